@@ -279,7 +279,7 @@ fn passive_simulation_conserves_energy() {
             kinetic_energy(&model, data, q, v) + potential_energy(&model, data, q)
         };
         let e0 = energy(&mut data, &q, &v);
-        let mut accel = |data: &mut Data, q: &[f64], v: &[f64]| -> Vec<f64> {
+        let accel = |data: &mut Data, q: &[f64], v: &[f64]| -> Vec<f64> {
             forward_dynamics(&model, data, q, v, &tau)
                 .unwrap()
                 .iter()

@@ -225,8 +225,8 @@ pub fn forward_dynamics<'a>(
     nonlinear_effects(model, data, q, v);
     crba(model, data, q);
     cholesky_factor(&data.mass, &mut data.chol)?;
-    for i in 0..model.nv() {
-        data.ddq[i] = tau[i] - data.nle[i];
+    for ((d, t), h) in data.ddq.iter_mut().zip(tau).zip(data.nle.iter()) {
+        *d = t - h;
     }
     cholesky_solve_in_place(&data.chol, data.ddq.as_mut_slice());
     Ok(&data.ddq)

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Measures robot-model and its two anchors (Pinocchio C++, dynibo) on the
+# Panda in one session, on this machine, and prints their medians side by
+# side. See bench-anchors/README.md; results go into docs/performance.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+URDF="$PWD/robot-model/urdf/panda.urdf"
+VENV=.venv-pinocchio
+mkdir -p bench-anchors/build
+
+# Pinocchio's headers and libraries ship in its PyPI wheels; Eigen's in cmeel-eigen.
+if ! "$VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
+    python3 -m venv "$VENV"
+    "$VENV/bin/pip" install --quiet "pin==4.1.0"
+fi
+"$VENV/bin/pip" install --quiet --disable-pip-version-check "cmeel-eigen==3.4.1"
+PREFIX=$("$VENV/bin/python" -c "import cmeel, os; print(os.path.join(os.path.dirname(cmeel.__file__), '..', 'cmeel.prefix'))" 2>/dev/null || true)
+[ -d "$PREFIX/include/pinocchio" ] || PREFIX=$(ls -d "$VENV"/lib/python3*/site-packages/cmeel.prefix)
+echo "== building the Pinocchio anchor (g++ -O3, same ISA baseline as rustc's default)"
+g++ -O3 -DNDEBUG -std=c++17 -w \
+    -I"$PREFIX/include" -I"$PREFIX/include/eigen3" \
+    bench-anchors/pinocchio/bench.cpp -o bench-anchors/build/pinocchio-anchor \
+    -L"$PREFIX/lib" -Wl,-rpath,"$PREFIX/lib" -lpinocchio_parsers -lpinocchio_default \
+    -lurdfdom_model -lboost_filesystem -lboost_serialization
+echo "== building the dynibo anchor"
+cargo build --quiet --release --manifest-path bench-anchors/dynibo/Cargo.toml --target-dir bench-anchors/target
+
+echo "== running (anchors, robot-model, anchors again: the spread shows the machine's noise)"
+bench-anchors/build/pinocchio-anchor "$URDF"
+bench-anchors/target/release/dynibo-anchor "$URDF"
+cargo bench --quiet -p robot-model --bench dynamics -- --noplot >/dev/null 2>&1 || cargo bench -p robot-model --bench dynamics
+printf 'robot-model (criterion median ns/call):'
+for op in fk fk+jacobian jdot_v crba rnea gravity forward_dynamics coriolis_matrix; do
+    f="target/criterion/panda/$op/new/estimates.json"
+    printf ' %s %s ' "$op" "$(python3 -c "import json,sys; print(round(json.load(open(sys.argv[1]))['median']['point_estimate']))" "$f")"
+done
+echo
+bench-anchors/build/pinocchio-anchor "$URDF"
+bench-anchors/target/release/dynibo-anchor "$URDF"

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The project's test command (README "Run the tests"; .ci/run calls exactly this).
+# Installs what the tests need on a fresh Debian machine, then runs format,
+# lint and every test of the workspace.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+if ! command -v cargo >/dev/null 2>&1; then
+    echo "error: cargo not found; install Rust with rustup (see README.md)" >&2
+    exit 1
+fi
+
+# Pinocchio (PyPI `pin`) is the independent reference robot-model is checked
+# against. It lives in a virtual environment inside the repository so that
+# nothing is installed system-wide; the test fails rather than skips when it
+# is missing here.
+PIN_VERSION=4.1.0
+VENV=.venv-pinocchio
+if ! "$VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
+    echo "== installing Pinocchio $PIN_VERSION into $VENV"
+    if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
+        apt-get update -qq && apt-get install -y -qq python3-venv
+        python3 -m venv "$VENV"
+    fi
+    "$VENV/bin/pip" install --quiet --disable-pip-version-check "pin==$PIN_VERSION"
+fi
+export ROBOT_MODEL_PINOCCHIO_PYTHON="$PWD/$VENV/bin/python"
+export ROBOT_MODEL_REQUIRE_PINOCCHIO=1
+
+echo "== cargo fmt --check"
+cargo fmt --all -- --check
+echo "== cargo clippy"
+cargo clippy --workspace --all-targets --quiet -- -D warnings
+echo "== cargo test"
+cargo test --workspace
