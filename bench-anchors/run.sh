@@ -8,17 +8,23 @@ URDF="$PWD/robot-model/urdf/panda.urdf"
 VENV=.venv-pinocchio
 mkdir -p bench-anchors/build
 
-# Pinocchio's headers and libraries ship in its PyPI wheels; Eigen's in cmeel-eigen.
+# Pinocchio's headers and libraries ship in its PyPI wheels; Eigen's and urdfdom's headers in cmeel-eigen and cmeel-urdfdom-headers.
 if ! "$VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
     python3 -m venv "$VENV"
     "$VENV/bin/pip" install --quiet "pin==4.1.0"
 fi
-"$VENV/bin/pip" install --quiet --disable-pip-version-check "cmeel-eigen==3.4.1"
+"$VENV/bin/pip" install --quiet --disable-pip-version-check "cmeel-eigen==3.4.1" "cmeel-urdfdom-headers==3.0.0"
 PREFIX=$("$VENV/bin/python" -c "import cmeel, os; print(os.path.join(os.path.dirname(cmeel.__file__), '..', 'cmeel.prefix'))" 2>/dev/null || true)
 [ -d "$PREFIX/include/pinocchio" ] || PREFIX=$(ls -d "$VENV"/lib/python3*/site-packages/cmeel.prefix)
 echo "== building the Pinocchio anchor (g++ -O3, same ISA baseline as rustc's default)"
+# The definitions are those Pinocchio's CMake targets export; the algorithms
+# are compiled header-only here (no PINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION),
+# as Pinocchio's own benchmarks do.
 g++ -O3 -DNDEBUG -std=c++17 -w \
-    -I"$PREFIX/include" -I"$PREFIX/include/eigen3" \
+    -DBOOST_MPL_LIMIT_LIST_SIZE=30 -DBOOST_MPL_LIMIT_VECTOR_SIZE=30 -DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS \
+    -DBOOST_FUSION_INVOKE_MAX_ARITY=12 -DPINOCCHIO_WITH_URDFDOM -DPINOCCHIO_URDFDOM_HEADERS_MAJOR_VERSION=3 \
+    -DPINOCCHIO_URDFDOM_HEADERS_MINOR_VERSION=0 -DPINOCCHIO_URDFDOM_HEADERS_PATCH_VERSION=0 \
+    -I"$PREFIX/include" -I"$PREFIX/include/eigen3" -I"$PREFIX/include/urdfdom_headers" \
     bench-anchors/pinocchio/bench.cpp -o bench-anchors/build/pinocchio-anchor \
     -L"$PREFIX/lib" -Wl,-rpath,"$PREFIX/lib" -lpinocchio_parsers -lpinocchio_default \
     -lurdfdom_model -lboost_filesystem -lboost_serialization

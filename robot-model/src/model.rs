@@ -75,6 +75,16 @@ pub struct Joint {
     pub child_link: String,
 }
 
+impl Joint {
+    /// The coordinate axis (0, 1, 2 for x, y, z) the joint's axis lies on,
+    /// either way round, or `None` for an oblique axis.
+    #[inline]
+    pub fn aligned_axis(&self) -> Option<usize> {
+        let a = &self.axis;
+        (0..3).find(|&k| a[k].abs() == 1.0 && a[(k + 1) % 3] == 0.0 && a[(k + 2) % 3] == 0.0)
+    }
+}
+
 /// What a frame stands for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FrameKind {

@@ -31,12 +31,36 @@ pub(crate) fn axis_rotation(k: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
     )
 }
 
+/// `p * R(axis, angle)`. Rotations about a coordinate axis (every joint of
+/// the shipped arms) only mix two columns of `p`, a fraction of the cost of
+/// a general 3×3 product.
+#[inline]
+fn rotate_about(
+    p: &Matrix3<f64>,
+    axis: &Vector3<f64>,
+    aligned: Option<usize>,
+    angle: f64,
+) -> Matrix3<f64> {
+    let Some(k) = aligned else {
+        return p * axis_rotation(axis, angle);
+    };
+    // Columns (a, b) span the plane of rotation, right-handed about +axis.
+    let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+    let (s, c) = angle.sin_cos();
+    let s = if axis[k] > 0.0 { s } else { -s };
+    let mut out = *p;
+    let (pa, pb) = (p.column(a).into_owned(), p.column(b).into_owned());
+    out.set_column(a, &(pa * c + pb * s));
+    out.set_column(b, &(pb * c - pa * s));
+    out
+}
+
 /// The joint's frame in its parent joint's frame at coordinate `q`.
 #[inline]
 pub(crate) fn joint_placement(j: &Joint, q: f64) -> Se3 {
     match j.kind {
         JointKind::Revolute | JointKind::Continuous => Se3 {
-            rot: j.placement.rot * axis_rotation(&j.axis, q),
+            rot: rotate_about(&j.placement.rot, &j.axis, j.aligned_axis(), q),
             trans: j.placement.trans,
         },
         JointKind::Prismatic => Se3 {
@@ -59,6 +83,15 @@ pub(crate) fn subspace(j: &Joint) -> Motion {
             lin: Vector3::zeros(),
             ang: j.axis,
         },
+    }
+}
+
+/// `Sᵀ f`: the joint's share of a spatial force (torque or axial force).
+#[inline]
+pub(crate) fn subspace_dot(j: &Joint, f: &crate::spatial::Force) -> f64 {
+    match j.kind {
+        JointKind::Prismatic => j.axis.dot(&f.lin),
+        _ => j.axis.dot(&f.ang),
     }
 }
 
