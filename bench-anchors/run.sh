@@ -5,17 +5,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 URDF="$PWD/robot-model/urdf/panda.urdf"
-VENV=.venv-pinocchio
 mkdir -p bench-anchors/build
 
-# Pinocchio's headers and libraries ship in its PyPI wheels; Eigen's and urdfdom's headers in cmeel-eigen and cmeel-urdfdom-headers.
-if ! "$VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install --quiet "pin==4.1.0"
-fi
-"$VENV/bin/pip" install --quiet --disable-pip-version-check "cmeel-eigen==3.4.1" "cmeel-urdfdom-headers==3.0.0"
-PREFIX=$("$VENV/bin/python" -c "import cmeel, os; print(os.path.join(os.path.dirname(cmeel.__file__), '..', 'cmeel.prefix'))" 2>/dev/null || true)
-[ -d "$PREFIX/include/pinocchio" ] || PREFIX=$(ls -d "$VENV"/lib/python3*/site-packages/cmeel.prefix)
+# Pinocchio's headers and libraries ship in its PyPI wheels; Eigen's and
+# urdfdom's headers in cmeel-eigen and cmeel-urdfdom-headers.
+. scripts/pinocchio-venv.sh
+"$PINOCCHIO_VENV/bin/pip" install --quiet --disable-pip-version-check "cmeel-eigen==3.4.1" "cmeel-urdfdom-headers==3.0.0"
+PREFIX=$(ls -d "$PINOCCHIO_VENV"/lib/python3*/site-packages/cmeel.prefix)
 echo "== building the Pinocchio anchor (g++ -O3, same ISA baseline as rustc's default)"
 # The definitions are those Pinocchio's CMake targets export; the algorithms
 # are compiled header-only here (no PINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION),

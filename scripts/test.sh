@@ -14,17 +14,8 @@ fi
 # against. It lives in a virtual environment inside the repository so that
 # nothing is installed system-wide; the test fails rather than skips when it
 # is missing here.
-PIN_VERSION=4.1.0
-VENV=.venv-pinocchio
-if ! "$VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
-    echo "== installing Pinocchio $PIN_VERSION into $VENV"
-    if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
-        apt-get update -qq && apt-get install -y -qq python3-venv
-        python3 -m venv "$VENV"
-    fi
-    "$VENV/bin/pip" install --quiet --disable-pip-version-check "pin==$PIN_VERSION"
-fi
-export ROBOT_MODEL_PINOCCHIO_PYTHON="$PWD/$VENV/bin/python"
+. scripts/pinocchio-venv.sh
+export ROBOT_MODEL_PINOCCHIO_PYTHON="$PWD/$PINOCCHIO_VENV/bin/python"
 export ROBOT_MODEL_REQUIRE_PINOCCHIO=1
 
 echo "== cargo fmt --check"

@@ -146,30 +146,18 @@ impl Se3 {
     /// Expresses in `a` a rigid-body inertia given in `b`.
     #[inline]
     pub fn act_inertia(&self, y: &Inertia) -> Inertia {
-        let r = &self.rot;
+        let rh = self.rot * y.h;
         let p = &self.trans;
-        let rh = r * y.h;
         // About the new origin: R I Rᵀ − ([Rh]ₓ[p]ₓ + [p]ₓ[Rh]ₓ) − m[p]ₓ², written
-        // with [a]ₓ[b]ₓ = b aᵀ − (a·b) 1 and filled one symmetric half only:
-        // CRBA transforms one inertia per joint, so this is on its hot path.
-        let ri = r * y.rot_inertia;
-        let diag = 2.0 * p.dot(&rh) + y.mass * p.dot(p);
-        let mut out = Matrix3::zeros();
-        for a in 0..3 {
-            for b in a..3 {
-                let rirt = ri[(a, 0)] * r[(b, 0)] + ri[(a, 1)] * r[(b, 1)] + ri[(a, 2)] * r[(b, 2)];
-                let mut v = rirt - (p[a] * rh[b] + rh[a] * p[b]) - y.mass * p[a] * p[b];
-                if a == b {
-                    v += diag;
-                }
-                out[(a, b)] = v;
-                out[(b, a)] = v;
-            }
-        }
+        // with [a]ₓ[b]ₓ = b aᵀ − (a·b) 1.
+        let cross_terms = p * rh.transpose() + rh * p.transpose();
+        let rot_i = self.rot * y.rot_inertia * self.rot.transpose() - cross_terms
+            + Matrix3::from_diagonal_element(2.0 * p.dot(&rh))
+            + y.mass * (Matrix3::from_diagonal_element(p.dot(p)) - p * p.transpose());
         Inertia {
             mass: y.mass,
             h: rh + y.mass * p,
-            rot_inertia: out,
+            rot_inertia: rot_i,
         }
     }
 }

@@ -109,32 +109,21 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &[f64]) -> &'a DMatrix<f64
         data.li_m_i[i] = joint_placement(j, q[j.idx_v]);
         data.ic[i] = model.inertias[i];
     }
-    let nv = model.nv();
-    assert!(
-        data.mass.nrows() == nv && data.mass.ncols() == nv,
-        "Data made for another model"
-    );
     for i in (1..nj).rev() {
         let ji = &model.joints[i];
         let col = ji.idx_v;
         // Force needed to accelerate joint i's subtree at unit rate, carried
         // down the chain to every ancestor.
         let mut f = data.ic[i].mul_motion(&subspace(ji));
-        let mut put = |r: usize, c: usize, val: f64| {
-            // SAFETY: idx_v < nv for every joint but the universe (built so
-            // by the loader), and `mass` is nv × nv (asserted above).
-            unsafe {
-                *data.mass.get_unchecked_mut((r, c)) = val;
-                *data.mass.get_unchecked_mut((c, r)) = val;
-            }
-        };
-        put(col, col, subspace_dot(ji, &f));
+        data.mass[(col, col)] = subspace_dot(ji, &f);
         let mut k = i;
         while model.joints[k].parent > 0 {
             f = data.li_m_i[k].act_force(&f);
             k = model.joints[k].parent;
             let jk = &model.joints[k];
-            put(jk.idx_v, col, subspace_dot(jk, &f));
+            let val = subspace_dot(jk, &f);
+            data.mass[(jk.idx_v, col)] = val;
+            data.mass[(col, jk.idx_v)] = val;
         }
         if ji.parent > 0 {
             let y = data.li_m_i[i].act_inertia(&data.ic[i]);
