@@ -11,3 +11,499 @@
 //!
 //! It must not allocate, lock or block in the 1 kHz path, and it must not do
 //! any learning. Kinematics and dynamics come from `robot-model`.
+//!
+//! ```no_run
+//! use robot_model::{LoadOptions, Model};
+//! use rt_controller::{Action, Controller, ControllerConfig, RobotState};
+//! let model = Model::from_urdf_file("robot-model/urdf/panda.urdf", &LoadOptions::default())?;
+//! let ctrl = Controller::new(&model, ControllerConfig::default())?;
+//! let mut data = ctrl.create_data(&model);
+//! let (q, v) = (vec![0.0; 7], vec![0.0; 7]);
+//! let state = RobotState { q: &q, v: &v, tau_measured: None, wrench: None };
+//! let action = Action { delta_pos_m: [0.0, 0.0, -0.005], delta_roll_rad: 0.0 };
+//! rt_controller::step(&model, &ctrl, &mut data, &state, Some(&action), 0.0);
+//! let torques: &[f64] = data.torques();
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod config;
+pub mod impedance;
+pub mod osc;
+pub mod qp;
+pub mod supervisor;
+pub mod trajectory;
+
+pub use config::{
+    ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, SafetyConfig,
+    TrajectoryConfig,
+};
+pub use qp::QpOutcome;
+pub use supervisor::{Counters, FaultReason, Mode, Rejection, Supervisor, Transition};
+
+use impedance::EeState;
+use nalgebra::{DVector, Matrix6xX, Vector3, Vector6};
+use osc::{OscData, OscInputs};
+use qp::{QpFilter, QpProblem};
+use robot_model::{FrameId, Model, Reference as Frame};
+use trajectory::{ActionEffect, Reference, TrajectoryGenerator};
+
+/// The policy's command: a displacement of the end-effector target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Action {
+    /// Position step (x, y, z) in the base frame, m.
+    pub delta_pos_m: [f64; 3],
+    /// Roll step about the base z axis, rad.
+    pub delta_roll_rad: f64,
+}
+
+/// The measured robot state of one cycle.
+#[derive(Debug, Clone, Copy)]
+pub struct RobotState<'a> {
+    /// Joint positions, rad (length `nv`).
+    pub q: &'a [f64],
+    /// Joint velocities, rad/s (length `nv`).
+    pub v: &'a [f64],
+    /// Measured joint torques, N·m, when the hardware has them; used to
+    /// start the torque-rate limiter from what the robot applies.
+    pub tau_measured: Option<&'a [f64]>,
+    /// Wrist wrench (force, then moment) in the sensor frame, when a sensor
+    /// is fitted; checked for overload.
+    pub wrench: Option<&'a [f64; 6]>,
+}
+
+/// What happened to the action passed to a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ActionStatus {
+    /// No action this cycle.
+    None,
+    /// Applied as given.
+    Applied,
+    /// Applied after clamping.
+    Clamped,
+    /// Rejected as garbage; the target is unchanged.
+    Rejected(Rejection),
+    /// Valid but ignored (Fault or a requested hold).
+    Ignored,
+}
+
+/// Summary of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StepInfo {
+    /// Mode after the step.
+    pub mode: Mode,
+    /// What the QP filter did (`None` in Fault, where the safe command is
+    /// clipped directly).
+    pub qp: Option<QpOutcome>,
+    /// What became of the action.
+    pub action: ActionStatus,
+}
+
+/// The immutable part of the controller: configuration and the robot's
+/// limits, shareable between many [`ControllerData`].
+#[derive(Debug, Clone)]
+pub struct Controller {
+    config: ControllerConfig,
+    ee_frame: FrameId,
+    kv: [f64; 6],
+    tau_max: DVector<f64>,
+    vel_max: DVector<f64>,
+    q_lo: DVector<f64>,
+    q_hi: DVector<f64>,
+}
+
+impl Controller {
+    /// Validates `config` against `model` and fixes the derived constants.
+    pub fn new(model: &Model, config: ControllerConfig) -> Result<Self, ConfigError> {
+        config.validate(model)?;
+        let ee_frame = model
+            .frame_id(&config.ee_frame)
+            .map_err(|_| ConfigError::UnknownFrame(config.ee_frame.clone()))?;
+        Ok(Self {
+            kv: config.impedance.effective_kv(),
+            ee_frame,
+            tau_max: model.effort_limits(),
+            vel_max: model.velocity_limits(),
+            q_lo: model.lower_limits(),
+            q_hi: model.upper_limits(),
+            config,
+        })
+    }
+
+    /// The validated configuration.
+    pub fn config(&self) -> &ControllerConfig {
+        &self.config
+    }
+
+    /// The controlled frame.
+    pub fn ee_frame(&self) -> FrameId {
+        self.ee_frame
+    }
+
+    /// Preallocates everything a step writes.
+    pub fn create_data(&self, model: &Model) -> ControllerData {
+        ControllerData::new(model, self)
+    }
+}
+
+/// Everything the step writes: robot-model's workspace, the OSC and QP
+/// buffers, the trajectory and the supervisor. Built once, reused forever.
+pub struct ControllerData {
+    /// robot-model workspace (placements, M, its Cholesky factor, h).
+    pub dynamics: robot_model::Data,
+    /// End-effector Jacobian in the base frame.
+    pub jacobian: Matrix6xX<f64>,
+    /// OSC results (Λ, J̄, Nᵀ, τ_osc, ...).
+    pub osc: OscData,
+    /// The trajectory generator.
+    pub trajectory: TrajectoryGenerator,
+    /// The mode machine and counters.
+    pub supervisor: Supervisor,
+    /// Measured end-effector state of the last step.
+    pub ee: EeState,
+    /// Reference of the last step.
+    pub reference: Option<Reference>,
+    /// Commanded task acceleration of the last step.
+    pub a_u: Vector6<f64>,
+    /// `J̇v` of the last step.
+    pub jdot_v: Vector6<f64>,
+    /// Posture target of the null-space term.
+    pub rest_q: DVector<f64>,
+    /// Torque box of the last step (torque and rate limits).
+    pub tau_lo: DVector<f64>,
+    /// Upper torque bound of the last step.
+    pub tau_hi: DVector<f64>,
+    /// Joint acceleration bounds of the last step.
+    pub acc_lo: DVector<f64>,
+    /// Upper joint acceleration bound.
+    pub acc_hi: DVector<f64>,
+    a_osc: DVector<f64>,
+    tau_cmd: DVector<f64>,
+    tau_prev: DVector<f64>,
+    g_last: DVector<f64>,
+    scratch: DVector<f64>,
+    qp: QpFilter,
+    initialised: bool,
+    capture_pending: bool,
+    /// Summary of the last step.
+    pub last: StepInfo,
+}
+
+impl ControllerData {
+    /// Buffers for `model`; the QP solver is set up at the rest (or neutral)
+    /// configuration.
+    pub fn new(model: &Model, ctrl: &Controller) -> Self {
+        let nv = model.nv();
+        let mut dynamics = model.create_data();
+        let q0 = match &ctrl.config.osc.rest_q {
+            Some(r) => DVector::from_column_slice(r),
+            None => model.neutral_configuration(),
+        };
+        robot_model::crba(model, &mut dynamics, q0.as_slice());
+        let mut minv = nalgebra::DMatrix::identity(nv, nv);
+        let mut chol = dynamics.chol.clone();
+        if robot_model::cholesky_factor(&dynamics.mass, &mut chol).is_ok() {
+            for k in 0..nv {
+                let mut col = DVector::zeros(nv);
+                col[k] = 1.0;
+                robot_model::cholesky_solve_in_place(&chol, col.as_mut_slice());
+                minv.set_column(k, &col);
+            }
+        }
+        let qp = QpFilter::new(nv, &ctrl.config.qp, &minv);
+        Self {
+            dynamics,
+            jacobian: Matrix6xX::zeros(nv),
+            osc: OscData::new(nv),
+            trajectory: TrajectoryGenerator::default(),
+            supervisor: Supervisor::default(),
+            ee: EeState {
+                pos: Vector3::zeros(),
+                rot: nalgebra::Matrix3::identity(),
+                twist: Vector6::zeros(),
+            },
+            reference: None,
+            a_u: Vector6::zeros(),
+            jdot_v: Vector6::zeros(),
+            rest_q: q0,
+            tau_lo: DVector::zeros(nv),
+            tau_hi: DVector::zeros(nv),
+            acc_lo: DVector::zeros(nv),
+            acc_hi: DVector::zeros(nv),
+            a_osc: DVector::zeros(nv),
+            tau_cmd: DVector::zeros(nv),
+            tau_prev: DVector::zeros(nv),
+            g_last: DVector::zeros(nv),
+            scratch: DVector::zeros(nv),
+            qp,
+            initialised: false,
+            capture_pending: true,
+            last: StepInfo {
+                mode: Mode::Idle,
+                qp: None,
+                action: ActionStatus::None,
+            },
+        }
+    }
+
+    /// The torques of the last step (always finite, within the torque and
+    /// torque-rate limits).
+    pub fn torques(&self) -> &[f64] {
+        self.tau_cmd.as_slice()
+    }
+
+    /// Current mode.
+    pub fn mode(&self) -> Mode {
+        self.supervisor.mode()
+    }
+
+    /// Leaves Fault for Idle; the next step holds the pose it then sees.
+    pub fn reset(&mut self, now: f64) {
+        if self.supervisor.mode() == Mode::Fault {
+            self.supervisor.reset(now);
+            self.capture_pending = true;
+        }
+    }
+}
+
+/// Torque box: torque limits intersected with the rate limit around the
+/// previous command. If the previous command was outside the limits (a
+/// measured torque at start), the limit wins over the rate.
+fn torque_box(ctrl: &Controller, d: &mut ControllerData) {
+    let r = ctrl.config.qp.torque_rate_limit_nm_s * ctrl.config.period_s;
+    for i in 0..d.tau_prev.len() {
+        let m = ctrl.tau_max[i];
+        let p = d.tau_prev[i];
+        d.tau_lo[i] = (-m).max((p - r).min(m));
+        d.tau_hi[i] = m.min((p + r).max(-m));
+    }
+}
+
+/// Joint position and velocity limits as acceleration bounds.
+fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: &[f64]) {
+    let c = &ctrl.config.qp;
+    let h = c.position_horizon_s;
+    let hv = c.velocity_horizon_s;
+    for i in 0..q.len() {
+        let p_hi = 2.0 * (ctrl.q_hi[i] - c.position_margin_rad - q[i] - v[i] * h) / (h * h);
+        let p_lo = 2.0 * (ctrl.q_lo[i] + c.position_margin_rad - q[i] - v[i] * h) / (h * h);
+        let vmax = ctrl.vel_max[i] * c.velocity_limit_scale;
+        let v_hi = (vmax - v[i]) / hv;
+        let v_lo = (-vmax - v[i]) / hv;
+        let (mut lo, mut hi) = (p_lo.max(v_lo), p_hi.min(v_hi));
+        if lo > hi {
+            // Position limits matter more than speed limits.
+            (lo, hi) = (p_lo, p_hi);
+        }
+        if lo > hi {
+            let mid = 0.5 * (lo + hi);
+            (lo, hi) = (mid, mid);
+        }
+        d.acc_lo[i] = lo;
+        d.acc_hi[i] = hi;
+    }
+}
+
+/// Writes the safe command of Fault (gravity compensation with joint
+/// damping, or the last valid gravity torque when the state is unusable),
+/// clipped to the torque box.
+fn safe_command(ctrl: &Controller, d: &mut ControllerData, v: Option<&[f64]>) {
+    torque_box(ctrl, d);
+    let damping = ctrl.config.safety.fault_damping_nms;
+    for i in 0..d.tau_cmd.len() {
+        let t = d.g_last[i] - v.map_or(0.0, |v| damping * v[i]);
+        d.tau_cmd[i] = t.clamp(d.tau_lo[i], d.tau_hi[i]);
+    }
+    d.tau_prev.copy_from(&d.tau_cmd);
+}
+
+fn finish(d: &mut ControllerData, qp: Option<QpOutcome>, action: ActionStatus) -> StepInfo {
+    d.last = StepInfo {
+        mode: d.supervisor.mode(),
+        qp,
+        action,
+    };
+    d.last
+}
+
+/// One control cycle: supervisor checks, trajectory, impedance, OSC and the
+/// QP filter. The torques are left in [`ControllerData::torques`].
+///
+/// `action` is `Some` only in the cycle a new action arrives; `now` is the
+/// controller's monotonic time in seconds. Lengths of `state.q` and
+/// `state.v` must equal `model.nv()` (checked; a mismatch is a programming
+/// error and panics). Never allocates.
+pub fn step(
+    model: &Model,
+    ctrl: &Controller,
+    d: &mut ControllerData,
+    state: &RobotState<'_>,
+    action: Option<&Action>,
+    now: f64,
+) -> StepInfo {
+    let nv = model.nv();
+    assert!(
+        state.q.len() == nv && state.v.len() == nv,
+        "rt_controller::step: state has {} positions and {} velocities, the model {nv} joints",
+        state.q.len(),
+        state.v.len()
+    );
+    d.supervisor.counters.steps += 1;
+    let cfg = &ctrl.config;
+    let (q, v) = (state.q, state.v);
+
+    let state_check = supervisor::Supervisor::check_state(&cfg.safety, model, q, v, state.wrench);
+    if let Err(supervisor::FaultReason::NonFiniteState) = state_check {
+        d.supervisor.raise(FaultReason::NonFiniteState, now);
+        safe_command(ctrl, d, None);
+        let status = ignored_if_some(d, action);
+        return finish(d, None, status);
+    }
+
+    // Kinematics and dynamics at the measured state.
+    let rm = &mut d.dynamics;
+    let jdv = robot_model::frame_jdot_v(model, rm, q, v, ctrl.ee_frame, Frame::Base);
+    let pose = robot_model::frame_se3(model, rm, ctrl.ee_frame);
+    let twist = robot_model::frame_velocity(model, rm, ctrl.ee_frame, Frame::Base);
+    robot_model::frame_jacobian(model, rm, ctrl.ee_frame, Frame::Base, &mut d.jacobian);
+    robot_model::gravity(model, rm, q);
+    d.g_last.copy_from(&rm.g);
+    robot_model::crba(model, rm, q);
+    robot_model::nonlinear_effects(model, rm, q, v);
+    let chol_ok = robot_model::cholesky_factor(&rm.mass, &mut rm.chol).is_ok();
+    d.jdot_v = jdv.to_vector();
+    d.ee = EeState {
+        pos: pose.trans,
+        rot: pose.rot,
+        twist: twist.to_vector(),
+    };
+
+    if !d.initialised {
+        // Start the rate limiter from what the robot applies now: measured
+        // torques if there are any, else the torques that hold it still.
+        match state.tau_measured {
+            Some(t) if t.len() == nv && t.iter().all(|x| x.is_finite()) => {
+                d.tau_prev.copy_from_slice(t)
+            }
+            _ => d.tau_prev.copy_from(&d.dynamics.nle),
+        }
+        if cfg.osc.rest_q.is_none() {
+            d.rest_q.copy_from_slice(q);
+        }
+        d.initialised = true;
+    }
+    if d.capture_pending {
+        d.trajectory.reset(&d.ee.pos, &d.ee.rot, now);
+        d.capture_pending = false;
+    }
+
+    if let Err(reason) = state_check {
+        d.supervisor.raise(reason, now);
+    } else if !chol_ok {
+        d.supervisor.raise(FaultReason::DynamicsFailure, now);
+    }
+    if d.supervisor.mode() == Mode::Fault {
+        safe_command(ctrl, d, Some(v));
+        let status = ignored_if_some(d, action);
+        return finish(d, None, status);
+    }
+
+    // The action.
+    let mut action_status = ActionStatus::None;
+    if let Some(a) = action {
+        let delta = [
+            a.delta_pos_m[0],
+            a.delta_pos_m[1],
+            a.delta_pos_m[2],
+            a.delta_roll_rad,
+        ];
+        action_status = match Supervisor::check_action(&cfg.safety, &delta) {
+            Err(r) => {
+                d.supervisor.counters.actions_rejected += 1;
+                ActionStatus::Rejected(r)
+            }
+            Ok(()) if d.supervisor.admit_action(now) => {
+                let (_, _, meas_roll) = trajectory::fixed_xyz_angles(&d.ee.rot);
+                let effect =
+                    d.trajectory
+                        .apply_action(&cfg.trajectory, delta, &d.ee.pos, meas_roll, now);
+                d.supervisor.counters.actions_accepted += 1;
+                if effect == ActionEffect::Clamped {
+                    d.supervisor.counters.actions_clamped += 1;
+                    ActionStatus::Clamped
+                } else {
+                    ActionStatus::Applied
+                }
+            }
+            Ok(()) => ActionStatus::Ignored,
+        };
+    }
+    d.supervisor.check_timeout(&cfg.safety, now);
+
+    // Reference → impedance → OSC.
+    let reference = d.trajectory.eval(now);
+    d.reference = Some(reference);
+    d.a_u = impedance::task_acceleration(&reference, &d.ee, &cfg.impedance.kp, &ctrl.kv);
+    let rm = &d.dynamics;
+    osc::compute(
+        &mut d.osc,
+        &OscInputs {
+            q,
+            v,
+            mass: &rm.mass,
+            chol: &rm.chol,
+            h: &rm.nle,
+            jac: &d.jacobian,
+            jdot_v: &d.jdot_v,
+            a_u: &d.a_u,
+            rest_q: d.rest_q.as_slice(),
+        },
+        cfg.osc.singular_eps,
+        cfg.osc.null_kp,
+        cfg.osc.null_kv,
+    );
+
+    // Limits → QP filter.
+    torque_box(ctrl, d);
+    acceleration_bounds(ctrl, d, q, v);
+    d.scratch.copy_from(&d.osc.tau);
+    d.scratch -= &d.dynamics.nle;
+    d.osc.minv.mul_to(&d.scratch, &mut d.a_osc);
+    let outcome = d.qp.filter(
+        &QpProblem {
+            jbar: &d.osc.jbar,
+            lambda_inv: &d.osc.lambda_inv,
+            null_t: &d.osc.null_t,
+            minv: &d.osc.minv,
+            tau_osc: &d.osc.tau,
+            a_osc: &d.a_osc,
+            tau_lo: &d.tau_lo,
+            tau_hi: &d.tau_hi,
+            acc_lo: &d.acc_lo,
+            acc_hi: &d.acc_hi,
+        },
+        &mut d.tau_cmd,
+    );
+    let c = &mut d.supervisor.counters;
+    match outcome {
+        QpOutcome::Skipped => c.qp_skipped += 1,
+        QpOutcome::Solved { .. } => c.qp_solved += 1,
+        QpOutcome::Fallback(_) => c.qp_fallbacks += 1,
+    }
+    if d.tau_cmd.iter().any(|t| !t.is_finite()) {
+        d.supervisor.raise(FaultReason::NonFiniteTorque, now);
+        safe_command(ctrl, d, Some(v));
+        return finish(d, Some(outcome), action_status);
+    }
+    d.tau_prev.copy_from(&d.tau_cmd);
+    finish(d, Some(outcome), action_status)
+}
+
+fn ignored_if_some(d: &mut ControllerData, action: Option<&Action>) -> ActionStatus {
+    match action {
+        Some(_) => {
+            d.supervisor.counters.actions_ignored += 1;
+            ActionStatus::Ignored
+        }
+        None => ActionStatus::None,
+    }
+}
