@@ -181,6 +181,11 @@ pub struct QpConfig {
     /// in the kinetic-energy metric, so a moment error counts by the angular
     /// acceleration it causes, not by its size in N·m.
     pub task_weight: [f64; 6],
+    /// Extra weight κ of the force error across the demanded force direction
+    /// (the shortfall along it has weight 1): how strongly a saturated
+    /// command gives up magnitude rather than direction. 0 gives the plain
+    /// closest point.
+    pub direction_weight: f64,
     /// Weight of the null-space torque error, measured in the `M⁻¹` metric
     /// (by the joint accelerations it causes), relative to the task error.
     pub null_weight: f64,
@@ -216,6 +221,7 @@ impl Default for QpConfig {
     fn default() -> Self {
         Self {
             task_weight: [1.0; 6],
+            direction_weight: 100.0,
             null_weight: 1e-2,
             regularization: 1e-6,
             torque_rate_limit_nm_s: 1000.0,
@@ -342,6 +348,7 @@ impl ControllerConfig {
         for (i, &w) in q.task_weight.iter().enumerate() {
             positive(&format!("qp.task_weight[{i}]"), w)?;
         }
+        non_negative("qp.direction_weight", q.direction_weight)?;
         non_negative("qp.null_weight", q.null_weight)?;
         positive("qp.regularization", q.regularization)?;
         positive("qp.torque_rate_limit_nm_s", q.torque_rate_limit_nm_s)?;

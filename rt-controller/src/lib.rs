@@ -28,6 +28,7 @@
 
 pub mod config;
 pub mod impedance;
+pub mod linalg;
 pub mod osc;
 pub mod qp;
 pub mod supervisor;
@@ -467,10 +468,11 @@ pub fn step(
     acceleration_bounds(ctrl, d, q, v);
     d.scratch.copy_from(&d.osc.tau);
     d.scratch -= &d.dynamics.nle;
-    d.osc.minv.mul_to(&d.scratch, &mut d.a_osc);
+    linalg::mul_into(&d.osc.minv, &d.scratch, &mut d.a_osc);
     let outcome = d.qp.filter(
         &QpProblem {
             jbar: &d.osc.jbar,
+            task_force: &d.osc.force,
             lambda_inv: &d.osc.lambda_inv,
             null_t: &d.osc.null_t,
             minv: &d.osc.minv,

@@ -15,6 +15,7 @@
 //!
 //! Everything is written into preallocated buffers; nothing allocates.
 
+use crate::linalg::{mul_into, tr_mul_into};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix6, Matrix6xX, OMatrix, SymmetricEigen, U6, Vector6};
 use robot_model::cholesky_solve_in_place;
 
@@ -134,16 +135,16 @@ pub fn compute(
         cholesky_solve_in_place(inp.chol, d.scratch.as_mut_slice());
         d.minv.set_column(k, &d.scratch);
     }
-    inp.jac.mul_to(&d.minv, &mut d.j_minv);
+    mul_into(inp.jac, &d.minv, &mut d.j_minv);
     d.j_minv.transpose_to(&mut d.minv_jt);
-    inp.jac.mul_to(&d.minv_jt, &mut d.lambda_inv);
+    mul_into(inp.jac, &d.minv_jt, &mut d.lambda_inv);
     // Symmetrise: rounding leaves the two triangles a few ulps apart.
     d.lambda_inv = 0.5 * (d.lambda_inv + d.lambda_inv.transpose());
     let (lambda, min_sigma) = robust_inverse(&d.lambda_inv, singular_eps);
     d.lambda = lambda;
     d.min_sigma = min_sigma;
-    d.minv_jt.mul_to(&d.lambda, &mut d.jbar);
-    d.jbar.mul_to(inp.jac, &mut d.jbar_j);
+    mul_into(&d.minv_jt, &d.lambda, &mut d.jbar);
+    mul_into(&d.jbar, inp.jac, &mut d.jbar_j);
     for c in 0..nv {
         for r in 0..nv {
             let id = if r == c { 1.0 } else { 0.0 };
@@ -154,10 +155,10 @@ pub fn compute(
     for i in 0..nv {
         d.scratch[i] = null_kp * (inp.rest_q[i] - inp.q[i]) - null_kv * inp.v[i];
     }
-    inp.mass.mul_to(&d.scratch, &mut d.tau0);
-    d.null_t.mul_to(&d.tau0, &mut d.tau_null);
+    mul_into(inp.mass, &d.scratch, &mut d.tau0);
+    mul_into(&d.null_t, &d.tau0, &mut d.tau_null);
     d.force = d.lambda * (inp.a_u - inp.jdot_v);
-    d.tau.gemv_tr(1.0, inp.jac, &d.force, 0.0);
+    tr_mul_into(inp.jac, &d.force, &mut d.tau);
     d.tau += &d.tau_null;
     d.tau += inp.h;
 }

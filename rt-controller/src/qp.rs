@@ -1,7 +1,8 @@
 //! QP torque-limit filter. With `δ = τ − τ_osc` it solves
 //!
 //! ```text
-//! min ½ δᵀ P δ + ½ ρ ‖s‖²,   P = J̄ W J̄ᵀ + w_N N M⁻¹ Nᵀ + ε M⁻¹,   W = D Λ⁻¹ D
+//! min ½ δᵀ P δ + ½ ρ ‖s‖²,   P = J̄ W J̄ᵀ + w_N N M⁻¹ Nᵀ + ε M⁻¹
+//!                             W = G + κ P⊥ G P⊥,  G = D Λ⁻¹ D,  P⊥ = I − u uᵀ
 //! s.t. τ_lo − τ_osc ≤ δ ≤ τ_hi − τ_osc                 torque and torque-rate box (hard)
 //!      a_lo − a_osc − s ≤ M⁻¹ δ ≤ a_hi − a_osc + s     joint position/velocity limits (soft)
 //! ```
@@ -13,7 +14,11 @@
 //! `‖J̄ᵀ δ‖_W` is the error of the task force the torques produce
 //! (`f = J̄ᵀ(τ − h)`), so when OSC asks for more than the robot can give the
 //! filter gives up magnitude before direction, which per-joint clipping does
-//! not. The force error is measured in the kinetic-energy metric `Λ⁻¹` and
+//! not. The part of the force error across the demanded force `u = f/‖f‖`
+//! costs `1 + κ` times the shortfall along it: the plain closest point in a
+//! box far from the demand is a vertex whose direction can be tens of
+//! degrees off (measured: mean 13°, p95 27° with κ = 0), while giving up
+//! magnitude first keeps the direction. The force error is measured in the kinetic-energy metric `Λ⁻¹` and
 //! the null-space and plain errors in `M⁻¹`: an error then costs by the
 //! acceleration it causes. With plain Euclidean norms a moment error on the
 //! light wrist is almost free, and while the torque-rate limit binds the
@@ -28,11 +33,12 @@
 //! off and structural zeros kept.
 
 use crate::config::QpConfig;
+use crate::linalg::{mul_into, tr_mul_into};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
 };
-use nalgebra::{DMatrix, DVector, Dyn, Matrix6, Matrix6xX, OMatrix, U6};
+use nalgebra::{DMatrix, DVector, Dyn, Matrix6, Matrix6xX, OMatrix, U6, Vector6};
 
 /// Acceleration bounds beyond this (rad/s²) are treated as absent: the
 /// solver wants finite data and no joint can get near it.
@@ -56,6 +62,9 @@ pub enum QpOutcome {
 pub struct QpProblem<'a> {
     /// Dynamically consistent inverse `J̄` (n×6).
     pub jbar: &'a OMatrix<f64, Dyn, U6>,
+    /// The task force OSC demands, `f = Λ(a_u − J̇v)`: its direction is the
+    /// one the filter protects.
+    pub task_force: &'a Vector6<f64>,
     /// Inverse task-space inertia `Λ⁻¹`: the metric of the force error.
     pub lambda_inv: &'a Matrix6<f64>,
     /// Null-space projector transpose `Nᵀ` (n×n).
@@ -85,6 +94,7 @@ pub struct QpFilter {
     b: Vec<f64>,
     q: Vec<f64>,
     sqrt_w: [f64; 6],
+    direction_weight: f64,
     null_weight: f64,
     regularization: f64,
     w_mat: Matrix6<f64>,
@@ -175,6 +185,7 @@ impl QpFilter {
             b,
             q,
             sqrt_w: cfg.task_weight.map(f64::sqrt),
+            direction_weight: cfg.direction_weight,
             null_weight: cfg.null_weight,
             regularization: cfg.regularization,
             w_mat: Matrix6::zeros(),
@@ -223,17 +234,22 @@ impl QpFilter {
             out.copy_from(pb.tau_osc);
             return QpOutcome::Skipped;
         }
-        // P = J̄ W J̄ᵀ + w_N N M⁻¹ Nᵀ + ε M⁻¹ with W = D Λ⁻¹ D, D = diag(√w).
-        for r in 0..6 {
-            for c in 0..6 {
-                self.w_mat[(r, c)] = self.sqrt_w[r] * pb.lambda_inv[(r, c)] * self.sqrt_w[c];
-            }
-        }
-        pb.jbar.mul_to(&self.w_mat, &mut self.jbar_w);
+        // P = J̄ W J̄ᵀ + w_N N M⁻¹ Nᵀ + ε M⁻¹ with W = G + κ P⊥ G P⊥,
+        // G = D Λ⁻¹ D, D = diag(√w), P⊥ = I − u uᵀ across the demanded force u.
+        let g = Matrix6::from_fn(|r, c| self.sqrt_w[r] * pb.lambda_inv[(r, c)] * self.sqrt_w[c]);
+        let norm = pb.task_force.norm();
+        self.w_mat = if self.direction_weight > 0.0 && norm > 1e-9 {
+            let u = pb.task_force / norm;
+            let p_perp = Matrix6::identity() - u * u.transpose();
+            g + self.direction_weight * (p_perp * g * p_perp)
+        } else {
+            g
+        };
+        mul_into(pb.jbar, &self.w_mat, &mut self.jbar_w);
         self.jbar_w.transpose_to(&mut self.w_jbar_t);
-        pb.jbar.mul_to(&self.w_jbar_t, &mut self.p_full);
-        pb.minv.mul_to(pb.null_t, &mut self.minv_nt);
-        self.p_null.gemm_tr(1.0, pb.null_t, &self.minv_nt, 0.0);
+        mul_into(pb.jbar, &self.w_jbar_t, &mut self.p_full);
+        mul_into(pb.minv, pb.null_t, &mut self.minv_nt);
+        tr_mul_into(pb.null_t, &self.minv_nt, &mut self.p_null);
         let mut k = 0;
         for j in 0..n {
             for i in 0..=j {
