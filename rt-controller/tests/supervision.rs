@@ -1,0 +1,246 @@
+//! The safety supervisor through the whole step: garbage actions, action
+//! time-outs, faults and their safe command.
+
+mod common;
+
+use common::{Bench, PANDA_READY, Rng, action, panda};
+use rt_controller::{
+    ActionStatus, ControllerConfig, FaultReason, Mode, Rejection, RobotState, step,
+};
+
+#[test]
+fn garbage_actions_are_counted_and_the_target_holds() {
+    let mut b = Bench::new(panda(), ControllerConfig::default(), &PANDA_READY);
+    b.cycle(Some(&action(0.005, 0.0, 0.0, 0.0)));
+    let target = b.data.trajectory.target();
+    for a in [
+        action(f64::NAN, 0.0, 0.0, 0.0),
+        action(0.0, f64::NEG_INFINITY, 0.0, 0.0),
+        action(0.0, 0.0, 0.5, 0.0),
+        action(0.0, 0.0, 0.0, 3.0),
+    ] {
+        let info = b.cycle(Some(&a));
+        assert!(matches!(info.action, ActionStatus::Rejected(_)), "{info:?}");
+        assert_eq!(b.data.trajectory.target(), target);
+    }
+    assert_eq!(b.data.supervisor.counters.actions_rejected, 4);
+    let info = b.cycle(Some(&action(-0.0, 0.0, f64::MIN_POSITIVE / 2.0, 0.0)));
+    assert_eq!(
+        info.action,
+        ActionStatus::Applied,
+        "−0 and denormals are fine"
+    );
+    let info = b.cycle(Some(&action(0.05, 0.0, 0.0, 0.0)));
+    assert_eq!(info.action, ActionStatus::Clamped);
+    assert_eq!(
+        rt_controller::supervisor::Supervisor::check_action(
+            &ControllerConfig::default().safety,
+            &[f64::NAN; 4]
+        ),
+        Err(Rejection::NonFinite)
+    );
+}
+
+#[test]
+fn ten_thousand_random_and_malformed_actions_never_exceed_the_limits() {
+    let mut b = Bench::new(panda(), ControllerConfig::default(), &PANDA_READY);
+    let mut rng = Rng(99);
+    let specials = [
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        -0.0,
+        f64::MIN_POSITIVE / 3.0,
+        1e308,
+        -1e-320,
+        0.1,
+        -0.01,
+    ];
+    for k in 0..10_000 {
+        let pick = |r: &mut Rng| {
+            if r.uniform(0.0, 1.0) < 0.3 {
+                specials[(r.next_u64() % specials.len() as u64) as usize]
+            } else {
+                r.uniform(-0.012, 0.012)
+            }
+        };
+        let a = action(
+            pick(&mut rng),
+            pick(&mut rng),
+            pick(&mut rng),
+            pick(&mut rng),
+        );
+        // One action per cycle: far more often than any policy would.
+        b.cycle(Some(&a));
+        assert_ne!(
+            b.data.mode(),
+            Mode::Fault,
+            "cycle {k}: {:?}",
+            b.data.supervisor.fault()
+        );
+    }
+    b.assert_within_limits();
+    let c = b.data.supervisor.counters;
+    assert!(
+        c.actions_rejected > 1000 && c.actions_accepted > 1000,
+        "{c:?}"
+    );
+}
+
+#[test]
+fn a_silent_policy_makes_the_controller_hold_and_a_fresh_action_resumes() {
+    let mut b = Bench::new(panda(), ControllerConfig::default(), &PANDA_READY);
+    b.run(0.5, 50, |_| Some(action(0.004, 0.0, 0.0, 0.0)));
+    assert_eq!(b.data.mode(), Mode::Running);
+    let target = b.data.trajectory.target();
+    // The last action came at t = 0.45 s; the hold comes 100 ms later.
+    let mut held_at = None;
+    for _ in 0..300 {
+        let info = b.cycle(None);
+        if info.mode == Mode::Holding && held_at.is_none() {
+            held_at = Some(b.t);
+        }
+    }
+    let held_at = held_at.expect("holds");
+    assert!((held_at - 0.551).abs() < 0.0015, "held at {held_at}");
+    assert_eq!(b.data.trajectory.target(), target);
+    let p = b.data.ee.pos;
+    assert!((p.x - target[0]).abs() < 3e-4, "rests at its last target");
+    b.cycle(Some(&action(0.0, 0.004, 0.0, 0.0)));
+    assert_eq!(b.data.mode(), Mode::Running);
+    // A requested hold (shutdown) ignores actions until released.
+    b.data.supervisor.request_hold(b.t);
+    let info = b.cycle(Some(&action(0.0, 0.004, 0.0, 0.0)));
+    assert_eq!(
+        (info.mode, info.action),
+        (Mode::Holding, ActionStatus::Ignored)
+    );
+    b.data.supervisor.release_hold();
+    assert_eq!(
+        b.cycle(Some(&action(0.0, 0.004, 0.0, 0.0))).mode,
+        Mode::Running
+    );
+}
+
+/// Runs one good step, then one with the bad state; checks the safe command
+/// and the latch, resets, and returns the fault's reason.
+fn fault_with(q: &[f64], v: &[f64], wrench: Option<&[f64; 6]>) -> FaultReason {
+    let model = panda();
+    let ctrl = rt_controller::Controller::new(&model, ControllerConfig::default()).unwrap();
+    let mut d = ctrl.create_data(&model);
+    let zero = [0.0; 7];
+    let ok = RobotState {
+        q: &PANDA_READY,
+        v: &zero,
+        tau_measured: None,
+        wrench: None,
+    };
+    step(&model, &ctrl, &mut d, &ok, None, 0.0);
+    let before = d.torques().to_vec();
+    let bad = RobotState {
+        q,
+        v,
+        tau_measured: None,
+        wrench,
+    };
+    let info = step(
+        &model,
+        &ctrl,
+        &mut d,
+        &bad,
+        Some(&action(0.001, 0.0, 0.0, 0.0)),
+        0.001,
+    );
+    assert_eq!(info.mode, Mode::Fault);
+    assert_eq!(info.action, ActionStatus::Ignored);
+    let reason = d.supervisor.fault().expect("a reason");
+    let limits = model.effort_limits();
+    for (i, t) in d.torques().iter().enumerate() {
+        assert!(t.is_finite() && t.abs() <= limits[i]);
+        assert!(
+            (t - before[i]).abs() <= 1.0 + 1e-9,
+            "the rate limit holds in Fault"
+        );
+    }
+    // Latched until reset; a reset returns to Idle, holding the pose it sees.
+    assert_eq!(
+        step(&model, &ctrl, &mut d, &ok, None, 0.002).mode,
+        Mode::Fault
+    );
+    d.reset(0.003);
+    assert_eq!(
+        step(&model, &ctrl, &mut d, &ok, None, 0.004).mode,
+        Mode::Idle
+    );
+    assert_eq!(d.supervisor.counters.faults, 1);
+    reason
+}
+
+#[test]
+fn faults_latch_with_their_reason_and_command_finite_limited_torques() {
+    let zero = [0.0; 7];
+    let mut q = PANDA_READY;
+    q[2] = f64::NAN;
+    assert_eq!(fault_with(&q, &zero, None), FaultReason::NonFiniteState);
+    let mut q = PANDA_READY;
+    q[3] = -3.2; // panda_joint4 limit −3.0718
+    assert!(matches!(
+        fault_with(&q, &zero, None),
+        FaultReason::JointPositionLimit { joint: 3, .. }
+    ));
+    let mut v = zero;
+    v[6] = 4.0; // limit 2.61 rad/s
+    assert!(matches!(
+        fault_with(&PANDA_READY, &v, None),
+        FaultReason::JointVelocityLimit { joint: 6, .. }
+    ));
+    let push = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0];
+    assert!(matches!(
+        fault_with(&PANDA_READY, &zero, Some(&push)),
+        FaultReason::ForceOverload { .. }
+    ));
+    let twist = [0.0, 0.0, 0.0, 20.0, 0.0, 0.0];
+    assert!(matches!(
+        fault_with(&PANDA_READY, &zero, Some(&twist)),
+        FaultReason::MomentOverload { .. }
+    ));
+    let bad_wrench = [0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(
+        fault_with(&PANDA_READY, &zero, Some(&bad_wrench)),
+        FaultReason::NonFiniteState
+    );
+}
+
+#[test]
+fn bad_configuration_names_the_field() {
+    let model = panda();
+    let mut c = ControllerConfig::default();
+    c.impedance.kp[2] = f64::NAN;
+    let e = rt_controller::Controller::new(&model, c)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("impedance.kp[2]"), "{e}");
+    let c = ControllerConfig {
+        ee_frame: "no_such_frame".into(),
+        ..Default::default()
+    };
+    let e = rt_controller::Controller::new(&model, c)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no_such_frame"), "{e}");
+    let mut c = ControllerConfig::default();
+    c.osc.rest_q = Some(vec![0.0; 6]);
+    let e = rt_controller::Controller::new(&model, c)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("osc.rest_q") && e.contains('6') && e.contains('7'),
+        "{e}"
+    );
+    let mut c = ControllerConfig::default();
+    c.trajectory.workspace_min_m[1] = 1.0;
+    let e = rt_controller::Controller::new(&model, c)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("workspace_min_m[1]"), "{e}");
+}
