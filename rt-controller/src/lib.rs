@@ -180,7 +180,9 @@ pub struct ControllerData {
     a_osc: DVector<f64>,
     tau_cmd: DVector<f64>,
     tau_prev: DVector<f64>,
-    g_last: DVector<f64>,
+    /// The last finite measured configuration (for the safe command when
+    /// a later state is not finite).
+    q_valid: DVector<f64>,
     scratch: DVector<f64>,
     qp: QpFilter,
     initialised: bool,
@@ -203,12 +205,7 @@ impl ControllerData {
         let mut minv = nalgebra::DMatrix::identity(nv, nv);
         let mut chol = dynamics.chol.clone();
         if robot_model::cholesky_factor(&dynamics.mass, &mut chol).is_ok() {
-            for k in 0..nv {
-                let mut col = DVector::zeros(nv);
-                col[k] = 1.0;
-                robot_model::cholesky_solve_in_place(&chol, col.as_mut_slice());
-                minv.set_column(k, &col);
-            }
+            osc::inverse_from_cholesky(&chol, &mut DVector::zeros(nv), &mut minv);
         }
         let qp = QpFilter::new(nv, &ctrl.config.qp, &minv);
         Self {
@@ -233,7 +230,7 @@ impl ControllerData {
             a_osc: DVector::zeros(nv),
             tau_cmd: DVector::zeros(nv),
             tau_prev: DVector::zeros(nv),
-            g_last: DVector::zeros(nv),
+            q_valid: DVector::zeros(nv),
             scratch: DVector::zeros(nv),
             qp,
             initialised: false,
@@ -305,13 +302,19 @@ fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: 
 }
 
 /// Writes the safe command of Fault (gravity compensation with joint
-/// damping, or the last valid gravity torque when the state is unusable),
-/// clipped to the torque box.
-fn safe_command(ctrl: &Controller, d: &mut ControllerData, v: Option<&[f64]>) {
+/// damping, or the gravity torque at the last finite configuration when the
+/// state is unusable, zero before any), clipped to the torque box. Gravity
+/// is computed here, off the normal path, which never needs it alone.
+fn safe_command(model: &Model, ctrl: &Controller, d: &mut ControllerData, v: Option<&[f64]>) {
+    if d.initialised {
+        robot_model::gravity(model, &mut d.dynamics, d.q_valid.as_slice());
+    } else {
+        d.dynamics.g.fill(0.0);
+    }
     torque_box(ctrl, d);
     let damping = ctrl.config.safety.fault_damping_nms;
     for i in 0..d.tau_cmd.len() {
-        let t = d.g_last[i] - v.map_or(0.0, |v| damping * v[i]);
+        let t = d.dynamics.g[i] - v.map_or(0.0, |v| damping * v[i]);
         d.tau_cmd[i] = t.clamp(d.tau_lo[i], d.tau_hi[i]);
     }
     d.tau_prev.copy_from(&d.tau_cmd);
@@ -355,10 +358,12 @@ pub fn step(
     let state_check = supervisor::Supervisor::check_state(&cfg.safety, model, q, v, state.wrench);
     if let Err(supervisor::FaultReason::NonFiniteState) = state_check {
         d.supervisor.raise(FaultReason::NonFiniteState, now);
-        safe_command(ctrl, d, None);
+        safe_command(model, ctrl, d, None);
         let status = ignored_if_some(d, action);
         return finish(d, None, status);
     }
+
+    d.q_valid.copy_from_slice(q);
 
     // Kinematics and dynamics at the measured state.
     let rm = &mut d.dynamics;
@@ -366,8 +371,6 @@ pub fn step(
     let pose = robot_model::frame_se3(model, rm, ctrl.ee_frame);
     let twist = robot_model::frame_velocity(model, rm, ctrl.ee_frame, Frame::Base);
     robot_model::frame_jacobian(model, rm, ctrl.ee_frame, Frame::Base, &mut d.jacobian);
-    robot_model::gravity(model, rm, q);
-    d.g_last.copy_from(&rm.g);
     robot_model::crba(model, rm, q);
     robot_model::nonlinear_effects(model, rm, q, v);
     let chol_ok = robot_model::cholesky_factor(&rm.mass, &mut rm.chol).is_ok();
@@ -403,7 +406,7 @@ pub fn step(
         d.supervisor.raise(FaultReason::DynamicsFailure, now);
     }
     if d.supervisor.mode() == Mode::Fault {
-        safe_command(ctrl, d, Some(v));
+        safe_command(model, ctrl, d, Some(v));
         let status = ignored_if_some(d, action);
         return finish(d, None, status);
     }
@@ -493,7 +496,7 @@ pub fn step(
     }
     if d.tau_cmd.iter().any(|t| !t.is_finite()) {
         d.supervisor.raise(FaultReason::NonFiniteTorque, now);
-        safe_command(ctrl, d, Some(v));
+        safe_command(model, ctrl, d, Some(v));
         return finish(d, Some(outcome), action_status);
     }
     d.tau_prev.copy_from(&d.tau_cmd);

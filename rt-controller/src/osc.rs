@@ -94,6 +94,21 @@ pub struct OscInputs<'a> {
     pub rest_q: &'a [f64],
 }
 
+/// `M⁻¹` column by column from the lower Cholesky factor of `M`;
+/// `scratch` is an n-vector of workspace.
+pub fn inverse_from_cholesky(
+    chol: &DMatrix<f64>,
+    scratch: &mut DVector<f64>,
+    out: &mut DMatrix<f64>,
+) {
+    for k in 0..chol.nrows() {
+        scratch.fill(0.0);
+        scratch[k] = 1.0;
+        cholesky_solve_in_place(chol, scratch.as_mut_slice());
+        out.set_column(k, scratch);
+    }
+}
+
 /// Singularity-robust inverse of a symmetric positive semi-definite 6×6
 /// matrix with eigenvalues σ: `V diag(φ(σ)) Vᵀ` with `φ(σ) = 1/σ` for
 /// `σ ≥ ε` and `φ(σ) = σ/ε²` below. This is damped least squares with the
@@ -128,13 +143,7 @@ pub fn compute(
     null_kv: f64,
 ) {
     let nv = inp.q.len();
-    // M⁻¹ column by column through the Cholesky factor.
-    for k in 0..nv {
-        d.scratch.fill(0.0);
-        d.scratch[k] = 1.0;
-        cholesky_solve_in_place(inp.chol, d.scratch.as_mut_slice());
-        d.minv.set_column(k, &d.scratch);
-    }
+    inverse_from_cholesky(inp.chol, &mut d.scratch, &mut d.minv);
     mul_into(inp.jac, &d.minv, &mut d.j_minv);
     d.j_minv.transpose_to(&mut d.minv_jt);
     mul_into(inp.jac, &d.minv_jt, &mut d.lambda_inv);
