@@ -10,3 +10,21 @@
 //!
 //! It must not contain controller logic: torques come in, sensor readings go
 //! out.
+//!
+//! ```
+//! use hw_sim::{World, WorldConfig};
+//! let mut world = World::new(WorldConfig::default()).unwrap();
+//! let tau = vec![0.0; 7];
+//! world.step(&tau).unwrap();
+//! assert_eq!(world.step_index(), 1);
+//! ```
+
+pub mod config;
+pub mod convert;
+pub mod rng;
+pub mod shapes;
+pub mod world;
+
+pub use config::{ConfigError, WorldConfig};
+pub use shapes::PegShape;
+pub use world::{SensorReadings, SimError, Stage, TaskState, World};

@@ -33,6 +33,7 @@
 
 pub mod algorithms;
 pub mod data;
+pub mod descriptions;
 pub mod error;
 pub mod model;
 pub mod spatial;

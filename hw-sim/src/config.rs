@@ -1,0 +1,487 @@
+//! Configuration of the simulated world and of an episode, TOML-ready:
+//! every field has a default; `validate` names the field at fault.
+
+use crate::shapes::PegShape;
+use serde::{Deserialize, Serialize};
+
+/// A configuration value that cannot be used, with the field that holds it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invalid hw-sim configuration: `{field}` {reason}")]
+pub struct ConfigError {
+    /// Dotted path of the field, e.g. `task.clearance_m`.
+    pub field: String,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+fn bad(field: &str, reason: impl Into<String>) -> ConfigError {
+    ConfigError {
+        field: field.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Everything a [`crate::World`] is built from. The same configuration and
+/// seed give bit-identical runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorldConfig {
+    /// A built-in robot (`"iiwa14"`, the paper's simulated robot, or
+    /// `"panda"`) or the path of a URDF file.
+    pub robot: String,
+    /// Physics step, s (1 kHz by default, the controller's rate).
+    pub dt_s: f64,
+    /// Initial joint positions, rad; empty: the robot's default pose, which
+    /// holds the peg pointing down above the box.
+    pub initial_q: Vec<f64>,
+    /// Viscous joint damping, N·m·s/rad: empty = the URDF's `<dynamics
+    /// damping>`, one value = every joint, or one per joint.
+    pub joint_damping: Vec<f64>,
+    /// Dry joint friction, N·m: same conventions as `joint_damping`.
+    pub joint_friction: Vec<f64>,
+    /// Saturate commanded torques at the URDF effort limits, as drives do.
+    pub clamp_torques: bool,
+    /// Solver iterations per step (rapier's substeps).
+    pub solver_iterations: usize,
+    /// rapier's length unit, m: scales its tolerances (contact slop
+    /// 0.005 × unit, prediction distance 0.02 × unit, maximum corrective
+    /// velocity 3 × unit per s). 1 cm keeps the slop at 0.05 mm, well under
+    /// the millimetre clearances of the pegs.
+    pub length_unit_m: f64,
+    /// The peg-in-hole task.
+    pub task: TaskConfig,
+    /// The RGB-D camera.
+    pub camera: CameraConfig,
+    /// Sensor noise.
+    pub noise: NoiseConfig,
+    /// Pushes and occlusions.
+    pub perturbations: PerturbationConfig,
+    /// Episode seed: box placement, noise and random perturbations.
+    pub seed: u64,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        Self {
+            robot: "iiwa14".into(),
+            dt_s: 0.001,
+            initial_q: Vec::new(),
+            joint_damping: Vec::new(),
+            joint_friction: Vec::new(),
+            clamp_torques: true,
+            solver_iterations: 4,
+            length_unit_m: 0.01,
+            task: TaskConfig::default(),
+            camera: CameraConfig::default(),
+            noise: NoiseConfig::default(),
+            perturbations: PerturbationConfig::default(),
+            seed: 0,
+        }
+    }
+}
+
+/// The peg, its box and where the box goes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TaskConfig {
+    /// Build the peg and the box at all (off: the bare arm, for dynamics
+    /// checks).
+    pub enabled: bool,
+    /// Peg cross-section.
+    pub peg: PegShape,
+    /// Peg width, m (side, diameter or across flats; see [`PegShape`]).
+    pub peg_width_m: f64,
+    /// Peg length from the sensor face, m; 0: up to the URDF's `peg_tip`
+    /// frame.
+    pub peg_length_m: f64,
+    /// Peg density, kg/m³ (3D-printed PLA at partial infill ≈ 1000).
+    pub peg_density_kg_m3: f64,
+    /// Clearance on the diameter, m: the hole is the peg's outline offset
+    /// by half of it (2 mm, the paper's real pegs).
+    pub clearance_m: f64,
+    /// Hole depth, m.
+    pub hole_depth_m: f64,
+    /// Box side, m.
+    pub box_side_m: f64,
+    /// Box height, m (it stands on the floor).
+    pub box_height_m: f64,
+    /// Coulomb friction between the peg and the box.
+    pub friction: f64,
+    /// Centre of the box placement region in the base x-y plane, m; empty:
+    /// under the peg tip at the initial pose.
+    pub box_center_xy_m: Vec<f64>,
+    /// Half-widths of the placement region around the centre, m.
+    pub box_xy_range_m: [f64; 2],
+    /// Half-range of the box yaw, rad.
+    pub box_yaw_range_rad: f64,
+    /// How far the tip must be below the top face to count as inserted, m.
+    pub inserted_depth_m: f64,
+    /// How close to the hole's bottom the tip must come to count as a
+    /// completed insertion, m.
+    pub completed_tolerance_m: f64,
+}
+
+impl Default for TaskConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            peg: PegShape::Square,
+            peg_width_m: 0.03,
+            peg_length_m: 0.0,
+            peg_density_kg_m3: 1000.0,
+            clearance_m: 0.002,
+            hole_depth_m: 0.04,
+            box_side_m: 0.16,
+            box_height_m: 0.10,
+            friction: 0.3,
+            box_center_xy_m: Vec::new(),
+            box_xy_range_m: [0.04, 0.04],
+            box_yaw_range_rad: 0.26,
+            inserted_depth_m: 0.003,
+            completed_tolerance_m: 0.003,
+        }
+    }
+}
+
+/// A fixed pinhole camera (OpenCV convention: x right, y down, z forward).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Image width, px.
+    pub width: u32,
+    /// Image height, px.
+    pub height: u32,
+    /// Vertical field of view, degrees (square pixels, centred principal
+    /// point).
+    pub vertical_fov_deg: f64,
+    /// Camera position in the base frame, m.
+    pub eye_m: [f64; 3],
+    /// The point it looks at, m.
+    pub target_m: [f64; 3],
+    /// Physics steps between frames (50 at 1 kHz: 20 Hz, the policy rate).
+    pub period_steps: u32,
+    /// Depth beyond which a pixel reads 0 (no return), m.
+    pub max_depth_m: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            width: 128,
+            height: 128,
+            vertical_fov_deg: 45.0,
+            eye_m: [1.45, -0.75, 0.85],
+            target_m: [0.45, 0.0, 0.2],
+            period_steps: 50,
+            max_depth_m: 4.0,
+        }
+    }
+}
+
+/// Gaussian noise per channel (standard deviations) and a constant F/T bias.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// Joint position, rad.
+    pub q_std_rad: f64,
+    /// Joint velocity, rad/s.
+    pub v_std_rad_s: f64,
+    /// F/T force, N.
+    pub force_std_n: f64,
+    /// F/T moment, N·m.
+    pub torque_std_nm: f64,
+    /// F/T bias added to every reading (fx, fy, fz, mx, my, mz).
+    pub ft_bias: [f64; 6],
+    /// Cut-off of the F/T sensor's first-order low-pass filter, Hz; 0: no
+    /// filter. Rigid contact delivers an impact's impulse within one step,
+    /// which reads as a one-sample spike of hundreds of newtons; a real
+    /// sensor's compliance and filter spread it (the paper's OptoForce
+    /// sensor offers 15–500 Hz filters; 150 Hz here).
+    pub ft_filter_hz: f64,
+    /// Depth, m.
+    pub depth_std_m: f64,
+    /// RGB, in 8-bit levels.
+    pub rgb_std: f64,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            q_std_rad: 0.0,
+            v_std_rad_s: 0.0,
+            force_std_n: 0.0,
+            torque_std_nm: 0.0,
+            ft_bias: [0.0; 6],
+            ft_filter_hz: 150.0,
+            depth_std_m: 0.0,
+            rgb_std: 0.0,
+        }
+    }
+}
+
+/// One push on the arm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Push {
+    /// Start, s of simulated time.
+    pub start_s: f64,
+    /// Duration, s; 0: an impulse (then `force_n` is in N·s).
+    pub duration_s: f64,
+    /// Joint index (1-based, as robot-model numbers them) of the link pushed.
+    pub link: usize,
+    /// Force (or impulse) in the base frame, applied at the link's origin.
+    pub force_n: [f64; 3],
+}
+
+impl Default for Push {
+    fn default() -> Self {
+        Self {
+            start_s: 0.0,
+            duration_s: 0.1,
+            link: 7,
+            force_n: [0.0; 3],
+        }
+    }
+}
+
+/// A camera occlusion.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Occlusion {
+    /// Start, s of simulated time.
+    pub start_s: f64,
+    /// End, s.
+    pub end_s: f64,
+    /// Patch `[x, y, width, height]` in pixels; empty: the whole image.
+    pub rect: Vec<u32>,
+}
+
+impl Default for Occlusion {
+    fn default() -> Self {
+        Self {
+            start_s: 0.0,
+            end_s: f64::INFINITY,
+            rect: Vec::new(),
+        }
+    }
+}
+
+/// Perturbations of an episode: explicit ones, plus random ones drawn from
+/// the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PerturbationConfig {
+    /// Explicit pushes.
+    pub pushes: Vec<Push>,
+    /// Explicit occlusions.
+    pub occlusions: Vec<Occlusion>,
+    /// Number of random pushes on the last link.
+    pub random_pushes: u32,
+    /// Their force magnitude range, N (horizontal direction uniform).
+    pub random_push_force_n: [f64; 2],
+    /// Their duration, s.
+    pub random_push_duration_s: f64,
+    /// Number of random square occlusion patches.
+    pub random_occlusions: u32,
+    /// Their side, px.
+    pub random_occlusion_side_px: u32,
+    /// Their duration, s.
+    pub random_occlusion_duration_s: f64,
+    /// Random perturbations start within this window, s.
+    pub random_window_s: [f64; 2],
+}
+
+impl Default for PerturbationConfig {
+    fn default() -> Self {
+        Self {
+            pushes: Vec::new(),
+            occlusions: Vec::new(),
+            random_pushes: 0,
+            random_push_force_n: [5.0, 20.0],
+            random_push_duration_s: 0.2,
+            random_occlusions: 0,
+            random_occlusion_side_px: 32,
+            random_occlusion_duration_s: 1.0,
+            random_window_s: [1.0, 20.0],
+        }
+    }
+}
+
+fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(bad(
+            field,
+            format!("must be a positive finite number, got {v}"),
+        ))
+    }
+}
+
+fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(bad(field, format!("must be finite and ≥ 0, got {v}")))
+    }
+}
+
+fn per_joint(field: &str, values: &[f64], nv: usize) -> Result<(), ConfigError> {
+    if !(values.is_empty() || values.len() == 1 || values.len() == nv) {
+        return Err(bad(
+            field,
+            format!("must hold 0, 1 or {nv} values, got {}", values.len()),
+        ));
+    }
+    for v in values {
+        non_negative(field, *v)?;
+    }
+    Ok(())
+}
+
+impl WorldConfig {
+    /// Checks every value that does not need the robot; `nv` is the robot's
+    /// number of joints.
+    pub fn validate(&self, nv: usize) -> Result<(), ConfigError> {
+        positive("dt_s", self.dt_s)?;
+        if !(self.initial_q.is_empty() || self.initial_q.len() == nv) {
+            return Err(bad(
+                "initial_q",
+                format!("must hold {nv} values, got {}", self.initial_q.len()),
+            ));
+        }
+        if self.initial_q.iter().any(|q| !q.is_finite()) {
+            return Err(bad("initial_q", "must be finite"));
+        }
+        per_joint("joint_damping", &self.joint_damping, nv)?;
+        per_joint("joint_friction", &self.joint_friction, nv)?;
+        if self.solver_iterations == 0 {
+            return Err(bad("solver_iterations", "must be at least 1"));
+        }
+        positive("length_unit_m", self.length_unit_m)?;
+        let t = &self.task;
+        positive("task.peg_width_m", t.peg_width_m)?;
+        non_negative("task.peg_length_m", t.peg_length_m)?;
+        positive("task.peg_density_kg_m3", t.peg_density_kg_m3)?;
+        non_negative("task.clearance_m", t.clearance_m)?;
+        positive("task.hole_depth_m", t.hole_depth_m)?;
+        positive("task.box_side_m", t.box_side_m)?;
+        positive("task.box_height_m", t.box_height_m)?;
+        non_negative("task.friction", t.friction)?;
+        if t.hole_depth_m >= t.box_height_m {
+            return Err(bad(
+                "task.hole_depth_m",
+                "must be less than task.box_height_m",
+            ));
+        }
+        if t.box_side_m < 2.0 * t.peg_width_m + t.clearance_m {
+            return Err(bad(
+                "task.box_side_m",
+                "must be at least twice the peg width",
+            ));
+        }
+        if !(t.box_center_xy_m.is_empty() || t.box_center_xy_m.len() == 2) {
+            return Err(bad("task.box_center_xy_m", "must hold 0 or 2 values"));
+        }
+        for v in t.box_xy_range_m.iter().chain(&t.box_center_xy_m) {
+            if !v.is_finite() {
+                return Err(bad("task.box_xy_range_m", "must be finite"));
+            }
+        }
+        non_negative("task.box_yaw_range_rad", t.box_yaw_range_rad)?;
+        non_negative("task.inserted_depth_m", t.inserted_depth_m)?;
+        non_negative("task.completed_tolerance_m", t.completed_tolerance_m)?;
+        let c = &self.camera;
+        if c.width == 0 || c.height == 0 || c.width > 4096 || c.height > 4096 {
+            return Err(bad("camera.width", "width and height must be in 1..=4096"));
+        }
+        if !(c.vertical_fov_deg > 1.0 && c.vertical_fov_deg < 170.0) {
+            return Err(bad(
+                "camera.vertical_fov_deg",
+                "must be in (1, 170) degrees",
+            ));
+        }
+        let dir: Vec<f64> = (0..3).map(|i| c.target_m[i] - c.eye_m[i]).collect();
+        if dir.iter().any(|d| !d.is_finite()) || dir.iter().all(|d| d.abs() < 1e-9) {
+            return Err(bad(
+                "camera.target_m",
+                "must be finite and differ from camera.eye_m",
+            ));
+        }
+        if dir[0].abs() < 1e-9 && dir[1].abs() < 1e-9 {
+            return Err(bad(
+                "camera.target_m",
+                "the view must not be vertical (up is +z)",
+            ));
+        }
+        if c.period_steps == 0 {
+            return Err(bad("camera.period_steps", "must be at least 1"));
+        }
+        positive("camera.max_depth_m", c.max_depth_m)?;
+        let n = &self.noise;
+        for (f, v) in [
+            ("noise.q_std_rad", n.q_std_rad),
+            ("noise.v_std_rad_s", n.v_std_rad_s),
+            ("noise.force_std_n", n.force_std_n),
+            ("noise.torque_std_nm", n.torque_std_nm),
+            ("noise.depth_std_m", n.depth_std_m),
+            ("noise.rgb_std", n.rgb_std),
+            ("noise.ft_filter_hz", n.ft_filter_hz),
+        ] {
+            non_negative(f, v)?;
+        }
+        if n.ft_bias.iter().any(|b| !b.is_finite()) {
+            return Err(bad("noise.ft_bias", "must be finite"));
+        }
+        let p = &self.perturbations;
+        for (i, push) in p.pushes.iter().enumerate() {
+            let f = format!("perturbations.pushes[{i}]");
+            non_negative(&format!("{f}.start_s"), push.start_s)?;
+            non_negative(&format!("{f}.duration_s"), push.duration_s)?;
+            if push.link == 0 || push.link > nv {
+                return Err(bad(&format!("{f}.link"), format!("must be in 1..={nv}")));
+            }
+            if push.force_n.iter().any(|v| !v.is_finite()) {
+                return Err(bad(&format!("{f}.force_n"), "must be finite"));
+            }
+        }
+        for (i, o) in p.occlusions.iter().enumerate() {
+            let f = format!("perturbations.occlusions[{i}]");
+            if !(o.rect.is_empty() || o.rect.len() == 4) {
+                return Err(bad(&format!("{f}.rect"), "must hold 0 or 4 values"));
+            }
+            if o.start_s.is_nan() || o.end_s.is_nan() || o.end_s < o.start_s {
+                return Err(bad(&format!("{f}.end_s"), "must not be before start_s"));
+            }
+        }
+        let [lo, hi] = p.random_push_force_n;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
+            return Err(bad(
+                "perturbations.random_push_force_n",
+                "must be 0 ≤ min ≤ max",
+            ));
+        }
+        non_negative(
+            "perturbations.random_push_duration_s",
+            p.random_push_duration_s,
+        )?;
+        non_negative(
+            "perturbations.random_occlusion_duration_s",
+            p.random_occlusion_duration_s,
+        )?;
+        let [a, b] = p.random_window_s;
+        if !(a.is_finite() && b.is_finite() && 0.0 <= a && a <= b) {
+            return Err(bad(
+                "perturbations.random_window_s",
+                "must be 0 ≤ start ≤ end",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Parses a TOML document (unknown fields are errors, so a typo is not
+    /// silently ignored).
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        toml::from_str(text).map_err(|e| bad("(document)", e.to_string()))
+    }
+}
