@@ -19,12 +19,15 @@
 //! assert_eq!(world.step_index(), 1);
 //! ```
 
+pub mod camera;
 pub mod config;
 pub mod convert;
+pub mod png;
 pub mod rng;
 pub mod shapes;
 pub mod world;
 
+pub use camera::{CameraFrame, Class};
 pub use config::{ConfigError, WorldConfig};
 pub use shapes::PegShape;
 pub use world::{SensorReadings, SimError, Stage, TaskState, World};

@@ -3,6 +3,7 @@
 //! the task metrics and the perturbations. A pure object: reset it, command
 //! torques, step it, read it.
 
+use crate::camera::{BodyPoses, BodyRef, Camera, CameraFrame, Class, Geometry, Primitive};
 use crate::config::{ConfigError, WorldConfig};
 use crate::convert::{from_glam, mat_to_glam, pose_from_glam, pose_to_glam, to_glam};
 use crate::rng::SimRng;
@@ -233,6 +234,7 @@ pub struct World {
     readings: SensorReadings,
     task: Option<TaskState>,
     gravity: Vector3<f64>,
+    camera: Option<Camera>,
 }
 
 impl World {
@@ -294,6 +296,7 @@ impl World {
                 wrench: [0.0; 6],
             },
             task: None,
+            camera: None,
         };
         world.reset(world.config.seed)?;
         Ok(world)
@@ -565,6 +568,7 @@ impl World {
             });
         }
 
+        self.camera = Some(Camera::new(&cfg.camera, self.primitives(), seed));
         self.step_index = 0;
         self.tau_applied.iter_mut().for_each(|t| *t = 0.0);
         self.wrench_true = self.static_wrench();
@@ -602,6 +606,103 @@ impl World {
             hole_pose,
             colliders,
         });
+    }
+
+    /// What the camera draws: the collision geometry of every body.
+    fn primitives(&self) -> Vec<Primitive> {
+        let mut prims = vec![Primitive {
+            body: BodyRef::Static,
+            local: Isometry3::translation(0.0, 0.0, -0.05),
+            geometry: Geometry::Cuboid {
+                half: Vector3::new(3.0, 3.0, 0.05),
+            },
+            class: Class::Ground,
+            color: [0.45, 0.45, 0.40],
+        }];
+        for g in self
+            .model
+            .geometries
+            .iter()
+            .filter(|g| g.role == robot_model::GeometryRole::Collision)
+        {
+            let geometry = match &g.shape {
+                Shape::Box { size } => Geometry::Cuboid {
+                    half: Vector3::from(*size) * 0.5,
+                },
+                Shape::Sphere { radius } => Geometry::Sphere { radius: *radius },
+                Shape::Capsule { radius, length } => Geometry::Capsule {
+                    half_length: 0.5 * length,
+                    radius: *radius,
+                },
+                Shape::Cylinder { radius, length } => Geometry::Cylinder {
+                    half_length: 0.5 * length,
+                    radius: *radius,
+                },
+                Shape::Mesh { .. } => continue,
+            };
+            // Alternate two greys along the chain so links stand apart.
+            let grey = if g.parent_joint % 2 == 0 { 0.80 } else { 0.62 };
+            prims.push(Primitive {
+                body: BodyRef::Link(g.parent_joint),
+                local: g.placement.to_isometry(),
+                geometry,
+                class: Class::Robot,
+                color: [grey, grey, grey + 0.04],
+            });
+        }
+        let convex = |prism: &ConvexPrism| Geometry::Convex {
+            planes: prism
+                .planes()
+                .into_iter()
+                .map(|(n, c)| (Vector3::from(n), c))
+                .collect(),
+            points: prism.points().into_iter().map(Vector3::from).collect(),
+        };
+        if let Some(peg) = &self.peg {
+            prims.push(Primitive {
+                body: BodyRef::Link(peg.info.link),
+                local: peg.info.sensor_in_link,
+                geometry: convex(&peg.info.prism),
+                class: Class::Peg,
+                color: [0.85, 0.22, 0.15],
+            });
+        }
+        if let Some(b) = &self.box_state {
+            for piece in &b.geometry.pieces {
+                prims.push(Primitive {
+                    body: BodyRef::Box,
+                    local: Isometry3::identity(),
+                    geometry: convex(piece),
+                    class: Class::Box,
+                    color: [0.20, 0.42, 0.85],
+                });
+            }
+        }
+        prims
+    }
+
+    /// Renders the camera's view of the current state into `frame`, with
+    /// the ground-truth flow from the previous render (normally every
+    /// `camera.period_steps` steps: see [`World::camera_due`]).
+    pub fn render(&mut self, frame: &mut CameraFrame) {
+        let links: Vec<Isometry3<f64>> =
+            (0..self.bodies.len()).map(|j| self.link_pose(j)).collect();
+        let poses = BodyPoses {
+            links: &links,
+            box_pose: self.hole_pose(),
+        };
+        let t = self.time_s();
+        let occlusions: Vec<Option<[u32; 4]>> = self.occlusions_at(t).map(|o| o.rect).collect();
+        let noise = (self.config.noise.depth_std_m, self.config.noise.rgb_std);
+        self.camera
+            .as_mut()
+            .expect("built at reset")
+            .render(&poses, t, &occlusions, noise, frame);
+    }
+
+    /// The camera (intrinsics, pose, projection).
+    pub fn camera(&self) -> &Camera {
+        self.camera.as_ref().expect("built at reset")
     }
 
     /// The joint index whose body carries the F/T sensor (and the peg).
@@ -1084,6 +1185,11 @@ impl World {
             self.place_box(b.geometry, hole_pose);
             self.task = None;
             self.update_task(false);
+            self.camera = Some(Camera::new(
+                &self.config.camera,
+                self.primitives(),
+                self.config.seed,
+            ));
         }
     }
 

@@ -1,0 +1,146 @@
+//! hw-sim throughput on one core:
+//! - physics: simulated seconds per wall second, with the peg inside the
+//!   hole pressed against its walls and bottom (contacts active), alone and
+//!   with rt-controller's step in the loop;
+//! - camera: one 128×128 RGB-D frame with its flow.
+//!
+//! `cargo bench -p hw-sim --bench sim` (prints a table; asserts nothing).
+
+use hw_sim::{CameraFrame, PegShape, Stage, World, WorldConfig};
+use rt_controller::{Action, Controller, ControllerConfig, RobotState};
+use std::time::Instant;
+
+struct Loop {
+    world: World,
+    model: robot_model::Model,
+    ctrl: Controller,
+    data: rt_controller::ControllerData,
+}
+
+impl Loop {
+    fn cycle(&mut self, action: Option<&Action>) {
+        let r = self.world.readings().clone();
+        let state = RobotState {
+            q: &r.q,
+            v: &r.v,
+            tau_measured: None,
+            wrench: Some(&r.wrench),
+        };
+        rt_controller::step(
+            &self.model,
+            &self.ctrl,
+            &mut self.data,
+            &state,
+            action,
+            r.t_s,
+        );
+        let tau = self.data.torques().to_vec();
+        self.world.step(&tau).expect("finite");
+    }
+}
+
+/// Drives the peg to the bottom of its hole with 20 Hz actions.
+fn inserted(peg: PegShape) -> Loop {
+    let mut config = WorldConfig::default();
+    config.task.peg = peg;
+    config.task.box_xy_range_m = [0.0, 0.0];
+    config.task.box_yaw_range_rad = 0.0;
+    let world = World::new(config).unwrap();
+    let model = world.model().clone();
+    let ctrl = Controller::new(&model, ControllerConfig::default()).unwrap();
+    let data = ctrl.create_data(&model);
+    let mut l = Loop {
+        world,
+        model,
+        ctrl,
+        data,
+    };
+    let hole = l.world.hole_pose().unwrap();
+    let depth = l.world.box_geometry().unwrap().depth;
+    for k in 0..8000 {
+        let action = (k % 50 == 0).then(|| {
+            let tip = l.world.peg_tip_pose().translation.vector;
+            let goal = hole * nalgebra::Point3::new(0.0, 0.0, -depth - 0.005);
+            let mut d = goal.coords - tip;
+            // Above the box first, then down.
+            if (tip.xy() - goal.coords.xy()).norm() > 0.002 {
+                d.z = (hole.translation.z + 0.02 - tip.z).max(-0.005);
+            }
+            let n = d.norm();
+            if n > 0.005 {
+                d *= 0.005 / n;
+            }
+            Action {
+                delta_pos_m: [d.x, d.y, d.z],
+                delta_roll_rad: 0.0,
+            }
+        });
+        l.cycle(action.as_ref());
+    }
+    l
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+fn main() {
+    println!("| peg | stage | physics only (sim s / wall s) | with controller (sim s / wall s) |");
+    println!("|---|---|---|---|");
+    for peg in PegShape::ALL {
+        let mut l = inserted(peg);
+        let stage = l.world.task().unwrap().stage;
+        let tau = l.data.torques().to_vec();
+        let mut physics = Vec::new();
+        let mut full = Vec::new();
+        for _ in 0..5 {
+            let t0 = Instant::now();
+            for _ in 0..1000 {
+                l.world.step(&tau).unwrap();
+            }
+            physics.push(1.0 / t0.elapsed().as_secs_f64());
+            let zero = Action {
+                delta_pos_m: [0.0; 3],
+                delta_roll_rad: 0.0,
+            };
+            let t0 = Instant::now();
+            for k in 0..1000 {
+                l.cycle((k % 50 == 0).then_some(&zero));
+            }
+            full.push(1.0 / t0.elapsed().as_secs_f64());
+        }
+        assert!(l.world.task().unwrap().in_contact || stage != Stage::Completed);
+        println!(
+            "| {} | {} (in contact: {}) | {:.1} | {:.1} |",
+            peg.name(),
+            stage.name(),
+            l.world.task().unwrap().in_contact,
+            median(physics),
+            median(full)
+        );
+    }
+
+    println!();
+    println!("| peg | render 128×128 RGB-D + flow, median | p90 |");
+    println!("|---|---|---|");
+    for peg in PegShape::ALL {
+        let mut l = inserted(peg);
+        let mut frame = CameraFrame::default();
+        l.world.render(&mut frame);
+        let mut times = Vec::new();
+        for _ in 0..200 {
+            l.cycle(None);
+            let t0 = Instant::now();
+            l.world.render(&mut frame);
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "| {} | {:.3} ms | {:.3} ms |",
+            peg.name(),
+            times[times.len() / 2],
+            times[times.len() * 9 / 10]
+        );
+    }
+}

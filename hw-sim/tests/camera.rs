@@ -1,0 +1,185 @@
+//! The camera: projection of a known point, exactness against rapier's own
+//! ray casts, ground-truth flow of a pure translation, occlusion, and
+//! determinism of frames.
+
+use hw_sim::camera::{BodyPoses, BodyRef, Camera, Class, Geometry, Primitive};
+use hw_sim::config::{CameraConfig, Occlusion};
+use hw_sim::convert::to_glam;
+use hw_sim::{CameraFrame, World, WorldConfig};
+use nalgebra::{Isometry3, Vector3};
+use rapier3d_f64::prelude::{QueryFilter, Ray};
+
+fn side_camera() -> CameraConfig {
+    CameraConfig {
+        eye_m: [2.0, 0.0, 0.5],
+        target_m: [0.0, 0.0, 0.5],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_known_point_projects_where_the_pinhole_model_says() {
+    let cfg = side_camera();
+    let cam = Camera::new(&cfg, Vec::new(), 0);
+    let f = 64.0 / (22.5f64).to_radians().tan();
+    assert!((cam.focal_px - f).abs() < 1e-12);
+    // The target is on the optical axis: the image centre.
+    let (u, v, z) = cam.project(&Vector3::new(0.0, 0.0, 0.5)).unwrap();
+    assert!((u - 64.0).abs() < 1e-12 && (v - 64.0).abs() < 1e-12 && (z - 2.0).abs() < 1e-12);
+    // Looking along −x with z up, image right is base +y; v grows downwards.
+    let (u, v, _) = cam.project(&Vector3::new(0.0, -0.1, 0.6)).unwrap();
+    assert!((u - (64.0 - f * 0.1 / 2.0)).abs() < 1e-9, "{u}");
+    assert!((v - (64.0 - f * 0.1 / 2.0)).abs() < 1e-9, "{v}");
+    assert!(
+        cam.project(&Vector3::new(3.0, 0.0, 0.5)).is_none(),
+        "behind the camera"
+    );
+}
+
+#[test]
+fn depth_equals_rapiers_ray_casts_on_the_collision_geometry() {
+    for peg in hw_sim::PegShape::ALL {
+        let mut cfg = WorldConfig::default();
+        cfg.task.peg = peg;
+        let mut world = World::new(cfg).unwrap();
+        // One step so that rapier's colliders follow their bodies.
+        world.step(&[0.0; 7]).unwrap();
+        let mut frame = CameraFrame::default();
+        world.render(&mut frame);
+        let cam = world.camera();
+        let (w, h) = (frame.width as usize, frame.height as usize);
+        let rot = cam.pose.rotation;
+        let eye = cam.pose.translation.vector;
+        let mut compared = 0;
+        let mut seen = [0usize; 5];
+        for i in (0..w * h).step_by(3) {
+            let (u, v) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let d = rot * Vector3::new((u - 64.0) / cam.focal_px, (v - 64.0) / cam.focal_px, 1.0);
+            let ray = Ray::new(to_glam(&eye), to_glam(&d));
+            let hit = world
+                .physics()
+                .cast_ray(&ray, 10.0, true, QueryFilter::default());
+            let ours = frame.depth_m[i] as f64;
+            seen[frame.class[i] as usize] += 1;
+            match hit {
+                Some((_, toi)) if toi <= world.config().camera.max_depth_m => {
+                    assert!(
+                        (toi - ours).abs() < 1e-5,
+                        "{peg:?} pixel {i}: rapier {toi} vs {ours} (class {})",
+                        frame.class[i]
+                    );
+                    compared += 1;
+                }
+                _ => assert_eq!(ours, 0.0, "{peg:?} pixel {i}"),
+            }
+        }
+        assert!(compared > 4000, "{compared}");
+        for class in [Class::Ground, Class::Box, Class::Robot, Class::Peg] {
+            assert!(
+                seen[class as usize] > 5,
+                "{peg:?}: {class:?} hardly visible: {seen:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_pure_translation_gives_constant_flow() {
+    let cfg = side_camera();
+    // A plate facing the camera (normal along +x, towards it) on link 1.
+    let prims = vec![Primitive {
+        body: BodyRef::Link(1),
+        local: Isometry3::identity(),
+        geometry: Geometry::Cuboid {
+            half: Vector3::new(0.01, 0.15, 0.1),
+        },
+        class: Class::Robot,
+        color: [0.5; 3],
+    }];
+    let mut cam = Camera::new(&cfg, prims, 0);
+    let base = Isometry3::translation(0.0, 0.0, 0.5);
+    let mut frame = CameraFrame::default();
+    let p0 = [Isometry3::identity(), base];
+    cam.render(
+        &BodyPoses {
+            links: &p0,
+            box_pose: None,
+        },
+        0.0,
+        &[],
+        (0.0, 0.0),
+        &mut frame,
+    );
+    assert!(
+        frame.flow_mask.iter().all(|&m| m == 0),
+        "no flow in a first frame"
+    );
+    // Move 1 cm along base +y (image +u) and 0.5 cm up (image −v).
+    let moved = Isometry3::translation(0.0, 0.01, 0.505);
+    let p1 = [Isometry3::identity(), moved];
+    cam.render(
+        &BodyPoses {
+            links: &p1,
+            box_pose: None,
+        },
+        0.05,
+        &[],
+        (0.0, 0.0),
+        &mut frame,
+    );
+    // The plate's front face is at depth 2 − 0.01.
+    let z = 1.99;
+    let expect = [cam.focal_px * 0.01 / z, -cam.focal_px * 0.005 / z];
+    let mut n = 0;
+    for (i, f) in frame.flow_px.iter().enumerate() {
+        if frame.flow_mask[i] == 1 {
+            n += 1;
+            assert!(
+                (f[0] as f64 - expect[0]).abs() < 1e-4,
+                "{f:?} vs {expect:?}"
+            );
+            assert!(
+                (f[1] as f64 - expect[1]).abs() < 1e-4,
+                "{f:?} vs {expect:?}"
+            );
+        } else {
+            assert_eq!(*f, [0.0, 0.0]);
+        }
+    }
+    assert!(n > 300, "only {n} pixels saw the plate");
+}
+
+#[test]
+fn occlusion_blanks_the_view_and_frames_are_deterministic() {
+    let mut cfg = WorldConfig::default();
+    cfg.noise.depth_std_m = 0.002;
+    cfg.noise.rgb_std = 3.0;
+    cfg.perturbations.occlusions.push(Occlusion {
+        start_s: 0.04,
+        end_s: 0.06,
+        rect: Vec::new(),
+    });
+    let run = || {
+        let mut world = World::new(cfg.clone()).unwrap();
+        let mut frames = Vec::new();
+        for _ in 0..100 {
+            world.step(&[0.0; 7]).unwrap();
+            if world.camera_due() {
+                let mut f = CameraFrame::default();
+                world.render(&mut f);
+                frames.push(f);
+            }
+        }
+        frames
+    };
+    let a = run();
+    let b = run();
+    assert_eq!(a.len(), 2);
+    assert_eq!(a, b, "same seed, different frames");
+    assert!(
+        a[0].depth_m.iter().all(|&d| d == 0.0),
+        "occluded frame has depth"
+    );
+    assert!(a[1].depth_m.iter().any(|&d| d > 0.0));
+    assert!(a[1].flow_mask.contains(&1), "the falling arm must flow");
+}
