@@ -6,38 +6,13 @@
 //!
 //! `cargo bench -p hw-sim --bench sim` (prints a table; asserts nothing).
 
-use hw_sim::{CameraFrame, PegShape, Stage, World, WorldConfig};
-use rt_controller::{Action, Controller, ControllerConfig, RobotState};
+use hw_sim::{CameraFrame, PegShape, Stage, WorldConfig};
+use rt_controller::Action;
 use std::time::Instant;
 
-struct Loop {
-    world: World,
-    model: robot_model::Model,
-    ctrl: Controller,
-    data: rt_controller::ControllerData,
-}
-
-impl Loop {
-    fn cycle(&mut self, action: Option<&Action>) {
-        let r = self.world.readings().clone();
-        let state = RobotState {
-            q: &r.q,
-            v: &r.v,
-            tau_measured: None,
-            wrench: Some(&r.wrench),
-        };
-        rt_controller::step(
-            &self.model,
-            &self.ctrl,
-            &mut self.data,
-            &state,
-            action,
-            r.t_s,
-        );
-        let tau = self.data.torques().to_vec();
-        self.world.step(&tau).expect("finite");
-    }
-}
+#[path = "../tests/common/mod.rs"]
+mod common;
+use common::Rig as Loop;
 
 /// Drives the peg to the bottom of its hole with 20 Hz actions.
 fn inserted(peg: PegShape) -> Loop {
@@ -45,16 +20,7 @@ fn inserted(peg: PegShape) -> Loop {
     config.task.peg = peg;
     config.task.box_xy_range_m = [0.0, 0.0];
     config.task.box_yaw_range_rad = 0.0;
-    let world = World::new(config).unwrap();
-    let model = world.model().clone();
-    let ctrl = Controller::new(&model, ControllerConfig::default()).unwrap();
-    let data = ctrl.create_data(&model);
-    let mut l = Loop {
-        world,
-        model,
-        ctrl,
-        data,
-    };
+    let mut l = Loop::new(config);
     let hole = l.world.hole_pose().unwrap();
     let depth = l.world.box_geometry().unwrap().depth;
     for k in 0..8000 {

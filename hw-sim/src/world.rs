@@ -176,19 +176,9 @@ fn groups(member: Group, filter: Group) -> InteractionGroups {
 /// The default initial pose of the built-in robots: the peg points down
 /// about 25 to 35 cm above the floor in front of the robot.
 pub fn default_initial_q(model: &Model) -> Vec<f64> {
-    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
-    match model.name.as_str() {
-        "iiwa14" => vec![0.0, 0.5, 0.0, -1.4, 0.0, 1.2, 0.0],
-        "panda" => vec![
-            0.0,
-            -FRAC_PI_4,
-            0.0,
-            -3.0 * FRAC_PI_4,
-            0.0,
-            FRAC_PI_2,
-            FRAC_PI_4,
-        ],
-        _ => model.neutral_configuration().as_slice().to_vec(),
+    match robot_model::descriptions::home_configuration(&model.name) {
+        Some(q) => q.to_vec(),
+        None => model.neutral_configuration().as_slice().to_vec(),
     }
 }
 

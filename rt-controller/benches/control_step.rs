@@ -14,18 +14,7 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
-
-/// The Panda's "ready" pose.
-const READY: [f64; 7] = [
-    0.0,
-    -FRAC_PI_4,
-    0.0,
-    -3.0 * FRAC_PI_4,
-    0.0,
-    FRAC_PI_2,
-    FRAC_PI_4,
-];
+use robot_model::descriptions::PANDA_READY_Q as READY;
 
 struct Case {
     model: Model,

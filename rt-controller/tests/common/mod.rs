@@ -9,15 +9,8 @@ use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotS
 use std::path::PathBuf;
 
 /// The Panda's "ready" pose: peg tip at (0.307, 0, 0.470) pointing down.
-pub const PANDA_READY: [f64; 7] = [
-    0.0,
-    -std::f64::consts::FRAC_PI_4,
-    0.0,
-    -3.0 * std::f64::consts::FRAC_PI_4,
-    0.0,
-    std::f64::consts::FRAC_PI_2,
-    std::f64::consts::FRAC_PI_4,
-];
+#[allow(unused_imports)]
+pub use robot_model::descriptions::PANDA_READY_Q as PANDA_READY;
 
 pub fn panda() -> Model {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/panda.urdf");
