@@ -205,6 +205,8 @@ pub struct World {
     joints: Vec<MultibodyJointHandle>,
     /// rapier generalized coordinate index per moving joint.
     dof: Vec<usize>,
+    /// rapier multibody link id per moving joint.
+    link_ids: Vec<usize>,
     /// Joint axis in the child body frame, per moving joint.
     axis: Vec<Vector3<f64>>,
     prismatic: Vec<bool>,
@@ -264,6 +266,7 @@ impl World {
             bodies: Vec::new(),
             joints: Vec::new(),
             dof: Vec::new(),
+            link_ids: Vec::new(),
             axis: Vec::new(),
             prismatic: Vec::new(),
             peg: None,
@@ -330,6 +333,7 @@ impl World {
         self.bodies.clear();
         self.joints.clear();
         self.dof.clear();
+        self.link_ids.clear();
         self.axis.clear();
         self.prismatic.clear();
         let peg_link = self.peg_link();
@@ -417,18 +421,21 @@ impl World {
             // until forward kinematics sees that the base is fixed.
             mb.forward_kinematics(&physics.bodies, true);
         }
-        for k in 0..nv {
-            let link = physics.multibody_joints.rigid_body_link(self.bodies[k + 1]);
-            self.dof.push(link.map(|l| l.id).unwrap_or(usize::MAX));
-        }
-        // Link id → generalized coordinate index.
+        // Link ids and generalized coordinate indices, looked up once here
+        // rather than on every step.
         {
             let (mb, _) = physics
                 .multibody_joints
                 .get(self.joints[0])
                 .expect("multibody");
-            for d in self.dof.iter_mut() {
-                *d = mb.link(*d).expect("link").assembly_id();
+            for &body in &self.bodies[1..] {
+                let id = physics
+                    .multibody_joints
+                    .rigid_body_link(body)
+                    .expect("every moving body is a multibody link")
+                    .id;
+                self.link_ids.push(id);
+                self.dof.push(mb.link(id).expect("link").assembly_id());
             }
         }
         {
@@ -824,13 +831,7 @@ impl World {
             .get(self.joints[0])
             .expect("multibody");
         let gv = mb.generalized_velocity();
-        for (k, &h) in self.bodies[1..].iter().enumerate() {
-            let link_id = self
-                .physics
-                .multibody_joints
-                .rigid_body_link(h)
-                .expect("link")
-                .id;
+        for (k, &link_id) in self.link_ids.iter().enumerate() {
             let coords = mb.link(link_id).expect("link").joint().coords();
             self.q[k] = if self.prismatic[k] {
                 coords[0]
@@ -1034,7 +1035,7 @@ impl World {
     }
 
     fn update_task(&mut self, contact: bool) {
-        let (Some(b), Some(peg)) = (self.box_state.as_ref(), self.peg.as_ref()) else {
+        let (Some(b), Some(_)) = (self.box_state.as_ref(), self.peg.as_ref()) else {
             self.task = None;
             return;
         };
@@ -1050,7 +1051,6 @@ impl World {
         if psi > 0.5 * period {
             psi -= period;
         }
-        let _ = peg;
         let t = &self.config.task;
         let stage_now = if s.z <= -(b.geometry.depth - t.completed_tolerance_m) {
             Stage::Completed
