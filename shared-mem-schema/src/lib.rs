@@ -1,18 +1,627 @@
 //! # shared-mem-schema
 //!
 //! Owns every message that crosses a process boundary in the stack: the 1 kHz
-//! sensor frame, the 20 Hz policy action, the hardware state and torque
-//! command, the camera frame and the controller status, as fixed-size
-//! `#[repr(C)]` structs usable zero-copy over iceoryx2, together with the
-//! service names and the schema version that two processes compare before
-//! they talk.
+//! hardware state and torque command exchanged with the (simulated) robot,
+//! the 1 kHz sensor frame, the 20 Hz policy action, the camera frame, the
+//! controller status, and the simulator's episode commands and reports. Each
+//! is a fixed-size `#[repr(C)]` struct without implicit padding, usable
+//! zero-copy over iceoryx2 and writable byte for byte into logs.
 //!
-//! It must not contain logic beyond plain constructors and must not depend on
-//! any other crate of this workspace.
-//!
-//! The messages arrive with the real-time stack; for now the crate holds the
-//! schema version that every later message will carry.
+//! Service names and the schema version live here too. [`transport`] opens a
+//! service with the version as a service attribute, so two processes built
+//! from different schema versions refuse to talk, with an error that names
+//! both versions. That handshake is the only logic here (see the closing
+//! note of the real-time stack issue); the crate must not depend on any other
+//! crate of this workspace.
+
+pub mod transport;
+
+use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the message layout. Bump it whenever any message's layout or
 /// meaning changes; peers built from different versions refuse to talk.
 pub const SCHEMA_VERSION: u32 = 1;
+
+/// Joint arrays hold this many entries; `n_joints` says how many are used.
+pub const MAX_JOINTS: usize = 8;
+/// Largest camera image width carried by [`CameraFrame`], pixels.
+pub const MAX_IMAGE_WIDTH: usize = 256;
+/// Largest camera image height carried by [`CameraFrame`], pixels.
+pub const MAX_IMAGE_HEIGHT: usize = 256;
+/// Capacity of [`SimCommand::config_toml`], bytes.
+pub const MAX_CONFIG_BYTES: usize = 16 * 1024;
+/// Capacity of [`EpisodeReport::message`], bytes.
+pub const MAX_MESSAGE_BYTES: usize = 256;
+/// Bins of a [`LatencyHistogram`] (1 µs each).
+pub const HISTOGRAM_BINS: usize = 2000;
+
+/// Service topics, relative to a namespace (`<namespace>/<topic>`), so that
+/// several stacks (parallel tests) can share one machine.
+pub mod topics {
+    /// hw-sim → rt-controller, 1 kHz: [`crate::HardwareState`].
+    pub const HARDWARE_STATE: &str = "hw/state";
+    /// rt-controller → hw-sim, 1 kHz: [`crate::TorqueCommand`].
+    pub const TORQUE_COMMAND: &str = "hw/torque";
+    /// hw-sim → learner, 20 Hz: [`crate::CameraFrame`].
+    pub const CAMERA: &str = "hw/camera";
+    /// learner → hw-sim: [`crate::SimCommand`].
+    pub const SIM_COMMAND: &str = "sim/command";
+    /// hw-sim → learner, 20 Hz and after each command: [`crate::EpisodeReport`].
+    pub const EPISODE: &str = "sim/episode";
+    /// rt-controller → learner, 1 kHz: [`crate::SensorFrame`].
+    pub const SENSOR: &str = "ctrl/sensor";
+    /// rt-controller → anyone, ~10 Hz: [`crate::ControllerStatus`].
+    pub const STATUS: &str = "ctrl/status";
+    /// learner → rt-controller, 20 Hz: [`crate::PolicyAction`].
+    pub const ACTION: &str = "policy/action";
+}
+
+/// Namespace used when none is given.
+pub const DEFAULT_NAMESPACE: &str = "vt";
+
+/// Full service name of `topic` in `namespace`.
+pub fn service_name(namespace: &str, topic: &str) -> String {
+    format!("{namespace}/{topic}")
+}
+
+/// Plain old data: `#[repr(C)]`, no padding, every bit pattern valid (all
+/// fields are integers, floats or arrays of them).
+///
+/// # Safety
+/// Implement only for types that satisfy the above; [`Pod::as_bytes`] reads
+/// every byte and [`Pod::zeroed`] writes all zeros.
+pub unsafe trait Pod: Copy + Sized + 'static {
+    /// The value's bytes in memory order (native endianness).
+    fn as_bytes(&self) -> &[u8] {
+        // SAFETY: no padding, so every byte is initialised.
+        unsafe { core::slice::from_raw_parts((self as *const Self).cast(), size_of::<Self>()) }
+    }
+
+    /// Writes all-zero bytes into uninitialised memory and returns it as a
+    /// value reference (large messages are built in place, never on the
+    /// stack).
+    fn zero_in_place(slot: &mut core::mem::MaybeUninit<Self>) -> &mut Self {
+        // SAFETY: all-zero is a valid value of every field.
+        unsafe {
+            core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1);
+            slot.assume_init_mut()
+        }
+    }
+
+    /// A boxed all-zero value (for messages too large for the stack).
+    fn boxed_zeroed() -> Box<Self> {
+        let mut b = Box::<Self>::new_uninit();
+        Self::zero_in_place(&mut b);
+        // SAFETY: just initialised.
+        unsafe { b.assume_init() }
+    }
+
+    /// Copies a value out of `bytes`; `None` when the length differs.
+    fn read_from(bytes: &[u8]) -> Option<Box<Self>> {
+        if bytes.len() != size_of::<Self>() {
+            return None;
+        }
+        let mut b = Self::boxed_zeroed();
+        // SAFETY: same length, any bytes are a valid value.
+        unsafe {
+            core::ptr::copy_nonoverlapping(
+                bytes.as_ptr(),
+                (&mut *b as *mut Self).cast::<u8>(),
+                bytes.len(),
+            );
+        }
+        Some(b)
+    }
+}
+
+/// Fields every message starts with.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+pub struct Header {
+    /// [`SCHEMA_VERSION`] of the sender.
+    pub schema_version: u32,
+    /// Message-specific flags (see each message).
+    pub flags: u32,
+    /// Sender's sequence number, +1 per message of this stream.
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` at publication, ns (one clock for all processes of
+    /// a machine, so latencies between them can be measured).
+    pub t_mono_ns: u64,
+    /// Hardware (simulated) time of the data, ns.
+    pub t_hw_ns: u64,
+    /// Episode the data belongs to (hw-sim's reset counter; 0 before any).
+    pub episode: u64,
+}
+
+impl Header {
+    /// A header of this schema version.
+    pub fn new(seq: u64, t_mono_ns: u64, t_hw_ns: u64, episode: u64) -> Self {
+        Self {
+            schema_version: SCHEMA_VERSION,
+            flags: 0,
+            seq,
+            t_mono_ns,
+            t_hw_ns,
+            episode,
+        }
+    }
+}
+
+/// Robot → controller, every hardware cycle (1 kHz).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct HardwareState {
+    /// Header; `flags` bits: [`HardwareState::BRAKES_ENGAGED`].
+    pub header: Header,
+    /// Hardware step index since start (lockstep: the command for this
+    /// state must carry it in [`TorqueCommand::state_step`]).
+    pub step: u64,
+    /// Sequence number of the torque command applied during the step that
+    /// led to this state (0: none yet).
+    pub applied_command_seq: u64,
+    /// Used entries of the joint arrays.
+    pub n_joints: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Joint positions, rad (or m).
+    pub q: [f64; MAX_JOINTS],
+    /// Joint velocities, rad/s.
+    pub v: [f64; MAX_JOINTS],
+    /// Joint torques applied (measured), N·m.
+    pub tau_measured: [f64; MAX_JOINTS],
+    /// Wrist wrench the tool exerts on the flange in the F/T sensor frame:
+    /// force (N) then moment (N·m).
+    pub wrench: [f64; 6],
+}
+
+impl HardwareState {
+    /// Flag: no valid torque command, the brakes hold the arm.
+    pub const BRAKES_ENGAGED: u32 = 1;
+}
+
+/// Controller → robot, every control cycle.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct TorqueCommand {
+    /// Header.
+    pub header: Header,
+    /// [`HardwareState::step`] of the state this command answers.
+    pub state_step: u64,
+    /// Sequence number of the newest policy action reflected in `tau`
+    /// (0: none).
+    pub action_seq: u64,
+    /// Used entries of `tau`.
+    pub n_joints: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Joint torques, N·m.
+    pub tau: [f64; MAX_JOINTS],
+}
+
+/// Controller → learner, every control cycle (1 kHz).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct SensorFrame {
+    /// Header (`t_hw_ns` is the hardware time of the state).
+    pub header: Header,
+    /// Hardware step of the state.
+    pub step: u64,
+    /// Sequence number of the newest action reflected in `tau_cmd`.
+    pub action_seq: u64,
+    /// Used entries of the joint arrays.
+    pub n_joints: u32,
+    /// Controller mode ([`ControllerMode`] as u32).
+    pub mode: u32,
+    /// Joint positions, rad.
+    pub q: [f64; MAX_JOINTS],
+    /// Joint velocities, rad/s.
+    pub v: [f64; MAX_JOINTS],
+    /// Torques commanded this cycle, N·m.
+    pub tau_cmd: [f64; MAX_JOINTS],
+    /// Torques measured, N·m.
+    pub tau_measured: [f64; MAX_JOINTS],
+    /// End-effector position in the base frame, m.
+    pub ee_pos_m: [f64; 3],
+    /// End-effector orientation in the base frame, quaternion (x, y, z, w).
+    pub ee_quat_xyzw: [f64; 4],
+    /// End-effector twist in the base frame: linear (m/s) then angular
+    /// (rad/s).
+    pub ee_twist: [f64; 6],
+    /// Wrist wrench in the F/T sensor frame: force (N) then moment (N·m).
+    pub wrench: [f64; 6],
+}
+
+/// Learner → controller, 20 Hz: the paper's action, a displacement of the
+/// end-effector target.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct PolicyAction {
+    /// Header (`t_hw_ns`: hardware time of the observation it answers).
+    pub header: Header,
+    /// Lockstep only: the hardware step at which the controller applies it
+    /// (0: as soon as it arrives, the deployed behaviour).
+    pub apply_at_step: u64,
+    /// Position step (x, y, z) in the base frame, m.
+    pub delta_pos_m: [f64; 3],
+    /// Roll step about the base z axis, rad.
+    pub delta_roll_rad: f64,
+}
+
+/// Robot (camera driver) → learner, 20 Hz: an RGB-D image with its
+/// calibration. Only the first `width × height` pixels of each buffer are
+/// meaningful.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct CameraFrame {
+    /// Header (`t_hw_ns`: exposure time).
+    pub header: Header,
+    /// Frame counter since start.
+    pub index: u64,
+    /// Image width, pixels (≤ [`MAX_IMAGE_WIDTH`]).
+    pub width: u32,
+    /// Image height, pixels (≤ [`MAX_IMAGE_HEIGHT`]).
+    pub height: u32,
+    /// Focal length, pixels (square pixels).
+    pub focal_px: f64,
+    /// Principal point (x, y), pixels.
+    pub principal_px: [f64; 2],
+    /// Camera position in the base frame, m. Camera axes: x right, y down,
+    /// z forward (optical).
+    pub pose_pos_m: [f64; 3],
+    /// Camera orientation in the base frame, quaternion (x, y, z, w).
+    pub pose_quat_xyzw: [f64; 4],
+    /// RGB, row-major, 3 bytes per pixel.
+    pub rgb: [u8; MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT * 3],
+    /// Depth along the optical axis, m, row-major (0: no return).
+    pub depth_m: [f32; MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT],
+}
+
+/// The controller's mode as carried in messages.
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerMode {
+    /// Holding the start pose, no action yet.
+    Idle = 0,
+    /// Following actions.
+    Running = 1,
+    /// Holding the last target (actions stopped).
+    Holding = 2,
+    /// Latched safe state.
+    Fault = 3,
+    /// No hardware state: no torques sent.
+    HardwareLost = 4,
+}
+
+impl ControllerMode {
+    /// Decodes a `mode` field; `None` for unknown values.
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::Idle,
+            1 => Self::Running,
+            2 => Self::Holding,
+            3 => Self::Fault,
+            4 => Self::HardwareLost,
+            _ => return None,
+        })
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Running => "running",
+            Self::Holding => "holding",
+            Self::Fault => "fault",
+            Self::HardwareLost => "hardware-lost",
+        }
+    }
+}
+
+/// A histogram of durations in 1 µs bins, cumulative since start.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct LatencyHistogram {
+    /// Samples recorded.
+    pub count: u64,
+    /// Samples at or above `HISTOGRAM_BINS` µs.
+    pub overflow: u64,
+    /// Largest sample, ns.
+    pub max_ns: u64,
+    /// Sum of samples, ns.
+    pub sum_ns: u64,
+    /// `bins[i]`: samples in [i, i+1) µs.
+    pub bins: [u32; HISTOGRAM_BINS],
+}
+
+impl LatencyHistogram {
+    /// An empty histogram.
+    pub const EMPTY: Self = Self {
+        count: 0,
+        overflow: 0,
+        max_ns: 0,
+        sum_ns: 0,
+        bins: [0; HISTOGRAM_BINS],
+    };
+
+    /// Records one duration (never allocates).
+    pub fn record(&mut self, ns: u64) {
+        self.count += 1;
+        self.sum_ns = self.sum_ns.saturating_add(ns);
+        self.max_ns = self.max_ns.max(ns);
+        let us = (ns / 1000) as usize;
+        match self.bins.get_mut(us) {
+            Some(b) => *b = b.saturating_add(1),
+            None => self.overflow += 1,
+        }
+    }
+
+    /// The `p`-quantile (0..=1), µs, as the upper edge of its bin; the
+    /// maximum when it falls in the overflow; 0 when empty.
+    pub fn quantile_us(&self, p: f64) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        let rank = ((p.clamp(0.0, 1.0) * self.count as f64).ceil() as u64).max(1);
+        let mut seen = 0u64;
+        for (i, &b) in self.bins.iter().enumerate() {
+            seen += u64::from(b);
+            if seen >= rank {
+                return (i + 1) as f64;
+            }
+        }
+        self.max_ns as f64 / 1000.0
+    }
+
+    /// Mean, µs.
+    pub fn mean_us(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.sum_ns as f64 / self.count as f64 / 1000.0
+        }
+    }
+}
+
+/// Controller → anyone, ~10 Hz: mode, counters and timing.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct ControllerStatus {
+    /// Header.
+    pub header: Header,
+    /// Control cycles run.
+    pub cycles: u64,
+    /// Cycles that started after their deadline had passed a whole period.
+    pub overruns: u64,
+    /// Actions received.
+    pub actions_received: u64,
+    /// Actions applied (clamped included).
+    pub actions_accepted: u64,
+    /// Garbage actions (NaN, out of range, wrong schema) counted and ignored.
+    pub actions_rejected: u64,
+    /// Valid actions ignored (fault or hold).
+    pub actions_ignored: u64,
+    /// Times the action stream went silent past the timeout.
+    pub action_timeouts: u64,
+    /// Faults raised.
+    pub faults: u64,
+    /// Cycles without a new hardware state.
+    pub hardware_misses: u64,
+    /// Sequence number of the newest action applied.
+    pub last_action_seq: u64,
+    /// Controller mode ([`ControllerMode`] as u32).
+    pub mode: u32,
+    /// Fault reason code (0: none; see rt-controller's docs).
+    pub fault_code: u32,
+    /// 1 when the real-time set-up (memory lock, SCHED_FIFO) succeeded.
+    pub realtime: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Wake-up latency of each cycle past its absolute deadline.
+    pub wakeup_latency: LatencyHistogram,
+    /// Compute time of each cycle (read state → torques sent → frame
+    /// published).
+    pub compute: LatencyHistogram,
+    /// From an action's publication to the first torque command that
+    /// reflects it.
+    pub action_latency: LatencyHistogram,
+}
+
+/// Learner → hw-sim: episode control.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct SimCommand {
+    /// Header (`seq` is the request id echoed in [`EpisodeReport`]).
+    pub header: Header,
+    /// What to do ([`SimCommand::RESET`], [`SimCommand::SHUTDOWN`]).
+    pub command: u32,
+    /// Used bytes of `config_toml`.
+    pub config_len: u32,
+    /// Seed of the new episode.
+    pub seed: u64,
+    /// TOML of the simulator's world configuration (UTF-8); empty: keep the
+    /// current configuration.
+    pub config_toml: [u8; MAX_CONFIG_BYTES],
+}
+
+impl SimCommand {
+    /// Start a new episode (new box pose, arm at its start pose).
+    pub const RESET: u32 = 1;
+    /// Stop the simulator process.
+    pub const SHUTDOWN: u32 = 2;
+}
+
+/// hw-sim → learner: the episode and task state, at 20 Hz and after each
+/// command (the simulator's ground truth; a real cell has none of it).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+pub struct EpisodeReport {
+    /// Header (`episode`: the current episode).
+    pub header: Header,
+    /// `seq` of the last command handled (0: none).
+    pub command_seq: u64,
+    /// Seed of the current episode.
+    pub seed: u64,
+    /// Hardware step of the report.
+    pub step: u64,
+    /// Result of the last command: [`EpisodeReport::OK`] or
+    /// [`EpisodeReport::REJECTED`] (reason in `message`).
+    pub command_result: u32,
+    /// Peg: 0 none, 1 square, 2 triangle, 3 semicircle, 4 hexagon.
+    pub peg: u32,
+    /// Stage now: 0 failed (not touched), 1 touched, 2 inserted, 3 completed.
+    pub stage_now: u32,
+    /// Best stage reached this episode (same codes).
+    pub stage_best: u32,
+    /// 1 when the peg touches the box.
+    pub in_contact: u32,
+    /// Used bytes of `message`.
+    pub message_len: u32,
+    /// Peg tip relative to the hole's top centre, hole frame, m.
+    pub s_m: [f64; 3],
+    /// Peg roll relative to the hole, wrapped by its symmetry, rad.
+    pub s_psi_rad: f64,
+    /// Hole top-centre position in the base frame, m.
+    pub hole_pos_m: [f64; 3],
+    /// Hole orientation in the base frame, quaternion (x, y, z, w).
+    pub hole_quat_xyzw: [f64; 4],
+    /// Peg width (outline scale), m.
+    pub peg_width_m: f64,
+    /// Hole depth, m.
+    pub hole_depth_m: f64,
+    /// UTF-8 text: the reason a command was rejected.
+    pub message: [u8; MAX_MESSAGE_BYTES],
+}
+
+impl EpisodeReport {
+    /// The command was carried out.
+    pub const OK: u32 = 0;
+    /// The command was refused; `message` says why.
+    pub const REJECTED: u32 = 1;
+
+    /// The message text (lossy UTF-8).
+    pub fn message_text(&self) -> String {
+        let n = (self.message_len as usize).min(MAX_MESSAGE_BYTES);
+        String::from_utf8_lossy(&self.message[..n]).into_owned()
+    }
+}
+
+/// Copies `text` into a fixed buffer, truncated at a character boundary;
+/// returns the bytes used.
+pub fn write_text(buf: &mut [u8], text: &str) -> u32 {
+    let mut n = text.len().min(buf.len());
+    while !text.is_char_boundary(n) {
+        n -= 1;
+    }
+    buf[..n].copy_from_slice(&text.as_bytes()[..n]);
+    buf[n..].fill(0);
+    n as u32
+}
+
+// SAFETY (all impls): `#[repr(C)]`, fields of u8/u32/u64/f32/f64 or arrays of
+// them, ordered so that no padding arises; the size checks below fail the
+// build if a change introduces any.
+unsafe impl Pod for Header {}
+unsafe impl Pod for HardwareState {}
+unsafe impl Pod for TorqueCommand {}
+unsafe impl Pod for SensorFrame {}
+unsafe impl Pod for PolicyAction {}
+unsafe impl Pod for CameraFrame {}
+unsafe impl Pod for LatencyHistogram {}
+unsafe impl Pod for ControllerStatus {}
+unsafe impl Pod for SimCommand {}
+unsafe impl Pod for EpisodeReport {}
+
+const H: usize = 40;
+const J: usize = 8 * MAX_JOINTS;
+const _: () = assert!(size_of::<Header>() == H);
+const _: () = assert!(size_of::<HardwareState>() == H + 16 + 8 + 3 * J + 48);
+const _: () = assert!(size_of::<TorqueCommand>() == H + 16 + 8 + J);
+const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 8 + 4 * J + 8 * 19);
+const _: () = assert!(size_of::<PolicyAction>() == H + 8 + 32);
+const _: () = assert!(
+    size_of::<CameraFrame>()
+        == H + 8 + 8 + 8 + 16 + 24 + 32 + MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT * 7
+);
+const _: () = assert!(size_of::<LatencyHistogram>() == 32 + 4 * HISTOGRAM_BINS);
+const _: () =
+    assert!(size_of::<ControllerStatus>() == H + 80 + 16 + 3 * size_of::<LatencyHistogram>());
+const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
+const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
+
+/// A message type with its topic.
+pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
+    /// Its topic (see [`topics`]).
+    const TOPIC: &'static str;
+    /// Its type name, as written into logs next to [`SCHEMA_VERSION`].
+    const NAME: &'static str;
+    /// Its header.
+    fn header(&self) -> &Header;
+}
+
+macro_rules! message {
+    ($t:ty, $topic:expr, $name:expr) => {
+        impl Message for $t {
+            const TOPIC: &'static str = $topic;
+            const NAME: &'static str = $name;
+            fn header(&self) -> &Header {
+                &self.header
+            }
+        }
+    };
+}
+
+message!(HardwareState, topics::HARDWARE_STATE, "HardwareState");
+message!(TorqueCommand, topics::TORQUE_COMMAND, "TorqueCommand");
+message!(SensorFrame, topics::SENSOR, "SensorFrame");
+message!(PolicyAction, topics::ACTION, "PolicyAction");
+message!(CameraFrame, topics::CAMERA, "CameraFrame");
+message!(ControllerStatus, topics::STATUS, "ControllerStatus");
+message!(SimCommand, topics::SIM_COMMAND, "SimCommand");
+message!(EpisodeReport, topics::EPISODE, "EpisodeReport");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_quantiles() {
+        let mut h = LatencyHistogram::EMPTY;
+        assert_eq!(h.quantile_us(0.5), 0.0);
+        for us in 0..100u64 {
+            h.record(us * 1000 + 500);
+        }
+        assert_eq!(h.count, 100);
+        assert_eq!(h.quantile_us(0.5), 50.0);
+        assert_eq!(h.quantile_us(0.99), 99.0);
+        assert_eq!(h.quantile_us(1.0), 100.0);
+        h.record(10_000_000);
+        assert_eq!(h.overflow, 1);
+        assert_eq!(h.quantile_us(1.0), 10_000.0);
+        assert!((h.mean_us() - (4950.0 + 50.0 + 10_000.0) / 101.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bytes_round_trip() {
+        let mut a = PolicyAction::boxed_zeroed();
+        a.header = Header::new(7, 1, 2, 3);
+        a.delta_pos_m = [0.1, -0.2, 0.3];
+        a.delta_roll_rad = -0.0;
+        let b = PolicyAction::read_from(a.as_bytes()).unwrap();
+        assert_eq!(a.as_bytes(), b.as_bytes());
+        assert!(PolicyAction::read_from(&a.as_bytes()[1..]).is_none());
+        let cam = CameraFrame::boxed_zeroed();
+        assert!(cam.rgb.iter().all(|&x| x == 0));
+    }
+
+    #[test]
+    fn text_truncates_on_char_boundary() {
+        let mut buf = [0xffu8; 5];
+        let n = write_text(&mut buf, "ab€d");
+        assert_eq!(n, 5);
+        let n = write_text(&mut buf, "abcd€");
+        assert_eq!(n, 4);
+        assert_eq!(&buf, b"abcd\0");
+        assert_eq!(ControllerMode::from_u32(3), Some(ControllerMode::Fault));
+        assert_eq!(ControllerMode::from_u32(9), None);
+    }
+}

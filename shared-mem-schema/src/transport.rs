@@ -1,0 +1,303 @@
+//! Opening the stack's iceoryx2 services with the schema-version handshake.
+//!
+//! Every service is opened (or created) with the attribute
+//! `schema_version = SCHEMA_VERSION`. A peer built from another version
+//! created the service with another value, so opening fails, and the error
+//! says which versions met. Every process opens a service with the same
+//! settings (from [`ServiceSettings::of`]), so creator and opener agree
+//! whichever starts first.
+
+use crate::{Message, SCHEMA_VERSION, service_name};
+use iceoryx2::node::NodeState;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+
+/// The service attribute that carries the schema version.
+pub const SCHEMA_ATTRIBUTE: &str = "vision_touch.schema_version";
+
+/// A publisher of message `T`.
+pub type Pub<T> = Publisher<ipc::Service, T, ()>;
+/// A subscriber of message `T`.
+pub type Sub<T> = Subscriber<ipc::Service, T, ()>;
+/// A node of the stack.
+pub type StackNode = Node<ipc::Service>;
+
+/// Why a service could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum TransportError {
+    /// The peer that created the service was built from another schema.
+    #[error(
+        "service '{service}' speaks schema version {theirs} but this process was built with \
+         schema version {ours}: rebuild both from the same shared-mem-schema"
+    )]
+    SchemaMismatch {
+        /// Service name.
+        service: String,
+        /// Our [`SCHEMA_VERSION`].
+        ours: u32,
+        /// The version the service was created with (as text; "none" when
+        /// it has no version attribute).
+        theirs: String,
+    },
+    /// Any other iceoryx2 failure.
+    #[error("iceoryx2: {what} '{service}': {detail}")]
+    Ipc {
+        /// Service or node name.
+        service: String,
+        /// What was being done.
+        what: &'static str,
+        /// iceoryx2's error.
+        detail: String,
+    },
+}
+
+/// Per-topic capacities. The same for every opener of a topic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServiceSettings {
+    /// Samples a subscriber may queue.
+    pub buffer: usize,
+    /// Publishers allowed at once.
+    pub publishers: usize,
+    /// Subscribers allowed at once.
+    pub subscribers: usize,
+}
+
+impl ServiceSettings {
+    /// The settings of a message type's topic. Small fast streams get deep
+    /// queues so a 20 Hz reader loses nothing of the 1 kHz streams; the
+    /// camera keeps only a few frames (each is ~460 kB).
+    pub fn of<T: Message>() -> Self {
+        let buffer = match T::TOPIC {
+            crate::topics::SENSOR => 1024,
+            crate::topics::CAMERA => 4,
+            crate::topics::HARDWARE_STATE | crate::topics::TORQUE_COMMAND => 8,
+            crate::topics::EPISODE => 64,
+            _ => 16,
+        };
+        Self {
+            buffer,
+            publishers: 4,
+            subscribers: 8,
+        }
+    }
+}
+
+fn ipc_err(service: &str, what: &'static str, e: impl core::fmt::Debug) -> TransportError {
+    TransportError::Ipc {
+        service: service.to_string(),
+        what,
+        detail: format!("{e:?}"),
+    }
+}
+
+/// Lowers iceoryx2's own logging to errors (its warnings, such as "no
+/// config file", are noise for users).
+pub fn quiet_logs() {
+    set_log_level(LogLevel::Error);
+}
+
+/// Creates a node named `name`. Signal handling is left to the process
+/// (iceoryx2's own handler is disabled), and stale resources of dead nodes
+/// are removed first, so a previous `kill -9` never breaks a start.
+pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
+    cleanup_dead_nodes();
+    let node_name = NodeName::new(name).map_err(|e| ipc_err(name, "node name", e))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| ipc_err(name, "creating node", e))
+}
+
+/// Removes the shared-memory resources of nodes whose process died; returns
+/// how many dead nodes were found.
+pub fn cleanup_dead_nodes() -> usize {
+    let mut dead = Vec::new();
+    let _ = StackNode::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    let n = dead.len();
+    for view in dead {
+        let _ = view.try_remove_stale_resources();
+    }
+    n
+}
+
+fn attribute_key() -> AttributeKey {
+    AttributeKey::new(SCHEMA_ATTRIBUTE.as_bytes()).expect("valid attribute key")
+}
+
+fn version_value(version: u32) -> AttributeValue {
+    AttributeValue::new(version.to_string().as_bytes()).expect("valid attribute value")
+}
+
+/// The schema version a service was created with; `None` if the service
+/// does not exist, `Some("none")` without the attribute.
+pub fn service_schema_version(name: &str) -> Option<String> {
+    let sn = ServiceName::new(name).ok()?;
+    let details = ipc::Service::details(
+        &sn,
+        Config::global_config(),
+        MessagingPattern::PublishSubscribe,
+    )
+    .ok()??;
+    let attrs = details.static_details.attributes();
+    let key = attribute_key();
+    Some(
+        attrs
+            .key_value(&key, 0)
+            .map(|v| v.to_string())
+            .unwrap_or_else(|| "none".into()),
+    )
+}
+
+/// A typed service of the stack, opened or created with the version
+/// handshake.
+pub struct Channel<T: Message> {
+    name: String,
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+}
+
+impl<T: Message> Channel<T> {
+    /// Opens `T`'s topic in `namespace`, creating it if absent.
+    pub fn open(node: &StackNode, namespace: &str) -> Result<Self, TransportError> {
+        Self::open_as_version(node, namespace, SCHEMA_VERSION)
+    }
+
+    /// As [`Channel::open`] but claiming schema `version`: what a process
+    /// built from another version does (tests use it to play one).
+    #[doc(hidden)]
+    pub fn open_as_version(
+        node: &StackNode,
+        namespace: &str,
+        version: u32,
+    ) -> Result<Self, TransportError> {
+        let name = service_name(namespace, T::TOPIC);
+        let sn = ServiceName::new(&name).map_err(|e| ipc_err(&name, "service name", e))?;
+        let s = ServiceSettings::of::<T>();
+        let verifier = AttributeVerifier::new()
+            .require(&attribute_key(), &version_value(version))
+            .map_err(|e| ipc_err(&name, "attribute", e))?;
+        let opened = node
+            .service_builder(&sn)
+            .publish_subscribe::<T>()
+            .subscriber_max_buffer_size(s.buffer)
+            .max_publishers(s.publishers)
+            .max_subscribers(s.subscribers)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create_with_attributes(&verifier);
+        match opened {
+            Ok(factory) => Ok(Self { name, factory }),
+            Err(e) => {
+                let mismatch = matches!(
+                    e,
+                    PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                        PublishSubscribeOpenError::IncompatibleAttributes
+                            | PublishSubscribeOpenError::IncompatibleTypes
+                    )
+                );
+                if mismatch
+                    && let Some(theirs) = service_schema_version(&name)
+                    && theirs != version.to_string()
+                {
+                    return Err(TransportError::SchemaMismatch {
+                        service: name,
+                        ours: version,
+                        theirs,
+                    });
+                }
+                Err(ipc_err(&name, "opening service", e))
+            }
+        }
+    }
+
+    /// The full service name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// A publisher on this service.
+    pub fn publisher(&self) -> Result<Pub<T>, TransportError> {
+        self.factory
+            .publisher_builder()
+            .create()
+            .map_err(|e| ipc_err(&self.name, "creating publisher", e))
+    }
+
+    /// A subscriber queueing up to the topic's buffer size (oldest samples
+    /// are dropped when full).
+    pub fn subscriber(&self) -> Result<Sub<T>, TransportError> {
+        self.factory
+            .subscriber_builder()
+            .buffer_size(ServiceSettings::of::<T>().buffer)
+            .create()
+            .map_err(|e| ipc_err(&self.name, "creating subscriber", e))
+    }
+}
+
+/// Opens `T`'s service and returns a publisher on it.
+pub fn publisher<T: Message>(node: &StackNode, namespace: &str) -> Result<Pub<T>, TransportError> {
+    Channel::<T>::open(node, namespace)?.publisher()
+}
+
+/// Opens `T`'s service and returns a subscriber on it.
+pub fn subscriber<T: Message>(node: &StackNode, namespace: &str) -> Result<Sub<T>, TransportError> {
+    Channel::<T>::open(node, namespace)?.subscriber()
+}
+
+/// Publishes a copy of `msg` (for the small messages). Never allocates.
+pub fn send<T: Message>(publisher: &Pub<T>, msg: &T) -> Result<(), TransportError> {
+    let sample = publisher
+        .loan_uninit()
+        .map_err(|e| ipc_err(T::TOPIC, "loaning sample", e))?;
+    sample
+        .write_payload(*msg)
+        .send()
+        .map(|_| ())
+        .map_err(|e| ipc_err(T::TOPIC, "sending", e))
+}
+
+/// Builds a message in place in shared memory (zeroed first) and publishes
+/// it: for large messages that must not be copied through the stack.
+pub fn send_with<T: Message>(
+    publisher: &Pub<T>,
+    fill: impl FnOnce(&mut T),
+) -> Result<(), TransportError> {
+    let mut sample = publisher
+        .loan_uninit()
+        .map_err(|e| ipc_err(T::TOPIC, "loaning sample", e))?;
+    fill(T::zero_in_place(sample.payload_mut()));
+    // SAFETY: zero_in_place initialised the payload.
+    let sample = unsafe { sample.assume_init() };
+    sample
+        .send()
+        .map(|_| ())
+        .map_err(|e| ipc_err(T::TOPIC, "sending", e))
+}
+
+/// Receives every queued sample, calling `f` on each; returns how many.
+pub fn drain<T: Message>(
+    subscriber: &Sub<T>,
+    mut f: impl FnMut(&T),
+) -> Result<usize, TransportError> {
+    let mut n = 0;
+    loop {
+        match subscriber.receive() {
+            Ok(Some(s)) => {
+                f(s.payload());
+                n += 1;
+            }
+            Ok(None) => return Ok(n),
+            Err(e) => return Err(ipc_err(T::TOPIC, "receiving", e)),
+        }
+    }
+}
