@@ -316,7 +316,24 @@ impl BodyPoses<'_> {
     }
 }
 
+/// One instant as the camera sees it: body poses, time, occlusions and
+/// noise levels (see [`crate::World::camera_shot`]).
+#[derive(Clone, Debug)]
+pub struct CameraShot {
+    /// Per robot-model joint (0: the base).
+    pub links: Vec<Isometry3<f64>>,
+    /// The box's hole frame, if there is a box.
+    pub box_pose: Option<Isometry3<f64>>,
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// Occluding rectangles `[x, y, w, h]` (`None`: the whole image).
+    pub occlusions: Vec<Option<[u32; 4]>>,
+    /// (depth σ in m, RGB σ in levels).
+    pub noise: (f64, f64),
+}
+
 /// The renderer and its state between frames.
+#[derive(Clone)]
 pub struct Camera {
     config: CameraConfig,
     /// Camera frame → base frame (x right, y down, z forward).
@@ -395,6 +412,15 @@ impl Camera {
                 c.z,
             )
         })
+    }
+
+    /// Renders a [`CameraShot`] into `frame` (see [`Camera::render`]).
+    pub fn render_shot(&mut self, shot: &CameraShot, frame: &mut CameraFrame) {
+        let poses = BodyPoses {
+            links: &shot.links,
+            box_pose: shot.box_pose,
+        };
+        self.render(&poses, shot.t_s, &shot.occlusions, shot.noise, frame);
     }
 
     /// Renders `poses` into `frame` (buffers are reused), with the flow from

@@ -3,7 +3,7 @@
 //! the task metrics and the perturbations. A pure object: reset it, command
 //! torques, step it, read it.
 
-use crate::camera::{BodyPoses, BodyRef, Camera, CameraFrame, Class, Geometry, Primitive};
+use crate::camera::{BodyRef, Camera, CameraFrame, CameraShot, Class, Geometry, Primitive};
 use crate::config::{ConfigError, WorldConfig};
 use crate::convert::{from_glam, mat_to_glam, pose_from_glam, pose_to_glam, to_glam};
 use crate::rng::SimRng;
@@ -682,19 +682,25 @@ impl World {
     /// the ground-truth flow from the previous render (normally every
     /// `camera.period_steps` steps: see [`World::camera_due`]).
     pub fn render(&mut self, frame: &mut CameraFrame) {
-        let links: Vec<Isometry3<f64>> =
-            (0..self.bodies.len()).map(|j| self.link_pose(j)).collect();
-        let poses = BodyPoses {
-            links: &links,
-            box_pose: self.hole_pose(),
-        };
-        let t = self.time_s();
-        let occlusions: Vec<Option<[u32; 4]>> = self.occlusions_at(t).map(|o| o.rect).collect();
-        let noise = (self.config.noise.depth_std_m, self.config.noise.rgb_std);
+        let shot = self.camera_shot();
         self.camera
             .as_mut()
             .expect("built at reset")
-            .render(&poses, t, &occlusions, noise, frame);
+            .render_shot(&shot, frame);
+    }
+
+    /// The current instant as the camera needs it, detached from the world:
+    /// a clone of [`World::camera`] can render it on another thread and
+    /// produce exactly the frame [`World::render`] would.
+    pub fn camera_shot(&self) -> CameraShot {
+        let t_s = self.time_s();
+        CameraShot {
+            links: (0..self.bodies.len()).map(|j| self.link_pose(j)).collect(),
+            box_pose: self.hole_pose(),
+            t_s,
+            occlusions: self.occlusions_at(t_s).map(|o| o.rect).collect(),
+            noise: (self.config.noise.depth_std_m, self.config.noise.rgb_std),
+        }
     }
 
     /// The camera (intrinsics, pose, projection).

@@ -27,6 +27,7 @@
 //! ```
 
 pub mod config;
+pub mod daemon;
 pub mod impedance;
 pub mod linalg;
 pub mod osc;
@@ -260,6 +261,17 @@ impl ControllerData {
             self.supervisor.reset(now);
             self.capture_pending = true;
         }
+    }
+
+    /// Starts over at whatever state the next step sees (the robot was
+    /// moved externally, e.g. a simulator reset): Idle from any mode, the
+    /// pose, rest posture and torque-rate limiter re-captured. Counters are
+    /// kept. Never allocates.
+    pub fn restart(&mut self, now: f64) {
+        self.supervisor.restart(now);
+        self.initialised = false;
+        self.capture_pending = true;
+        self.reference = None;
     }
 }
 

@@ -190,6 +190,15 @@ impl Supervisor {
         }
     }
 
+    /// Back to Idle from any mode, the fault and any hold cleared (the
+    /// robot was moved by someone else: a new episode). Counters are kept.
+    pub fn restart(&mut self, now: f64) {
+        self.fault = None;
+        self.hold_requested = false;
+        self.last_action_at = f64::NEG_INFINITY;
+        self.go(Mode::Idle, now);
+    }
+
     /// Asks for a hold (e.g. on shutdown): actions are ignored until
     /// [`Supervisor::release_hold`].
     pub fn request_hold(&mut self, now: f64) {

@@ -14,6 +14,7 @@
 //! note of the real-time stack issue); the crate must not depend on any other
 //! crate of this workspace.
 
+pub mod process;
 pub mod transport;
 
 use iceoryx2::prelude::ZeroCopySend;

@@ -1,0 +1,568 @@
+//! `hw-sim`: the simulated robot served over shared memory, as hardware.
+//!
+//! Publishes the joint state and wrist wrench every step, applies the torque
+//! commands it receives, publishes camera frames at the camera's rate and
+//! episode reports at 20 Hz, and resets episodes on request.
+//!
+//! - `--mode realtime`: paced at the step period by the wall clock; applies
+//!   the latest command, as real hardware does. Without a fresh command for
+//!   `--command-timeout-ms` the brakes hold the arm.
+//! - `--mode lockstep`: after publishing state k it waits for the command
+//!   answering state k, then steps; as fast as the peers allow, and
+//!   deterministic.
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, ValueEnum};
+use hw_sim::camera::{Camera, CameraShot};
+use hw_sim::{Stage, World, WorldConfig};
+use shared_mem_schema::process::{
+    install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
+};
+use shared_mem_schema::transport::{self, Pub, Sub};
+use shared_mem_schema::{
+    CameraFrame, EpisodeReport, HardwareState, Header, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH,
+    MAX_JOINTS, SimCommand, TorqueCommand, write_text,
+};
+use std::path::PathBuf;
+use std::sync::mpsc;
+use tracing::{info, warn};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Mode {
+    /// Paced by the wall clock; applies the latest command.
+    Realtime,
+    /// Each step waits for its command; deterministic.
+    Lockstep,
+}
+
+/// The simulated robot, served over shared memory.
+#[derive(Debug, Parser)]
+#[command(name = "hw-sim", version)]
+struct Args {
+    /// World configuration (TOML, see docs/hw-sim.md); defaults when absent.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Pacing.
+    #[arg(long, value_enum, default_value = "realtime")]
+    mode: Mode,
+    /// Service namespace (several stacks can share a machine).
+    #[arg(long, default_value = shared_mem_schema::DEFAULT_NAMESPACE)]
+    namespace: String,
+    /// Seed of the first episode.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Real-time mode: brakes engage when the newest command is older than
+    /// this, ms.
+    #[arg(long, default_value_t = 20.0)]
+    command_timeout_ms: f64,
+    /// Lockstep mode: how long a step waits for its command before the
+    /// brakes hold it, s.
+    #[arg(long, default_value_t = 10.0)]
+    lockstep_timeout_s: f64,
+    /// Stop after this much simulated time, s (0: until SIGINT/SIGTERM or a
+    /// shutdown command).
+    #[arg(long, default_value_t = 0.0)]
+    duration_s: f64,
+    /// Do not render or publish camera frames.
+    #[arg(long)]
+    no_camera: bool,
+}
+
+/// Work for the render thread.
+enum RenderJob {
+    /// A new episode's camera.
+    Camera(Box<Camera>),
+    /// Render this instant.
+    Shot {
+        shot: CameraShot,
+        episode: u64,
+        seq: u64,
+    },
+}
+
+fn main() {
+    tracing_subscriber::fmt().with_target(false).init();
+    if let Err(e) = run(Args::parse()) {
+        eprintln!("hw-sim: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn peg_code(world: &World) -> u32 {
+    match world.config().task.enabled {
+        false => 0,
+        true => {
+            hw_sim::PegShape::ALL
+                .iter()
+                .position(|&p| p == world.config().task.peg)
+                .unwrap_or(0) as u32
+                + 1
+        }
+    }
+}
+
+fn stage_code(s: Stage) -> u32 {
+    match s {
+        Stage::Failed => 0,
+        Stage::Touched => 1,
+        Stage::Inserted => 2,
+        Stage::Completed => 3,
+    }
+}
+
+struct Server {
+    args: Args,
+    world: World,
+    namespace: String,
+    episode: u64,
+    seed: u64,
+    state_pub: Pub<HardwareState>,
+    report_pub: Pub<EpisodeReport>,
+    torque_sub: Sub<TorqueCommand>,
+    command_sub: Sub<SimCommand>,
+    render_tx: Option<mpsc::SyncSender<RenderJob>>,
+    state_seq: u64,
+    report_seq: u64,
+    camera_seq: u64,
+    /// Newest valid command of the current episode.
+    command: Option<TorqueCommand>,
+    /// Brake position while engaged.
+    brake_q: Option<Vec<f64>>,
+    last_command_seq: u64,
+    last_result: (u64, u32, String),
+    rejected_commands: u64,
+    shutdown: bool,
+}
+
+fn run(args: Args) -> Result<()> {
+    install_termination_handler();
+    transport::quiet_logs();
+    let mut config = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading the world configuration {}", path.display()))?;
+            WorldConfig::from_toml(&text)
+                .with_context(|| format!("in the world configuration {}", path.display()))?
+        }
+        None => WorldConfig::default(),
+    };
+    config.seed = args.seed;
+    let world = World::new(config).context("building the simulated world")?;
+    let ns = args.namespace.clone();
+    let node = transport::create_node("hw-sim")?;
+    let state_pub = transport::publisher::<HardwareState>(&node, &ns)?;
+    let report_pub = transport::publisher::<EpisodeReport>(&node, &ns)?;
+    let torque_sub = transport::subscriber::<TorqueCommand>(&node, &ns)?;
+    let command_sub = transport::subscriber::<SimCommand>(&node, &ns)?;
+    // Camera frames are published by the render thread (iceoryx2 ports stay
+    // on the thread that made them); it opens its service before we go on
+    // so that a schema mismatch stops the start.
+    let (render_tx, render_thread) = if args.no_camera {
+        (None, None)
+    } else {
+        let (tx, rx) = mpsc::sync_channel::<RenderJob>(4);
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let ns2 = ns.clone();
+        let handle = std::thread::Builder::new()
+            .name("hw-sim-render".into())
+            .spawn(move || render_loop(&ns2, rx, ready_tx))?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => bail!("camera service: {e}"),
+            Err(_) => bail!("the render thread stopped at start"),
+        }
+        (Some(tx), Some(handle))
+    };
+    let mut server = Server {
+        seed: args.seed,
+        args,
+        world,
+        namespace: ns,
+        episode: 1,
+        state_pub,
+        report_pub,
+        torque_sub,
+        command_sub,
+        render_tx,
+        state_seq: 0,
+        report_seq: 0,
+        camera_seq: 0,
+        command: None,
+        brake_q: None,
+        last_command_seq: 0,
+        last_result: (0, EpisodeReport::OK, String::new()),
+        rejected_commands: 0,
+        shutdown: false,
+    };
+    info!(
+        "hw-sim: robot {}, peg {}, {} mode, namespace '{}', dt {} s",
+        server.world.config().robot,
+        if server.world.config().task.enabled {
+            server.world.config().task.peg.name()
+        } else {
+            "none"
+        },
+        match server.args.mode {
+            Mode::Realtime => "real-time",
+            Mode::Lockstep => "lockstep",
+        },
+        server.namespace,
+        server.world.config().dt_s
+    );
+    server.new_episode_camera();
+    let result = server.serve();
+    drop(server.render_tx.take());
+    if let Some(h) = render_thread {
+        let _ = h.join();
+    }
+    info!(
+        "hw-sim: stopped after {} steps ({} torque commands refused)",
+        server.world.step_index(),
+        server.rejected_commands
+    );
+    result
+}
+
+impl Server {
+    fn serve(&mut self) -> Result<()> {
+        let dt_ns = (self.world.config().dt_s * 1e9).round() as u64;
+        let end_step = if self.args.duration_s > 0.0 {
+            (self.args.duration_s / self.world.config().dt_s).round() as u64
+        } else {
+            u64::MAX
+        };
+        let nv = self.world.model().nv();
+        let zeros = vec![0.0; nv];
+        let mut tau = vec![0.0; nv];
+        self.publish_state();
+        self.publish_report()?;
+        let mut deadline = mono_now_ns();
+        while !termination_requested() && !self.shutdown && self.world.step_index() < end_step {
+            self.handle_commands()?;
+            if self.shutdown {
+                break;
+            }
+            let step = self.world.step_index();
+            let have = match self.args.mode {
+                Mode::Realtime => {
+                    self.take_latest_command();
+                    let timeout_steps =
+                        (self.args.command_timeout_ms * 1e-3 / self.world.config().dt_s).ceil();
+                    self.command
+                        .filter(|c| (step.saturating_sub(c.state_step)) as f64 <= timeout_steps)
+                }
+                Mode::Lockstep => self.wait_for_command(step)?,
+            };
+            if self.shutdown {
+                break;
+            }
+            match have {
+                Some(c) => {
+                    tau.copy_from_slice(&c.tau[..nv]);
+                    self.brake_q = None;
+                    self.last_command_seq = c.header.seq;
+                    self.world.step(&tau).context("stepping the world")?;
+                }
+                None => {
+                    let q = self
+                        .brake_q
+                        .get_or_insert_with(|| self.world.q().to_vec())
+                        .clone();
+                    self.world.set_joint_state(&q, &zeros)?;
+                    self.world.step(&zeros).context("stepping the world")?;
+                }
+            }
+            self.publish_state();
+            if self.world.camera_due() {
+                self.publish_report()?;
+                if let Some(tx) = &self.render_tx {
+                    self.camera_seq += 1;
+                    let job = RenderJob::Shot {
+                        shot: self.world.camera_shot(),
+                        episode: self.episode,
+                        seq: self.camera_seq,
+                    };
+                    if tx.send(job).is_err() {
+                        bail!("the render thread stopped");
+                    }
+                }
+            }
+            if self.args.mode == Mode::Realtime {
+                deadline += dt_ns;
+                let now = mono_now_ns();
+                if now > deadline + 20 * dt_ns {
+                    // Far behind (a stall): restart the schedule instead of
+                    // racing through the missed steps.
+                    deadline = now;
+                } else {
+                    sleep_until_ns(deadline);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Keeps the newest valid command of the current episode.
+    fn take_latest_command(&mut self) {
+        let nv = self.world.model().nv();
+        let episode = self.episode;
+        let mut newest = self.command;
+        let mut refused = 0;
+        let r = transport::drain(&self.torque_sub, |c| {
+            if c.header.episode != episode {
+                return; // answers a state of the previous episode
+            }
+            if !valid_command(c, nv) {
+                refused += 1;
+                return;
+            }
+            if newest.is_none_or(|n| c.header.seq > n.header.seq || c.state_step > n.state_step) {
+                newest = Some(*c);
+            }
+        });
+        if let Err(e) = r {
+            warn!("hw-sim: {e}");
+        }
+        self.rejected_commands += refused;
+        self.command = newest;
+    }
+
+    /// Lockstep: waits for the command answering state `step`.
+    fn wait_for_command(&mut self, step: u64) -> Result<Option<TorqueCommand>> {
+        let start = mono_now_ns();
+        let limit = (self.args.lockstep_timeout_s * 1e9) as u64;
+        let mut spins = 0u32;
+        loop {
+            self.take_latest_command();
+            if let Some(c) = self.command
+                && c.state_step == step
+            {
+                return Ok(Some(c));
+            }
+            if termination_requested() || self.shutdown {
+                return Ok(None);
+            }
+            // Commands may also come while we wait (a reset, a shutdown).
+            let episode = self.episode;
+            self.handle_commands()?;
+            if self.episode != episode {
+                return Ok(None);
+            }
+            if mono_now_ns() - start > limit {
+                return Ok(None);
+            }
+            spins += 1;
+            if spins > 200 {
+                std::thread::yield_now();
+            }
+        }
+    }
+
+    fn handle_commands(&mut self) -> Result<()> {
+        let mut pending = Vec::new();
+        transport::drain(&self.command_sub, |c| pending.push(Box::new(*c)))?;
+        for c in pending {
+            self.handle_command(&c)?;
+        }
+        Ok(())
+    }
+
+    fn handle_command(&mut self, c: &SimCommand) -> Result<()> {
+        if c.header.schema_version != shared_mem_schema::SCHEMA_VERSION {
+            self.last_result = (
+                c.header.seq,
+                EpisodeReport::REJECTED,
+                format!(
+                    "command of schema version {}, this simulator speaks {}",
+                    c.header.schema_version,
+                    shared_mem_schema::SCHEMA_VERSION
+                ),
+            );
+            return self.publish_report();
+        }
+        match c.command {
+            SimCommand::SHUTDOWN => {
+                info!("hw-sim: shutdown requested");
+                self.shutdown = true;
+                self.last_result = (c.header.seq, EpisodeReport::OK, String::new());
+            }
+            SimCommand::RESET => {
+                let outcome = self.reset(c);
+                self.last_result = match outcome {
+                    Ok(()) => (c.header.seq, EpisodeReport::OK, String::new()),
+                    Err(e) => {
+                        warn!("hw-sim: reset refused: {e:#}");
+                        (c.header.seq, EpisodeReport::REJECTED, format!("{e:#}"))
+                    }
+                };
+            }
+            other => {
+                self.last_result = (
+                    c.header.seq,
+                    EpisodeReport::REJECTED,
+                    format!("unknown command {other}"),
+                );
+            }
+        }
+        self.publish_report()
+    }
+
+    fn reset(&mut self, c: &SimCommand) -> Result<()> {
+        let n = (c.config_len as usize).min(c.config_toml.len());
+        if n > 0 {
+            let text = std::str::from_utf8(&c.config_toml[..n])
+                .context("the configuration is not UTF-8")?;
+            let mut config = WorldConfig::from_toml(text)?;
+            config.seed = c.seed;
+            // Built aside: a bad configuration leaves the running world.
+            self.world = World::new(config)?;
+        } else {
+            self.world.reset(c.seed)?;
+        }
+        self.seed = c.seed;
+        self.episode += 1;
+        self.command = None;
+        self.brake_q = None;
+        self.new_episode_camera();
+        info!("hw-sim: episode {} (seed {})", self.episode, self.seed);
+        self.publish_state();
+        Ok(())
+    }
+
+    fn new_episode_camera(&mut self) {
+        if let Some(tx) = &self.render_tx {
+            let _ = tx.send(RenderJob::Camera(Box::new(self.world.camera().clone())));
+        }
+    }
+
+    fn header(&self, seq: u64) -> Header {
+        Header::new(
+            seq,
+            mono_now_ns(),
+            (self.world.time_s() * 1e9).round() as u64,
+            self.episode,
+        )
+    }
+
+    fn publish_state(&mut self) {
+        self.state_seq += 1;
+        let r = self.world.readings();
+        let nv = r.q.len();
+        let mut header = self.header(self.state_seq);
+        if self.brake_q.is_some() || self.command.is_none() {
+            header.flags |= HardwareState::BRAKES_ENGAGED;
+        }
+        let mut m = HardwareState {
+            header,
+            step: self.world.step_index(),
+            applied_command_seq: self.last_command_seq,
+            n_joints: nv as u32,
+            reserved: 0,
+            q: [0.0; MAX_JOINTS],
+            v: [0.0; MAX_JOINTS],
+            tau_measured: [0.0; MAX_JOINTS],
+            wrench: r.wrench,
+        };
+        m.q[..nv].copy_from_slice(&r.q);
+        m.v[..nv].copy_from_slice(&r.v);
+        m.tau_measured[..nv].copy_from_slice(&r.tau_applied);
+        if let Err(e) = transport::send(&self.state_pub, &m) {
+            warn!("hw-sim: {e}");
+        }
+    }
+
+    fn publish_report(&mut self) -> Result<()> {
+        self.report_seq += 1;
+        let header = self.header(self.report_seq);
+        let step = self.world.step_index();
+        let peg = peg_code(&self.world);
+        let task = self.world.task().cloned();
+        let hole = self.world.hole_pose();
+        let cfg = self.world.config().task.clone();
+        let (cmd_seq, result, message) = self.last_result.clone();
+        let seed = self.seed;
+        transport::send_with(&self.report_pub, |m| {
+            m.header = header;
+            m.command_seq = cmd_seq;
+            m.seed = seed;
+            m.step = step;
+            m.command_result = result;
+            m.peg = peg;
+            if let Some(t) = &task {
+                m.stage_now = stage_code(t.stage_now);
+                m.stage_best = stage_code(t.stage);
+                m.in_contact = t.in_contact as u32;
+                m.s_m = [t.s_m.x, t.s_m.y, t.s_m.z];
+                m.s_psi_rad = t.s_psi_rad;
+            }
+            if let Some(h) = hole {
+                m.hole_pos_m = h.translation.vector.into();
+                m.hole_quat_xyzw = h.rotation.coords.into();
+            }
+            m.peg_width_m = cfg.peg_width_m;
+            m.hole_depth_m = cfg.hole_depth_m;
+            m.message_len = write_text(&mut m.message, &message);
+        })?;
+        Ok(())
+    }
+}
+
+fn valid_command(c: &TorqueCommand, nv: usize) -> bool {
+    c.header.schema_version == shared_mem_schema::SCHEMA_VERSION
+        && c.n_joints as usize == nv
+        && c.tau[..nv].iter().all(|t| t.is_finite())
+}
+
+/// Renders shots in order and publishes them.
+fn render_loop(
+    namespace: &str,
+    rx: mpsc::Receiver<RenderJob>,
+    ready: mpsc::Sender<Result<(), String>>,
+) {
+    let opened = transport::create_node("hw-sim-camera")
+        .and_then(|node| Ok((transport::publisher::<CameraFrame>(&node, namespace)?, node)));
+    let (publisher, _node) = match opened {
+        Ok(p) => {
+            let _ = ready.send(Ok(()));
+            p
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e.to_string()));
+            return;
+        }
+    };
+    let mut camera: Option<Box<Camera>> = None;
+    let mut frame = hw_sim::CameraFrame::default();
+    while let Ok(job) = rx.recv() {
+        match job {
+            RenderJob::Camera(c) => camera = Some(c),
+            RenderJob::Shot { shot, episode, seq } => {
+                let Some(cam) = camera.as_mut() else { continue };
+                cam.render_shot(&shot, &mut frame);
+                let (w, h) = (frame.width as usize, frame.height as usize);
+                if w > MAX_IMAGE_WIDTH || h > MAX_IMAGE_HEIGHT {
+                    warn!("hw-sim: a {w}×{h} image exceeds the message's maximum size");
+                    continue;
+                }
+                let pose = cam.pose;
+                let focal = cam.focal_px;
+                let r = transport::send_with(&publisher, |m| {
+                    m.header =
+                        Header::new(seq, mono_now_ns(), (shot.t_s * 1e9).round() as u64, episode);
+                    m.index = frame.index;
+                    m.width = w as u32;
+                    m.height = h as u32;
+                    m.focal_px = focal;
+                    m.principal_px = [0.5 * w as f64, 0.5 * h as f64];
+                    m.pose_pos_m = pose.translation.vector.into();
+                    m.pose_quat_xyzw = pose.rotation.coords.into();
+                    m.rgb[..w * h * 3].copy_from_slice(&frame.rgb);
+                    m.depth_m[..w * h].copy_from_slice(&frame.depth_m);
+                });
+                if let Err(e) = r {
+                    warn!("hw-sim: {e}");
+                }
+            }
+        }
+    }
+}
