@@ -17,7 +17,7 @@ use rt_controller::{ControllerConfig, Mode};
 #[path = "common/counting.rs"]
 mod counting;
 
-use counting::{ALLOCATIONS, Counting, LARGEST, LIVE_BYTES, TRACE, count};
+use counting::{Counting, LARGEST, LIVE_BYTES, TRACE, count};
 use std::sync::atomic::Ordering;
 
 #[global_allocator]
