@@ -132,6 +132,8 @@ struct Server {
     last_result: (u64, u32, String),
     rejected_commands: u64,
     shutdown: bool,
+    /// Workspace for the brakes' gravity load.
+    dynamics: robot_model::Data,
 }
 
 fn run(args: Args) -> Result<()> {
@@ -148,6 +150,7 @@ fn run(args: Args) -> Result<()> {
     };
     config.seed = args.seed;
     let world = World::new(config).context("building the simulated world")?;
+    let world_model_data = world.model().create_data();
     let ns = args.namespace.clone();
     let node = transport::create_node("hw-sim")?;
     let state_pub = transport::publisher::<HardwareState>(&node, &ns)?;
@@ -193,6 +196,7 @@ fn run(args: Args) -> Result<()> {
         last_result: (0, EpisodeReport::OK, String::new()),
         rejected_commands: 0,
         shutdown: false,
+        dynamics: world_model_data,
     };
     info!(
         "hw-sim: robot {}, peg {}, {} mode, namespace '{}', dt {} s",
@@ -251,7 +255,16 @@ impl Server {
                     self.command
                         .filter(|c| (step.saturating_sub(c.state_step)) as f64 <= timeout_steps)
                 }
-                Mode::Lockstep => self.wait_for_command(step)?,
+                Mode::Lockstep => {
+                    let episode = self.episode;
+                    let c = self.wait_for_command(step)?;
+                    if self.episode != episode {
+                        // Reset while waiting: state 0 of the new episode is
+                        // out; wait for its command.
+                        continue;
+                    }
+                    c
+                }
             };
             if self.shutdown {
                 break;
@@ -331,6 +344,7 @@ impl Server {
     fn wait_for_command(&mut self, step: u64) -> Result<Option<TorqueCommand>> {
         let start = mono_now_ns();
         let limit = (self.args.lockstep_timeout_s * 1e9) as u64;
+        let mut republish_at = 20_000_000;
         let mut spins = 0u32;
         loop {
             self.take_latest_command();
@@ -348,8 +362,15 @@ impl Server {
             if self.episode != episode {
                 return Ok(None);
             }
-            if mono_now_ns() - start > limit {
+            let waited = mono_now_ns() - start;
+            if waited > limit {
                 return Ok(None);
+            }
+            // Re-publish the state now and then: a controller that started
+            // after it was sent would otherwise wait for it forever.
+            if waited > republish_at {
+                self.publish_state();
+                republish_at += 20_000_000;
             }
             spins += 1;
             if spins > 200 {
@@ -368,6 +389,10 @@ impl Server {
     }
 
     fn handle_command(&mut self, c: &SimCommand) -> Result<()> {
+        if c.header.seq != 0 && c.header.seq == self.last_result.0 {
+            // A repeated request (sent again before our answer arrived).
+            return self.publish_report();
+        }
         if c.header.schema_version != shared_mem_schema::SCHEMA_VERSION {
             self.last_result = (
                 c.header.seq,
@@ -446,12 +471,12 @@ impl Server {
 
     fn publish_state(&mut self) {
         self.state_seq += 1;
-        let r = self.world.readings();
-        let nv = r.q.len();
         let mut header = self.header(self.state_seq);
         if self.brake_q.is_some() || self.command.is_none() {
             header.flags |= HardwareState::BRAKES_ENGAGED;
         }
+        let r = self.world.readings().clone();
+        let nv = r.q.len();
         let mut m = HardwareState {
             header,
             step: self.world.step_index(),
@@ -465,7 +490,13 @@ impl Server {
         };
         m.q[..nv].copy_from_slice(&r.q);
         m.v[..nv].copy_from_slice(&r.v);
-        m.tau_measured[..nv].copy_from_slice(&r.tau_applied);
+        if header.flags & HardwareState::BRAKES_ENGAGED != 0 {
+            // Braked joints carry the gravity load: what torque sensors read.
+            robot_model::gravity(self.world.model(), &mut self.dynamics, self.world.q());
+            m.tau_measured[..nv].copy_from_slice(self.dynamics.g.as_slice());
+        } else {
+            m.tau_measured[..nv].copy_from_slice(&r.tau_applied);
+        }
         if let Err(e) = transport::send(&self.state_pub, &m) {
             warn!("hw-sim: {e}");
         }

@@ -507,8 +507,20 @@ impl World {
             let y = center[1] + box_rng.uniform(-t.box_xy_range_m[1], t.box_xy_range_m[1]);
             let yaw = box_rng.uniform(-t.box_yaw_range_rad, t.box_yaw_range_rad);
             let peg = &self.peg.as_ref().expect("task has a peg").info;
+            // The hole frame has z up and the peg's frame z down the peg:
+            // aligned (s_ψ = 0) they differ by a half turn about x, which
+            // mirrors y. The hole is the peg's cross-section seen from the
+            // hole (mirrored, reversed to stay counter-clockwise); without
+            // this, the triangle and the semicircle meet an upside-down hole.
+            let seen_from_hole: Vec<[f64; 2]> = peg
+                .prism
+                .polygon
+                .iter()
+                .rev()
+                .map(|p| [p[0], -p[1]])
+                .collect();
             let geometry = BoxWithHole::new(
-                &peg.prism.polygon,
+                &seen_from_hole,
                 t.clearance_m,
                 t.box_side_m,
                 t.box_height_m,

@@ -9,3 +9,9 @@
 //!
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.
+
+pub mod env;
+pub mod live;
+pub mod log;
+pub mod policy;
+pub mod stack;

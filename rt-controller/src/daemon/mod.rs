@@ -246,6 +246,7 @@ pub struct Daemon<H: Hardware> {
     v: Vec<f64>,
     tau_meas: Vec<f64>,
     torque_seq: u64,
+    last_command: TorqueCommand,
     sensor_seq: u64,
     status_seq: u64,
     next_status_ns: u64,
@@ -302,6 +303,14 @@ impl<H: Hardware> Daemon<H> {
             v: vec![0.0; nv],
             tau_meas: vec![0.0; nv],
             torque_seq: 0,
+            last_command: TorqueCommand {
+                header: Header::default(),
+                state_step: 0,
+                action_seq: 0,
+                n_joints: 0,
+                reserved: 0,
+                tau: [0.0; MAX_JOINTS],
+            },
             sensor_seq: 0,
             status_seq: 0,
             next_status_ns: 0,
@@ -372,6 +381,19 @@ impl<H: Hardware> Daemon<H> {
         };
         if s.header.schema_version != SCHEMA_VERSION || s.n_joints as usize != nv {
             // Not usable: treat as silence (the timeout then faults).
+            return Ok(false);
+        }
+        if self.have_state
+            && s.header.episode == self.episode
+            && s.step == self.state.step
+            && self.last_command.state_step == s.step
+            && self.torque_seq > 0
+        {
+            // The same state again (a lockstep simulator re-publishes while
+            // it waits): answer with the same command, do not step again.
+            self.last_state_ns = now_ns;
+            let cmd = self.last_command;
+            self.hw.send(&cmd)?;
             return Ok(false);
         }
         self.state = *s;
@@ -545,6 +567,7 @@ impl<H: Hardware> Daemon<H> {
         };
         cmd.tau[..nv].copy_from_slice(self.data.torques());
         self.hw.send(&cmd)?;
+        self.last_command = cmd;
         if applied && let Some(a) = &action {
             let sent = cmd.header.t_mono_ns;
             self.stats
@@ -686,9 +709,15 @@ impl<H: Hardware> Daemon<H> {
                     while !fresh {
                         now = mono_now_ns();
                         fresh = self.poll_hardware(now)?;
+                        // Stop waiting on a stop request, or when the
+                        // shutdown hold is over; keep waiting during it.
+                        let stopping = match stopping_until {
+                            Some(until) => now >= until,
+                            None => stop(),
+                        };
                         if fresh
                             || now - wait_start > (timing.hardware_timeout_ms * 1e6) as u64
-                            || stop()
+                            || stopping
                         {
                             break;
                         }

@@ -1,0 +1,146 @@
+//! The fast path: simulator and control core in one process, in lockstep,
+//! with no IPC. It runs exactly what the deployed stack runs in lockstep
+//! mode (same order, same time stamps), so both give the same trajectory
+//! for the same seed (tests/lockstep.rs in the `tests` crate checks it).
+//!
+//! One cycle k: the hardware state after k physics steps → the control step
+//! (with the action addressed to step k, if any) → the physics step. The
+//! policy acts every [`ACTION_PERIOD`] cycles on the observation of the
+//! cycle before the one its action is applied in.
+
+use crate::policy::{Action4, Observation, WrenchHistory};
+use hw_sim::{World, WorldConfig};
+use nalgebra::{UnitQuaternion, Vector3};
+use robot_model::Model;
+use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState};
+
+/// Control cycles per policy action (20 Hz at 1 kHz).
+pub const ACTION_PERIOD: u64 = 50;
+
+/// Hardware time stamp of a simulated time, ns (as hw-sim stamps it).
+pub fn hw_time_ns(t_s: f64) -> u64 {
+    (t_s * 1e9).round() as u64
+}
+
+/// Seconds of a hardware stamp (as rt-controller's daemon reads it).
+pub fn hw_time_s(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// One environment of the fast path.
+pub struct FastEnv {
+    world: World,
+    model: Model,
+    ctrl: Controller,
+    data: ControllerData,
+    tau_meas: Vec<f64>,
+    gravity: robot_model::Data,
+    episodes: u64,
+    /// Wrench readings of every cycle (the policy's window).
+    pub wrench: WrenchHistory,
+    last_obs: Option<Observation>,
+}
+
+impl FastEnv {
+    /// Builds the world and the controller; call [`FastEnv::reset`] before
+    /// stepping.
+    pub fn new(world: WorldConfig, controller: ControllerConfig) -> anyhow::Result<Self> {
+        let world = World::new(world)?;
+        let model = world.model().clone();
+        let ctrl = Controller::new(&model, controller)?;
+        let data = ctrl.create_data(&model);
+        let gravity = model.create_data();
+        Ok(Self {
+            tau_meas: vec![0.0; model.nv()],
+            world,
+            model,
+            ctrl,
+            data,
+            gravity,
+            episodes: 0,
+            wrench: WrenchHistory::default(),
+            last_obs: None,
+        })
+    }
+
+    /// The simulated world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The control law's workspace.
+    pub fn controller_data(&self) -> &ControllerData {
+        &self.data
+    }
+
+    /// Starts an episode: as hw-sim's reset with a configuration (a world
+    /// built afresh with `seed`), the controller restarted as the daemon
+    /// restarts it when it sees a new episode.
+    pub fn reset(&mut self, seed: u64) -> anyhow::Result<()> {
+        let mut cfg = self.world.config().clone();
+        cfg.seed = seed;
+        self.world = World::with_model(self.model.clone(), cfg)?;
+        let t = hw_time_s(hw_time_ns(self.world.time_s()));
+        self.data.restart(t);
+        self.episodes += 1;
+        self.wrench.clear();
+        self.last_obs = None;
+        // Until the first command the brakes hold the arm: the joints then
+        // carry the gravity load, which is what the torque sensors read.
+        robot_model::gravity(&self.model, &mut self.gravity, self.world.q());
+        self.tau_meas.copy_from_slice(self.gravity.g.as_slice());
+        Ok(())
+    }
+
+    /// One control cycle and physics step; `action` is applied in it.
+    pub fn cycle(&mut self, action: Option<&Action4>) -> anyhow::Result<()> {
+        let r = self.world.readings();
+        let t = hw_time_s(hw_time_ns(self.world.time_s()));
+        let wrench = r.wrench;
+        let a = action.map(|a| Action {
+            delta_pos_m: [a[0], a[1], a[2]],
+            delta_roll_rad: a[3],
+        });
+        rt_controller::step(
+            &self.model,
+            &self.ctrl,
+            &mut self.data,
+            &RobotState {
+                q: &r.q,
+                v: &r.v,
+                tau_measured: Some(&self.tau_meas),
+                wrench: Some(&wrench),
+            },
+            a.as_ref(),
+            t,
+        );
+        self.wrench.push(wrench);
+        let ee = &self.data.ee;
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(ee.rot);
+        let mut twist = [0.0; 6];
+        twist.copy_from_slice(ee.twist.as_slice());
+        self.last_obs = Some(Observation {
+            t_hw_ns: hw_time_ns(self.world.time_s()),
+            step: self.world.step_index(),
+            episode: self.episodes,
+            ee_pos: Vector3::new(ee.pos.x, ee.pos.y, ee.pos.z),
+            ee_rot: UnitQuaternion::from_rotation_matrix(&rot),
+            ee_twist: twist,
+        });
+        let tau = self.data.torques().to_vec();
+        self.world.step(&tau)?;
+        self.tau_meas
+            .copy_from_slice(&self.world.readings().tau_applied);
+        Ok(())
+    }
+
+    /// Runs cycles up to the one before the next action step and returns
+    /// its observation; `action` (if any) is applied in the first cycle.
+    pub fn step(&mut self, action: Option<&Action4>) -> anyhow::Result<Observation> {
+        self.cycle(action)?;
+        while !self.world.step_index().is_multiple_of(ACTION_PERIOD) {
+            self.cycle(None)?;
+        }
+        Ok(self.last_obs.clone().expect("a cycle ran"))
+    }
+}

@@ -1,0 +1,379 @@
+//! The live policy node: subscribes to the controller's sensor frames, the
+//! camera and the simulator's episode reports, acts at 20 Hz, publishes the
+//! actions and logs every stream to MCAP, one file per episode.
+//!
+//! Real-time mode acts every 50 ms of wall time on the newest frame, as a
+//! deployed policy does. Lockstep mode answers each action request of a
+//! lockstep simulator: on the frame of step 50m−1 it publishes the action
+//! addressed to step 50m, so runs are deterministic.
+
+use crate::env::ACTION_PERIOD;
+use crate::log::StackLogger;
+use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
+use anyhow::{Context, Result, bail};
+use hw_sim::WorldConfig;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use shared_mem_schema::process::{mono_now_ns, termination_requested};
+use shared_mem_schema::transport::{self, Pub, Sub};
+use shared_mem_schema::{
+    CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
+};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Settings of a live run.
+#[derive(Debug, Clone)]
+pub struct LiveConfig {
+    /// Service namespace.
+    pub namespace: String,
+    /// Episodes to run.
+    pub episodes: u32,
+    /// Seed of the first episode (+1 per episode).
+    pub seed: u64,
+    /// World configuration sent with every reset.
+    pub world: WorldConfig,
+    /// Episode length limit, s of hardware time.
+    pub episode_timeout_s: f64,
+    /// Where the MCAP logs go.
+    pub log_dir: PathBuf,
+    /// Lockstep (deterministic) instead of wall-clock acting.
+    pub lockstep: bool,
+    /// Hold still this long after completion before ending, s.
+    pub settle_s: f64,
+}
+
+/// How an episode ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeOutcome {
+    /// Episode number (the simulator's).
+    pub episode: u64,
+    /// Its seed.
+    pub seed: u64,
+    /// Best stage reached: completed, inserted, touched or failed.
+    pub stage: &'static str,
+    /// Hardware time it took, s.
+    pub duration_s: f64,
+    /// Actions sent.
+    pub actions: u64,
+    /// Its log.
+    pub log: PathBuf,
+}
+
+/// Name of a stage code of [`EpisodeReport`].
+pub fn stage_name(code: u32) -> &'static str {
+    match code {
+        3 => "completed",
+        2 => "inserted",
+        1 => "touched",
+        _ => "failed",
+    }
+}
+
+struct Node {
+    _node: transport::StackNode,
+    sensor: Sub<SensorFrame>,
+    camera: Sub<CameraFrame>,
+    status: Sub<ControllerStatus>,
+    report: Sub<EpisodeReport>,
+    action: Pub<PolicyAction>,
+    command: Pub<SimCommand>,
+    action_seq: u64,
+    command_seq: u64,
+}
+
+/// What the node has seen of the current episode.
+struct Seen {
+    frame: Option<SensorFrame>,
+    report: Option<EpisodeReport>,
+    wrench: WrenchHistory,
+    frames: u64,
+    last_frame_wall_ns: u64,
+}
+
+impl Node {
+    fn open(ns: &str) -> Result<Self> {
+        let node = transport::create_node("learner")?;
+        Ok(Self {
+            sensor: transport::subscriber(&node, ns)?,
+            camera: transport::subscriber(&node, ns)?,
+            status: transport::subscriber(&node, ns)?,
+            report: transport::subscriber(&node, ns)?,
+            action: transport::publisher(&node, ns)?,
+            command: transport::publisher(&node, ns)?,
+            _node: node,
+            action_seq: 0,
+            command_seq: 0,
+        })
+    }
+
+    /// Takes everything queued; logs what belongs to `episode`.
+    fn pump(
+        &mut self,
+        episode: u64,
+        seen: &mut Seen,
+        mut log: Option<&mut StackLogger>,
+    ) -> Result<()> {
+        let now = mono_now_ns();
+        let mut err = None;
+        transport::drain(&self.sensor, |f| {
+            if f.header.episode != episode {
+                return;
+            }
+            seen.wrench.push(f.wrench);
+            seen.frames += 1;
+            seen.last_frame_wall_ns = now;
+            if let Some(l) = log.as_deref_mut()
+                && let Err(e) = l.sensor(f)
+            {
+                err = Some(e);
+            }
+            seen.frame = Some(*f);
+        })?;
+        transport::drain(&self.report, |r| {
+            if r.header.episode == episode {
+                if let Some(l) = log.as_deref_mut()
+                    && let Err(e) = l.episode(r)
+                {
+                    err = Some(e);
+                }
+                seen.report = Some(*r);
+            }
+        })?;
+        transport::drain(&self.status, |s| {
+            if let Some(l) = log.as_deref_mut()
+                && let Err(e) = l.status(s)
+            {
+                err = Some(e);
+            }
+        })?;
+        transport::drain(&self.camera, |c| {
+            if c.header.episode == episode
+                && let Some(l) = log.as_deref_mut()
+                && let Err(e) = l.camera(c)
+            {
+                err = Some(e);
+            }
+        })?;
+        if let Some(e) = err {
+            return Err(e.into());
+        }
+        Ok(())
+    }
+
+    fn send_action(
+        &mut self,
+        episode: u64,
+        t_hw_ns: u64,
+        apply_at_step: u64,
+        a: [f64; 4],
+    ) -> Result<PolicyAction> {
+        self.action_seq += 1;
+        let m = PolicyAction {
+            header: Header::new(self.action_seq, mono_now_ns(), t_hw_ns, episode),
+            apply_at_step,
+            delta_pos_m: [a[0], a[1], a[2]],
+            delta_roll_rad: a[3],
+        };
+        transport::send(&self.action, &m)?;
+        Ok(m)
+    }
+
+    /// Resets the simulator and waits for its answer; returns the report.
+    fn reset(&mut self, seed: u64, world: &str, lockstep: bool) -> Result<EpisodeReport> {
+        // Request ids are unique across learner processes (pid, counter):
+        // the simulator ignores a repeated id, so the request can be sent
+        // again until answered (a simulator still starting misses it).
+        self.command_seq += 1;
+        let seq = (u64::from(std::process::id()) << 32) | self.command_seq;
+        if world.len() > shared_mem_schema::MAX_CONFIG_BYTES {
+            bail!(
+                "the world configuration is {} bytes, a command carries at most {}",
+                world.len(),
+                shared_mem_schema::MAX_CONFIG_BYTES
+            );
+        }
+        let send = |publisher: &Pub<SimCommand>| {
+            transport::send_with(publisher, |c| {
+                c.header = Header::new(seq, mono_now_ns(), 0, 0);
+                c.command = SimCommand::RESET;
+                c.seed = seed;
+                c.config_len = world.len() as u32;
+                c.config_toml[..world.len()].copy_from_slice(world.as_bytes());
+            })
+        };
+        send(&self.command)?;
+        let start = mono_now_ns();
+        let mut resend_at = start + 500_000_000;
+        loop {
+            if mono_now_ns() > resend_at {
+                send(&self.command)?;
+                resend_at += 500_000_000;
+            }
+            let mut answer = None;
+            transport::drain(&self.report, |r| {
+                if r.command_seq == seq {
+                    answer = Some(*r);
+                }
+            })?;
+            if let Some(r) = answer {
+                if r.command_result != EpisodeReport::OK {
+                    bail!("the simulator refused the reset: {}", r.message_text());
+                }
+                return Ok(r);
+            }
+            // A lockstep stack may be waiting on us for an action: answer
+            // any pending request with a zero action so it can move on to
+            // the reset.
+            if lockstep {
+                let mut pending = None;
+                transport::drain(&self.sensor, |f| {
+                    if (f.step + 1).is_multiple_of(ACTION_PERIOD) {
+                        pending = Some((f.header.episode, f.header.t_hw_ns, f.step + 1));
+                    }
+                })?;
+                if let Some((ep, t, step)) = pending {
+                    self.send_action(ep, t, step, [0.0; 4])?;
+                }
+            }
+            if termination_requested() {
+                bail!("interrupted while waiting for the simulator");
+            }
+            if mono_now_ns() - start > 15_000_000_000 {
+                bail!("no answer from the simulator to a reset within 15 s (is hw-sim running?)");
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+}
+
+fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
+    let [x, y, z, w] = r.hole_quat_xyzw;
+    TaskGeometry {
+        hole_pose: Isometry3::from_parts(
+            Translation3::from(r.hole_pos_m),
+            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+        ),
+        symmetry: world.task.peg.symmetry_order(),
+        depth_m: r.hole_depth_m,
+    }
+}
+
+/// Runs `cfg.episodes` episodes with the heuristic policy; prints each
+/// outcome as it ends and returns them all.
+pub fn run(
+    cfg: &LiveConfig,
+    mut on_outcome: impl FnMut(&EpisodeOutcome),
+) -> Result<Vec<EpisodeOutcome>> {
+    transport::quiet_logs();
+    let mut node = Node::open(&cfg.namespace)?;
+    let world_toml = toml::to_string(&cfg.world).context("printing the world configuration")?;
+    let mut outcomes = Vec::new();
+    for i in 0..cfg.episodes {
+        if termination_requested() {
+            break;
+        }
+        let seed = cfg.seed + i as u64;
+        let first = node.reset(seed, &world_toml, cfg.lockstep)?;
+        let episode = first.header.episode;
+        let path = cfg
+            .log_dir
+            .join(format!("episode-{episode:04}-seed-{seed}.mcap"));
+        let mut log = StackLogger::create(&path)?;
+        log.event(
+            first.header.t_hw_ns,
+            &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,
+                "lockstep": cfg.lockstep, "world": &cfg.world}),
+        )?;
+        let task = task_geometry(&first, &cfg.world);
+        let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
+        let mut seen = Seen {
+            frame: None,
+            report: Some(first),
+            wrench: WrenchHistory::default(),
+            frames: 0,
+            last_frame_wall_ns: mono_now_ns(),
+        };
+        let mut actions = 0u64;
+        let mut next_tick = mono_now_ns();
+        let mut acted_for_step = u64::MAX;
+        let mut best_stage = 0u32;
+        let mut completed_at: Option<u64> = None;
+        let mut t_end;
+        loop {
+            node.pump(episode, &mut seen, Some(&mut log))?;
+            if let Some(r) = &seen.report
+                && r.stage_best > best_stage
+            {
+                best_stage = r.stage_best;
+                log.event(
+                    r.header.t_hw_ns,
+                    &serde_json::json!({"event": "stage", "stage": stage_name(best_stage)}),
+                )?;
+                if best_stage == 3 && completed_at.is_none() {
+                    completed_at = Some(r.header.t_hw_ns);
+                }
+            }
+            let Some(frame) = seen.frame else {
+                if mono_now_ns() - seen.last_frame_wall_ns > 10_000_000_000 {
+                    bail!("no sensor frames from rt-controller for 10 s (is it running?)");
+                }
+                std::thread::sleep(Duration::from_micros(200));
+                continue;
+            };
+            t_end = frame.header.t_hw_ns;
+            let t_ep = (frame.header.t_hw_ns.saturating_sub(first.header.t_hw_ns)) as f64 * 1e-9;
+            let settled = completed_at.is_some_and(|t| {
+                frame.header.t_hw_ns.saturating_sub(t) as f64 * 1e-9 >= cfg.settle_s
+            });
+            if settled || t_ep >= cfg.episode_timeout_s || termination_requested() {
+                break;
+            }
+            if mono_now_ns() - seen.last_frame_wall_ns > 2_000_000_000 {
+                bail!("sensor frames stopped for 2 s in episode {episode}");
+            }
+            let due = if cfg.lockstep {
+                (frame.step + 1).is_multiple_of(ACTION_PERIOD) && acted_for_step != frame.step
+            } else {
+                mono_now_ns() >= next_tick
+            };
+            if !due {
+                if cfg.lockstep {
+                    std::thread::yield_now();
+                } else {
+                    std::thread::sleep(Duration::from_micros(500));
+                }
+                continue;
+            }
+            let obs = Observation::from_frame(&frame);
+            let a = policy.act(&obs, &seen.wrench, &task);
+            let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
+            let m = node.send_action(episode, frame.header.t_hw_ns, apply_at, a)?;
+            log.action(&m)?;
+            actions += 1;
+            acted_for_step = frame.step;
+            next_tick += ACTION_PERIOD * 1_000_000;
+            if next_tick < mono_now_ns() {
+                next_tick = mono_now_ns() + ACTION_PERIOD * 1_000_000;
+            }
+        }
+        let stage = stage_name(best_stage);
+        let duration_s = (t_end.saturating_sub(first.header.t_hw_ns)) as f64 * 1e-9;
+        log.event(
+            t_end,
+            &serde_json::json!({"event": "outcome", "stage": stage, "duration_s": duration_s,
+                "actions": actions}),
+        )?;
+        let path = log.finish()?;
+        let outcome = EpisodeOutcome {
+            episode,
+            seed,
+            stage,
+            duration_s,
+            actions,
+            log: path,
+        };
+        on_outcome(&outcome);
+        outcomes.push(outcome);
+    }
+    Ok(outcomes)
+}
