@@ -69,12 +69,17 @@ pub fn stage_name(code: u32) -> &'static str {
     }
 }
 
-struct Node {
+/// The policy node's services: what it reads and what it publishes.
+pub struct PolicyNode {
     _node: transport::StackNode,
-    sensor: Sub<SensorFrame>,
-    camera: Sub<CameraFrame>,
-    status: Sub<ControllerStatus>,
-    report: Sub<EpisodeReport>,
+    /// Controller sensor frames.
+    pub sensor: Sub<SensorFrame>,
+    /// Camera frames.
+    pub camera: Sub<CameraFrame>,
+    /// Controller status.
+    pub status: Sub<ControllerStatus>,
+    /// Simulator episode reports.
+    pub report: Sub<EpisodeReport>,
     action: Pub<PolicyAction>,
     command: Pub<SimCommand>,
     action_seq: u64,
@@ -90,8 +95,9 @@ struct Seen {
     last_frame_wall_ns: u64,
 }
 
-impl Node {
-    fn open(ns: &str) -> Result<Self> {
+impl PolicyNode {
+    /// Opens the services of namespace `ns`.
+    pub fn open(ns: &str) -> Result<Self> {
         let node = transport::create_node("learner")?;
         Ok(Self {
             sensor: transport::subscriber(&node, ns)?,
@@ -160,7 +166,8 @@ impl Node {
         Ok(())
     }
 
-    fn send_action(
+    /// Publishes an action (`apply_at_step` 0: as soon as it arrives).
+    pub fn send_action(
         &mut self,
         episode: u64,
         t_hw_ns: u64,
@@ -178,8 +185,10 @@ impl Node {
         Ok(m)
     }
 
-    /// Resets the simulator and waits for its answer; returns the report.
-    fn reset(&mut self, seed: u64, world: &str, lockstep: bool) -> Result<EpisodeReport> {
+    /// Resets the simulator with `world` (TOML) and `seed` and waits for
+    /// its answer; returns the report of the new episode. In lockstep it
+    /// answers pending action requests with zero actions meanwhile.
+    pub fn reset(&mut self, seed: u64, world: &str, lockstep: bool) -> Result<EpisodeReport> {
         // Request ids are unique across learner processes (pid, counter):
         // the simulator ignores a repeated id, so the request can be sent
         // again until answered (a simulator still starting misses it).
@@ -246,7 +255,8 @@ impl Node {
     }
 }
 
-fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
+/// The task as the policy needs it, from a simulator report.
+pub fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
     let [x, y, z, w] = r.hole_quat_xyzw;
     TaskGeometry {
         hole_pose: Isometry3::from_parts(
@@ -265,7 +275,7 @@ pub fn run(
     mut on_outcome: impl FnMut(&EpisodeOutcome),
 ) -> Result<Vec<EpisodeOutcome>> {
     transport::quiet_logs();
-    let mut node = Node::open(&cfg.namespace)?;
+    let mut node = PolicyNode::open(&cfg.namespace)?;
     let world_toml = toml::to_string(&cfg.world).context("printing the world configuration")?;
     let mut outcomes = Vec::new();
     for i in 0..cfg.episodes {

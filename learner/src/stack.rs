@@ -187,9 +187,7 @@ pub fn run(cfg: &StackConfig) -> Result<std::process::ExitStatus> {
         if termination_requested() {
             // The children got the terminal's SIGINT too; make sure.
             policy.stop(Duration::from_secs(3));
-            break policy
-                .try_wait()
-                .unwrap_or_default();
+            break policy.try_wait().unwrap_or_default();
         }
         std::thread::sleep(Duration::from_millis(20));
     };

@@ -1,0 +1,413 @@
+//! End-to-end tests that start the real processes: hw-sim, rt-controller
+//! and the policy node, over real shared memory. The test process plays the
+//! learner (or a misbehaving peer) where a test needs to see inside.
+
+use hw_sim::WorldConfig;
+use learner::env::{ACTION_PERIOD, FastEnv};
+use learner::live::{PolicyNode, task_geometry};
+use learner::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
+use shared_mem_schema::process::mono_now_ns;
+use shared_mem_schema::transport::{self, Channel, TransportError};
+use shared_mem_schema::{
+    ControllerMode, ControllerStatus, HardwareState, Header, PolicyAction, SCHEMA_VERSION,
+    SensorFrame, TorqueCommand,
+};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// Drains `sub` until `pred` holds for a message or `timeout` passes.
+fn wait_for<T: shared_mem_schema::Message>(
+    sub: &transport::Sub<T>,
+    timeout: Duration,
+    mut pred: impl FnMut(&T) -> bool,
+) -> Option<T> {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        let mut hit = None;
+        transport::drain(sub, |m| {
+            if hit.is_none() && pred(m) {
+                hit = Some(*m);
+            }
+        })
+        .unwrap();
+        if hit.is_some() {
+            return hit;
+        }
+        std::thread::sleep(Duration::from_micros(300));
+    }
+    None
+}
+
+#[test]
+fn heuristic_policy_completes_insertion_through_the_stack() {
+    let _g = tests::exclusive();
+    tests::stack_bins();
+    for (mode, peg) in [("realtime", "square"), ("lockstep", "triangle")] {
+        let dir = tests::scratch_dir(&format!("stack-{mode}"));
+        let mut cmd = Command::new(tests::stack_bins().join("learner"));
+        cmd.args(["stack", "--episodes", "1", "--peg", peg, "--namespace"])
+            .arg(tests::unique_namespace(mode))
+            .arg("--log-dir")
+            .arg(&dir);
+        if mode == "lockstep" {
+            cmd.arg("--lockstep");
+        }
+        let out = cmd.output().expect("running learner stack");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success(),
+            "{mode}: {}\n{stdout}\n{stderr}",
+            out.status
+        );
+        assert!(
+            stdout.contains(": completed after"),
+            "{mode} {peg}: not completed:\n{stdout}\n{stderr}"
+        );
+        let logs: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().extension().is_some_and(|x| x == "mcap"))
+            .collect();
+        assert_eq!(logs.len(), 1, "{mode}: one MCAP log per episode");
+        assert!(logs[0].metadata().unwrap().len() > 10_000);
+        let ctl = std::fs::read_to_string(dir.join("rt-controller.log")).unwrap();
+        assert!(
+            !ctl.contains("mode fault"),
+            "{mode}: controller faulted:\n{ctl}"
+        );
+    }
+}
+
+fn start_sim_and_controller(
+    ns: &str,
+    dir: &std::path::Path,
+) -> (learner::stack::Managed, learner::stack::Managed) {
+    let sim = tests::start("hw-sim", &["--namespace", ns, "--no-camera"], dir);
+    let ctl = tests::start("rt-controller", &["--namespace", ns, "--no-realtime"], dir);
+    (sim, ctl)
+}
+
+fn action(node_seq: u64, dx: f64, version: u32) -> PolicyAction {
+    let mut header = Header::new(node_seq, mono_now_ns(), 0, 0);
+    header.schema_version = version;
+    PolicyAction {
+        header,
+        apply_at_step: 0,
+        delta_pos_m: [dx, 0.0, 0.0],
+        delta_roll_rad: 0.0,
+    }
+}
+
+#[test]
+fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("policy-loss");
+    let dir = tests::scratch_dir("policy-loss");
+    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    let node = transport::create_node("e2e-observer").unwrap();
+    let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
+    let mut policy = tests::start(
+        "learner",
+        &[
+            "run",
+            "--episodes",
+            "1",
+            "--episode-timeout-s",
+            "60",
+            "--namespace",
+            &ns,
+            "--log-dir",
+            dir.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    let running = wait_for(&frames, Duration::from_secs(30), |f| {
+        f.mode == ControllerMode::Running as u32 && f.action_seq > 10
+    });
+    assert!(running.is_some(), "the policy never drove the controller");
+    policy.signal(libc::SIGKILL);
+    policy.wait_timeout(Duration::from_secs(5)).expect("killed");
+    // The last action applied, then the first frame in Holding.
+    let mut last_action = (0u64, 0u64);
+    let holding = wait_for(&frames, Duration::from_secs(5), |f| {
+        if f.action_seq != last_action.0 {
+            last_action = (f.action_seq, f.header.t_hw_ns);
+        }
+        f.mode == ControllerMode::Holding as u32
+    })
+    .expect("the controller never held");
+    let gap_s = (holding.header.t_hw_ns - last_action.1) as f64 * 1e-9;
+    assert!(
+        gap_s <= 0.1 + 0.0015,
+        "held {gap_s:.4} s after the last action (timeout 0.1 s)"
+    );
+    // The policy comes back: actions resume the run.
+    let back = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
+    let resumed = {
+        let start = Instant::now();
+        let mut hit = None;
+        let mut seq = 1_000_000;
+        while hit.is_none() && start.elapsed() < Duration::from_secs(5) {
+            seq += 1;
+            transport::send(&back, &action(seq, 0.0, SCHEMA_VERSION)).unwrap();
+            hit = wait_for(&frames, Duration::from_millis(50), |f| {
+                f.mode == ControllerMode::Running as u32
+            });
+        }
+        hit
+    };
+    assert!(resumed.is_some(), "actions did not resume the run");
+}
+
+#[test]
+fn silent_hardware_is_a_fault_with_no_further_torques() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("hw-loss");
+    let dir = tests::scratch_dir("hw-loss");
+    let (mut sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    let node = transport::create_node("e2e-observer").unwrap();
+    let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
+    let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    assert!(
+        wait_for(&torques, Duration::from_secs(20), |_| true).is_some(),
+        "no torque commands at all"
+    );
+    sim.signal(libc::SIGKILL);
+    sim.wait_timeout(Duration::from_secs(5)).expect("killed");
+    let lost = wait_for(&status, Duration::from_secs(2), |s| {
+        s.mode == ControllerMode::HardwareLost as u32
+    })
+    .expect("the controller never reported the hardware lost");
+    assert_eq!(
+        lost.fault_code,
+        rt_controller::daemon::FAULT_HARDWARE_SILENT
+    );
+    // Whatever was in flight is gone; nothing new may come.
+    std::thread::sleep(Duration::from_millis(20));
+    transport::drain(&torques, |_| {}).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let late = transport::drain(&torques, |_| {}).unwrap();
+    assert_eq!(
+        late, 0,
+        "{late} torque commands after the hardware went silent"
+    );
+}
+
+#[test]
+fn processes_of_another_schema_version_are_refused() {
+    let _g = tests::exclusive();
+    // A peer built with another version owns the hardware service: the
+    // daemon must refuse to start, saying why.
+    let ns = tests::unique_namespace("schema");
+    let dir = tests::scratch_dir("schema");
+    let node = transport::create_node("e2e-other-version").unwrap();
+    let _other = Channel::<HardwareState>::open_as_version(&node, &ns, SCHEMA_VERSION + 1).unwrap();
+    let mut ctl = tests::start(
+        "rt-controller",
+        &["--namespace", &ns, "--no-realtime"],
+        &dir,
+    );
+    let status = ctl
+        .wait_timeout(Duration::from_secs(20))
+        .expect("the daemon kept running against another schema version");
+    assert!(!status.success());
+    let log = std::fs::read_to_string(dir.join("rt-controller.log")).unwrap();
+    assert!(
+        log.contains(&format!("schema version {}", SCHEMA_VERSION + 1))
+            && log.contains(&format!("schema version {SCHEMA_VERSION}")),
+        "the error does not name both versions:\n{log}"
+    );
+    // And the other way round: our services refuse a peer of another version.
+    let ns2 = tests::unique_namespace("schema2");
+    let _sim = tests::start("hw-sim", &["--namespace", &ns2, "--no-camera"], &dir);
+    let ours = transport::create_node("e2e-ours").unwrap();
+    assert!(
+        wait_for(
+            &transport::subscriber::<HardwareState>(&ours, &ns2).unwrap(),
+            Duration::from_secs(20),
+            |_| true
+        )
+        .is_some()
+    );
+    match Channel::<HardwareState>::open_as_version(&node, &ns2, SCHEMA_VERSION + 1) {
+        Err(TransportError::SchemaMismatch { ours, theirs, .. }) => {
+            assert_eq!(ours, SCHEMA_VERSION + 1);
+            assert_eq!(theirs, SCHEMA_VERSION.to_string());
+        }
+        Err(e) => panic!("wrong error: {e}"),
+        Ok(_) => panic!("a peer of another schema version was let in"),
+    }
+}
+
+/// A small deterministic generator for the garbage test.
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> u64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        self.0 >> 11
+    }
+    fn unit(&mut self) -> f64 {
+        self.next() as f64 / (1u64 << 53) as f64
+    }
+}
+
+#[test]
+fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("garbage");
+    let dir = tests::scratch_dir("garbage");
+    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    let model = robot_model::descriptions::builtin("iiwa14").unwrap();
+    let limits = model.effort_limits();
+    let node = transport::create_node("e2e-garbage").unwrap();
+    let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
+    let publisher = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
+    assert!(wait_for(&torques, Duration::from_secs(20), |_| true).is_some());
+    let specials = [
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        -0.0,
+        f64::MIN_POSITIVE / 4.0,
+        -f64::MIN_POSITIVE / 3.0,
+        1e300,
+        -1e300,
+        f64::MAX,
+        0.5,
+        -0.2,
+    ];
+    let mut rng = Lcg(7);
+    let (mut checked, mut bad) = (0usize, Vec::new());
+    let mut check = |c: &TorqueCommand| {
+        for (i, &t) in c.tau[..7].iter().enumerate() {
+            if !(t.is_finite() && t.abs() <= limits[i] + 1e-9) {
+                bad.push((c.state_step, i, t));
+            }
+        }
+        checked += 1;
+    };
+    for k in 0..10_000u64 {
+        let mut a = action(k + 1, 0.0, SCHEMA_VERSION);
+        let pick = |rng: &mut Lcg| match rng.next() % 3 {
+            0 => specials[(rng.next() % specials.len() as u64) as usize],
+            1 => (rng.unit() - 0.5) * 0.02, // plausible steps
+            _ => (rng.unit() - 0.5) * 2e3,  // far out of range
+        };
+        a.delta_pos_m = [pick(&mut rng), pick(&mut rng), pick(&mut rng)];
+        a.delta_roll_rad = pick(&mut rng);
+        if rng.next() % 50 == 0 {
+            a.header.schema_version = SCHEMA_VERSION + 1 + (rng.next() % 5) as u32;
+        }
+        transport::send(&publisher, &a).unwrap();
+        if k % 2 == 1 {
+            std::thread::sleep(Duration::from_micros(900));
+            transport::drain(&torques, &mut check).unwrap();
+        }
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    transport::drain(&torques, &mut check).unwrap();
+    assert!(checked > 3000, "only {checked} torque commands seen");
+    assert!(
+        bad.is_empty(),
+        "torques beyond limits: {:?}",
+        &bad[..bad.len().min(5)]
+    );
+    let s = wait_for(&status, Duration::from_secs(2), |s| {
+        s.actions_received >= 10_000
+    })
+    .expect("the status never counted the actions");
+    assert_eq!(s.actions_received, 10_000);
+    assert!(
+        s.actions_rejected > 3000,
+        "only {} garbage actions counted",
+        s.actions_rejected
+    );
+}
+
+#[test]
+fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("lockstep");
+    let dir = tests::scratch_dir("lockstep");
+    let _sim = tests::start(
+        "hw-sim",
+        &["--namespace", &ns, "--mode", "lockstep", "--no-camera"],
+        &dir,
+    );
+    let _ctl = tests::start(
+        "rt-controller",
+        &[
+            "--namespace",
+            &ns,
+            "--no-realtime",
+            "--clock",
+            "hardware",
+            "--lockstep-actions",
+        ],
+        &dir,
+    );
+    let mut world = WorldConfig::default();
+    world.task.peg = hw_sim::PegShape::Hexagon;
+    let seed = 42;
+    let actions = 60;
+
+    // Through the processes, this test acting as the policy node.
+    let mut node = PolicyNode::open(&ns).unwrap();
+    let report = node
+        .reset(seed, &toml::to_string(&world).unwrap(), true)
+        .expect("reset through the stack");
+    let episode = report.header.episode;
+    let task = task_geometry(&report, &world);
+    let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
+    let mut wrench = WrenchHistory::default();
+    let mut stack_obs = Vec::new();
+    let start = Instant::now();
+    while stack_obs.len() < actions {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "lockstep stalled"
+        );
+        let mut frames = Vec::new();
+        transport::drain(&node.sensor, |f| {
+            if f.header.episode == episode {
+                frames.push(*f)
+            }
+        })
+        .unwrap();
+        for f in frames {
+            wrench.push(f.wrench);
+            if (f.step + 1).is_multiple_of(ACTION_PERIOD) {
+                let obs = Observation::from_frame(&f);
+                let a = policy.act(&obs, &wrench, &task);
+                node.send_action(episode, f.header.t_hw_ns, f.step + 1, a)
+                    .unwrap();
+                stack_obs.push((f.step, obs.ee_pos, a));
+            }
+        }
+        std::thread::yield_now();
+    }
+
+    // In one process.
+    let mut env = FastEnv::new(world.clone(), rt_controller::ControllerConfig::default()).unwrap();
+    env.reset(seed).unwrap();
+    let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
+    let mut obs = env.step(None).unwrap();
+    for (k, (step, ee, a_stack)) in stack_obs.iter().enumerate() {
+        assert_eq!(obs.step, *step);
+        assert_eq!(
+            obs.ee_pos,
+            *ee,
+            "action {k} (step {step}): the end-effector differs by {:e} m",
+            (obs.ee_pos - ee).norm()
+        );
+        let a = policy.act(&obs, &env.wrench, &task);
+        assert_eq!(&a, a_stack, "action {k} differs");
+        obs = env.step(Some(&a)).unwrap();
+    }
+}
