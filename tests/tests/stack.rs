@@ -301,7 +301,7 @@ fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
         };
         a.delta_pos_m = [pick(&mut rng), pick(&mut rng), pick(&mut rng)];
         a.delta_roll_rad = pick(&mut rng);
-        if rng.next() % 50 == 0 {
+        if rng.next().is_multiple_of(50) {
             a.header.schema_version = SCHEMA_VERSION + 1 + (rng.next() % 5) as u32;
         }
         transport::send(&publisher, &a).unwrap();
