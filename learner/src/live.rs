@@ -51,6 +51,8 @@ pub struct EpisodeOutcome {
     pub seed: u64,
     /// Best stage reached: completed, inserted, touched or failed.
     pub stage: &'static str,
+    /// The run was interrupted (SIGINT/SIGTERM) during the episode.
+    pub interrupted: bool,
     /// Hardware time it took, s.
     pub duration_s: f64,
     /// Actions sent.
@@ -378,6 +380,7 @@ pub fn run(
             episode,
             seed,
             stage,
+            interrupted: termination_requested() && completed_at.is_none(),
             duration_s,
             actions,
             log: path,

@@ -109,10 +109,11 @@ fn run(cli: Cli) -> Result<()> {
             };
             let outcomes = live::run(&cfg, |o| {
                 println!(
-                    "episode {} (seed {}): {} after {:.2} s, {} actions; log {}",
+                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; log {}",
                     o.episode,
                     o.seed,
                     o.stage,
+                    if o.interrupted { " (interrupted)" } else { "" },
                     o.duration_s,
                     o.actions,
                     o.log.display()

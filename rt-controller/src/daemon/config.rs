@@ -274,6 +274,14 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_configuration_loads() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../deploy/rt-controller.toml");
+        let c = DaemonConfig::from_file(std::path::Path::new(path)).unwrap();
+        assert_eq!(c.robot, "iiwa14");
+        assert_eq!(c.timing.clock, Clock::Wall);
+    }
+
+    #[test]
     fn bad_values_and_unknown_fields_are_named() {
         let e = DaemonConfig::from_toml("[realtime]\npriority = 120\n", "x.toml").unwrap_err();
         assert!(e.to_string().contains("realtime.priority"), "{e}");

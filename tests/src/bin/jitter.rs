@@ -1,0 +1,362 @@
+//! Timing/jitter harness: runs rt-controller at 1 kHz against hw-sim (real
+//! time) for a chosen duration while a bare timer thread at the same
+//! priority measures the machine's own wake-up floor (what cyclictest
+//! measures), and a 20 Hz publisher sends small actions to measure the
+//! latency from an action's publication to the first torque reflecting it.
+//!
+//! ```sh
+//! cargo run --release -p tests --bin jitter -- --duration-s 30
+//! ```
+//!
+//! Prints a table, writes `jitter.json` and `jitter.png` (wake-up latency
+//! histograms, log counts) into `--out`.
+
+use clap::Parser;
+use shared_mem_schema::process::{
+    install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
+};
+use shared_mem_schema::transport;
+use shared_mem_schema::{ControllerStatus, Header, LatencyHistogram, PolicyAction};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// rt-controller timing against the machine's floor.
+#[derive(Debug, Parser)]
+struct Args {
+    /// How long to measure, s.
+    #[arg(long, default_value_t = 10.0)]
+    duration_s: f64,
+    /// SCHED_FIFO priority of the daemon and the bare timer.
+    #[arg(long, default_value_t = 80)]
+    priority: i32,
+    /// Run the daemon without its real-time set-up (and the timer at
+    /// normal priority).
+    #[arg(long)]
+    no_realtime: bool,
+    /// Where the JSON and the picture go.
+    #[arg(long, default_value = "target/jitter")]
+    out: PathBuf,
+}
+
+fn set_fifo(priority: i32) -> bool {
+    let p = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: plain syscall on the calling thread.
+    unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) == 0 }
+}
+
+/// The bare timer: absolute 1 ms sleeps, nothing else.
+fn bare_timer(duration_s: f64, priority: Option<i32>) -> (LatencyHistogram, bool) {
+    let fifo = priority.is_some_and(set_fifo);
+    let mut h = LatencyHistogram::EMPTY;
+    let end = mono_now_ns() + (duration_s * 1e9) as u64;
+    let mut deadline = mono_now_ns() + 1_000_000;
+    while deadline < end && !termination_requested() {
+        sleep_until_ns(deadline);
+        h.record(mono_now_ns().saturating_sub(deadline));
+        deadline += 1_000_000;
+    }
+    (h, fifo)
+}
+
+fn row(name: &str, h: &LatencyHistogram) -> String {
+    format!(
+        "| {name} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} |",
+        h.count,
+        h.quantile_us(0.5),
+        h.quantile_us(0.99),
+        h.quantile_us(0.999),
+        h.max_ns as f64 / 1e3,
+        h.mean_us()
+    )
+}
+
+fn json(h: &LatencyHistogram) -> serde_json::Value {
+    serde_json::json!({
+        "count": h.count,
+        "p50_us": h.quantile_us(0.5),
+        "p99_us": h.quantile_us(0.99),
+        "p999_us": h.quantile_us(0.999),
+        "max_us": h.max_ns as f64 / 1e3,
+        "mean_us": h.mean_us(),
+        "overflow": h.overflow,
+    })
+}
+
+/// 3×5 digits for tick labels.
+const DIGITS: [[u8; 5]; 10] = [
+    [7, 5, 5, 5, 7],
+    [2, 6, 2, 2, 7],
+    [7, 1, 7, 4, 7],
+    [7, 1, 7, 1, 7],
+    [5, 5, 7, 1, 1],
+    [7, 4, 7, 1, 7],
+    [7, 4, 7, 5, 7],
+    [7, 1, 1, 1, 1],
+    [7, 5, 7, 5, 7],
+    [7, 5, 7, 1, 7],
+];
+
+struct Canvas {
+    w: usize,
+    h: usize,
+    px: Vec<u8>,
+}
+
+impl Canvas {
+    fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
+        if x < self.w && y < self.h {
+            let i = 3 * (y * self.w + x);
+            self.px[i..i + 3].copy_from_slice(&c);
+        }
+    }
+    fn text(&mut self, x: usize, y: usize, s: &str) {
+        for (k, ch) in s.chars().enumerate() {
+            if let Some(d) = ch.to_digit(10) {
+                for (r, bits) in DIGITS[d as usize].iter().enumerate() {
+                    for c in 0..3 {
+                        if bits & (4 >> c) != 0 {
+                            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                                self.set(x + 8 * k + 2 * c + dx, y + 2 * r + dy, [0, 0, 0]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Histograms of wake-up latency: x in µs (linear, labelled), y log10 of
+/// the count; daemon blue bars, bare timer thin orange bars.
+fn picture(daemon: &LatencyHistogram, bare: &LatencyHistogram) -> (usize, usize, Vec<u8>) {
+    let (w, h) = (900usize, 420usize);
+    let (left, bottom, top) = (40usize, 40usize, 20usize);
+    let mut cv = Canvas {
+        w,
+        h,
+        px: vec![255; w * h * 3],
+    };
+    let span = (daemon.quantile_us(0.9999).max(bare.quantile_us(0.9999)) * 1.2)
+        .clamp(20.0, shared_mem_schema::HISTOGRAM_BINS as f64) as usize;
+    let plot_w = w - left - 10;
+    let plot_h = h - bottom - top;
+    let max_count = daemon
+        .bins
+        .iter()
+        .chain(bare.bins.iter())
+        .copied()
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let ymax = max_count.log10().max(1.0);
+    let x_of = |us: f64| left + (us / span as f64 * plot_w as f64) as usize;
+    let y_of = |count: u32| {
+        let v = if count == 0 {
+            0.0
+        } else {
+            (count as f64).log10() + 0.1
+        };
+        h - bottom - ((v / (ymax + 0.1)) * plot_h as f64) as usize
+    };
+    // Axes and ticks.
+    for x in left..w - 10 {
+        cv.set(x, h - bottom, [0, 0, 0]);
+    }
+    for y in top..=h - bottom {
+        cv.set(left, y, [0, 0, 0]);
+    }
+    let step = [1usize, 2, 5, 10, 20, 50, 100, 200, 500]
+        .into_iter()
+        .find(|s| span / s <= 12)
+        .unwrap_or(1000);
+    let mut t = 0;
+    while t <= span {
+        let x = x_of(t as f64);
+        for y in top..h - bottom {
+            if y % 4 == 0 {
+                cv.set(x, y, [200, 200, 200]);
+            }
+        }
+        cv.text(x.saturating_sub(4), h - bottom + 8, &t.to_string());
+        t += step;
+    }
+    for decade in 0..=(ymax as u32) {
+        let y = y_of(10u32.pow(decade).max(1));
+        for x in left..w - 10 {
+            if x % 4 == 0 {
+                cv.set(x, y, [220, 220, 220]);
+            }
+        }
+        cv.text(4, y.saturating_sub(5), &10u64.pow(decade).to_string());
+    }
+    // The daemon as filled bars, the bare timer as a thin bar over each.
+    for (hist, color, thin) in [(daemon, [30, 90, 200], false), (bare, [230, 120, 20], true)] {
+        for us in 0..span {
+            let c = hist.bins[us];
+            if c == 0 {
+                continue;
+            }
+            let x0 = x_of(us as f64);
+            let x1 = x_of(us as f64 + 1.0).max(x0 + 1);
+            let (x0, x1) = if thin {
+                (x0 + (x1 - x0) / 2, x0 + (x1 - x0) / 2 + 1)
+            } else {
+                (x0, x1)
+            };
+            for x in x0..x1 {
+                for y in y_of(c)..h - bottom {
+                    cv.set(x, y, color);
+                }
+            }
+        }
+    }
+    (w, h, cv.px)
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    install_termination_handler();
+    transport::quiet_logs();
+    let ns = format!("jitter-{}", std::process::id());
+    let dir = args.out.clone();
+    std::fs::create_dir_all(&dir)?;
+    tests::stack_bins();
+    let _sim = tests::start("hw-sim", &["--namespace", &ns, "--mode", "realtime"], &dir);
+    let prio = args.priority.to_string();
+    let mut ctl_args = vec!["--namespace", ns.as_str()];
+    if args.no_realtime {
+        ctl_args.push("--no-realtime");
+    }
+    let cfg_path = dir.join("jitter-rt.toml");
+    std::fs::write(
+        &cfg_path,
+        format!("[realtime]\npriority = {prio}\n[timing]\nstatus_period_ms = 100.0\n"),
+    )?;
+    let cfg = cfg_path.to_string_lossy().into_owned();
+    ctl_args.extend(["--config", cfg.as_str()]);
+    let mut ctl = tests::start("rt-controller", &ctl_args, &dir);
+    let node = transport::create_node("jitter-harness")?;
+    let status = transport::subscriber::<ControllerStatus>(&node, &ns)?;
+    let actions = transport::publisher::<PolicyAction>(&node, &ns)?;
+    // Wait until the loop runs.
+    let start = std::time::Instant::now();
+    let mut first: Option<ControllerStatus> = None;
+    while first.is_none() {
+        anyhow::ensure!(
+            start.elapsed() < Duration::from_secs(30),
+            "the daemon never published a status (see {})",
+            dir.join("rt-controller.log").display()
+        );
+        transport::drain(&status, |s| {
+            if s.cycles > 100 {
+                first = Some(*s)
+            }
+        })?;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let first = first.unwrap();
+    println!(
+        "measuring for {} s (daemon real-time set-up: {})",
+        args.duration_s,
+        if first.realtime == 1 { "yes" } else { "no" }
+    );
+    // The bare timer on its own thread; actions from this one.
+    let (d, prio_opt) = (
+        args.duration_s,
+        (!args.no_realtime).then_some(args.priority),
+    );
+    let timer = std::thread::spawn(move || bare_timer(d, prio_opt));
+    let end = mono_now_ns() + (args.duration_s * 1e9) as u64;
+    let mut seq = 0u64;
+    let mut next = mono_now_ns();
+    while mono_now_ns() < end && !termination_requested() {
+        seq += 1;
+        let dx = if (seq / 10).is_multiple_of(2) { 0.0005 } else { -0.0005 };
+        let a = PolicyAction {
+            header: Header::new(seq, mono_now_ns(), 0, 0),
+            apply_at_step: 0,
+            delta_pos_m: [dx, 0.0, 0.0],
+            delta_roll_rad: 0.0,
+        };
+        transport::send(&actions, &a)?;
+        // 20 Hz, each at another phase of the daemon's 1 ms cycle (both
+        // clocks are absolute: a fixed phase would measure one point of
+        // the latency's range).
+        next += 50_000_000;
+        sleep_until_ns(next + (seq * 7919 % 1000) * 1000);
+    }
+    let (bare, bare_fifo) = timer.join().expect("timer thread");
+    std::thread::sleep(Duration::from_millis(250));
+    let mut last: Option<Box<ControllerStatus>> = None;
+    transport::drain(&status, |s| last = Some(Box::new(*s)))?;
+    let last = last.ok_or_else(|| anyhow::anyhow!("no status at the end"))?;
+    ctl.stop(Duration::from_secs(5));
+
+    // Differences of the cumulative histograms: the measured window only.
+    let window = |a: &LatencyHistogram, b: &LatencyHistogram| {
+        let mut h = *b;
+        h.count -= a.count;
+        h.overflow -= a.overflow;
+        h.sum_ns -= a.sum_ns;
+        for (x, y) in h.bins.iter_mut().zip(a.bins.iter()) {
+            *x -= *y;
+        }
+        h
+    };
+    let wake = window(&first.wakeup_latency, &last.wakeup_latency);
+    let compute = window(&first.compute, &last.compute);
+    let latency = window(&first.action_latency, &last.action_latency);
+    let cycles = last.cycles - first.cycles;
+    let overruns = last.overruns - first.overruns;
+    let misses = last.hardware_misses - first.hardware_misses;
+    println!("\n| µs | samples | p50 | p99 | p99.9 | max | mean |\n|---|---|---|---|---|---|---|");
+    println!("{}", row("daemon wake-up latency", &wake));
+    println!(
+        "{}",
+        row(
+            &format!(
+                "bare timer wake-up latency ({})",
+                if bare_fifo {
+                    "SCHED_FIFO"
+                } else {
+                    "normal priority"
+                }
+            ),
+            &bare
+        )
+    );
+    println!("{}", row("daemon compute per cycle", &compute));
+    println!("{}", row("action → first torque", &latency));
+    println!(
+        "\ncycles {cycles}, overruns {overruns}, cycles without a new hardware state {misses}, \
+         daemon real-time {}",
+        last.realtime == 1
+    );
+    println!("(max of the daemon histograms: since the daemon started)");
+    let report = serde_json::json!({
+        "duration_s": args.duration_s,
+        "daemon_realtime": last.realtime == 1,
+        "bare_timer_fifo": bare_fifo,
+        "cycles": cycles,
+        "overruns": overruns,
+        "hardware_misses": misses,
+        "daemon_wakeup_latency": json(&wake),
+        "bare_timer_wakeup_latency": json(&bare),
+        "compute": json(&compute),
+        "action_to_torque": json(&latency),
+    });
+    std::fs::write(
+        dir.join("jitter.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    let (w, h, px) = picture(&wake, &bare);
+    hw_sim::png::write(dir.join("jitter.png"), w as u32, h as u32, 3, &px)?;
+    println!(
+        "wrote {} and {}",
+        dir.join("jitter.json").display(),
+        dir.join("jitter.png").display()
+    );
+    Ok(())
+}
