@@ -6,6 +6,7 @@ use clap::{Parser, ValueEnum};
 use robot_model::{LoadOptions, Model};
 use rt_controller::daemon::config::{BackendKind, Clock, DaemonConfig};
 use rt_controller::daemon::rt::{self, Notifier};
+use rt_controller::daemon::rt_alloc::{self, RtAllocator};
 use rt_controller::daemon::{Daemon, FAULT_HARDWARE_SILENT, Shared, SimBackend};
 use shared_mem_schema::ControllerMode;
 use shared_mem_schema::process::{
@@ -17,6 +18,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tracing::{error, info, warn};
+
+// The control loop's few dependency allocations come from static pools.
+#[global_allocator]
+static ALLOCATOR: RtAllocator = RtAllocator;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum ClockArg {
@@ -160,6 +165,11 @@ fn run(args: Args) -> Result<()> {
     monitor_stop.store(true, Ordering::Relaxed);
     let _ = monitor.join();
     let summary = result?;
+    let a = rt_alloc::stats();
+    info!(
+        "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap",
+        a.pool_allocs, a.system_allocs_on_rt_thread
+    );
     let s = &daemon.stats;
     info!(
         "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, wake-up p99 \

@@ -6,7 +6,9 @@
 //! every `status_period_ms`, the status). Nothing in a cycle locks or
 //! blocks, and our code allocates nothing; iceoryx2 0.10 itself takes one
 //! small block per publication, freed at send (tests/daemon_alloc.rs pins
-//! that down exactly).
+//! that down exactly), and clarabel a fixed set per solve. The daemon serves
+//! those from lock-free static pools ([`rt_alloc`]), so the loop never
+//! reaches the heap (tests/daemon_rt_alloc.rs).
 //!
 //! Transport choices: every input is *polled* (an iceoryx2 `receive` costs
 //! about 1 µs) rather than waited on with an event listener, whose wake-up
@@ -16,6 +18,7 @@
 
 pub mod config;
 pub mod rt;
+pub mod rt_alloc;
 
 use crate::{ActionStatus, Controller, ControllerData, FaultReason, Mode, RobotState};
 use config::{Clock, DaemonConfig};
@@ -681,6 +684,10 @@ impl<H: Hardware> Daemon<H> {
             std::thread::sleep(std::time::Duration::from_micros(500));
         }
         on_ready();
+        // From here on the loop's small allocations (iceoryx2's, clarabel's)
+        // come from the real-time pools when the binary installs
+        // `rt_alloc::RtAllocator`.
+        rt_alloc::enter_realtime();
         let mut stopping_until: Option<u64> = None;
         let mut deadline = mono_now_ns();
         let mut fresh = true; // the state of the start-up poll
@@ -748,6 +755,7 @@ impl<H: Hardware> Daemon<H> {
                 }
             }
         }
+        rt_alloc::leave_realtime();
         let now = mono_now_ns();
         self.publish_status(now)?;
         Ok(RunSummary {

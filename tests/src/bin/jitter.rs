@@ -273,7 +273,11 @@ fn main() -> anyhow::Result<()> {
     let mut next = mono_now_ns();
     while mono_now_ns() < end && !termination_requested() {
         seq += 1;
-        let dx = if (seq / 10).is_multiple_of(2) { 0.0005 } else { -0.0005 };
+        let dx = if (seq / 10).is_multiple_of(2) {
+            0.0005
+        } else {
+            -0.0005
+        };
         let a = PolicyAction {
             header: Header::new(seq, mono_now_ns(), 0, 0),
             apply_at_step: 0,
