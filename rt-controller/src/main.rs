@@ -214,21 +214,20 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
             }
             last_mode = mode;
         }
-        let garbage = shared.garbage_actions.load(Ordering::Relaxed);
-        if garbage > last_garbage {
-            warn!(
-                "rt-controller: {} garbage actions ignored ({garbage} in all)",
-                garbage - last_garbage
-            );
-            last_garbage = garbage;
-        }
-        let overruns = shared.overruns.load(Ordering::Relaxed);
-        if overruns > last_overruns {
-            warn!(
-                "rt-controller: {} overruns ({overruns} in all)",
-                overruns - last_overruns
-            );
-            last_overruns = overruns;
-        }
+        warn_on_increase(
+            &shared.garbage_actions,
+            &mut last_garbage,
+            "garbage actions ignored",
+        );
+        warn_on_increase(&shared.overruns, &mut last_overruns, "overruns");
+    }
+}
+
+/// Logs how much a counter grew since the last look.
+fn warn_on_increase(counter: &std::sync::atomic::AtomicU64, last: &mut u64, what: &str) {
+    let now = counter.load(Ordering::Relaxed);
+    if now > *last {
+        warn!("rt-controller: {} {what} ({now} in all)", now - *last);
+        *last = now;
     }
 }

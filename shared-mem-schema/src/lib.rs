@@ -178,6 +178,21 @@ pub struct HardwareState {
 impl HardwareState {
     /// Flag: no valid torque command, the brakes hold the arm.
     pub const BRAKES_ENGAGED: u32 = 1;
+
+    /// All zeros but the joint count and the schema version.
+    pub fn empty(n_joints: usize) -> Self {
+        Self {
+            header: Header::new(0, 0, 0, 0),
+            step: 0,
+            applied_command_seq: 0,
+            n_joints: n_joints as u32,
+            reserved: 0,
+            q: [0.0; MAX_JOINTS],
+            v: [0.0; MAX_JOINTS],
+            tau_measured: [0.0; MAX_JOINTS],
+            wrench: [0.0; 6],
+        }
+    }
 }
 
 /// Controller → robot, every control cycle.
@@ -246,6 +261,18 @@ pub struct PolicyAction {
     pub delta_pos_m: [f64; 3],
     /// Roll step about the base z axis, rad.
     pub delta_roll_rad: f64,
+}
+
+impl PolicyAction {
+    /// An action to apply as soon as it arrives.
+    pub fn new(seq: u64, t_mono_ns: u64, delta_pos_m: [f64; 3], delta_roll_rad: f64) -> Self {
+        Self {
+            header: Header::new(seq, t_mono_ns, 0, 0),
+            apply_at_step: 0,
+            delta_pos_m,
+            delta_roll_rad,
+        }
+    }
 }
 
 /// Robot (camera driver) → learner, 20 Hz: an RGB-D image with its

@@ -9,8 +9,8 @@ use learner::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHisto
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Channel, TransportError};
 use shared_mem_schema::{
-    ControllerMode, ControllerStatus, HardwareState, Header, PolicyAction, SCHEMA_VERSION,
-    SensorFrame, TorqueCommand,
+    ControllerMode, ControllerStatus, HardwareState, PolicyAction, SCHEMA_VERSION, SensorFrame,
+    TorqueCommand,
 };
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -88,15 +88,10 @@ fn start_sim_and_controller(
     (sim, ctl)
 }
 
-fn action(node_seq: u64, dx: f64, version: u32) -> PolicyAction {
-    let mut header = Header::new(node_seq, mono_now_ns(), 0, 0);
-    header.schema_version = version;
-    PolicyAction {
-        header,
-        apply_at_step: 0,
-        delta_pos_m: [dx, 0.0, 0.0],
-        delta_roll_rad: 0.0,
-    }
+fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
+    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0], 0.0);
+    a.header.schema_version = version;
+    a
 }
 
 #[test]

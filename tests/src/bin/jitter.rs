@@ -16,7 +16,7 @@ use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
 };
 use shared_mem_schema::transport;
-use shared_mem_schema::{ControllerStatus, Header, LatencyHistogram, PolicyAction};
+use shared_mem_schema::{ControllerStatus, LatencyHistogram, PolicyAction};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -278,12 +278,7 @@ fn main() -> anyhow::Result<()> {
         } else {
             -0.0005
         };
-        let a = PolicyAction {
-            header: Header::new(seq, mono_now_ns(), 0, 0),
-            apply_at_step: 0,
-            delta_pos_m: [dx, 0.0, 0.0],
-            delta_roll_rad: 0.0,
-        };
+        let a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0], 0.0);
         transport::send(&actions, &a)?;
         // 20 Hz, each at another phase of the daemon's 1 ms cycle (both
         // clocks are absolute: a fixed phase would measure one point of
