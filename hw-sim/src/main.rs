@@ -21,7 +21,7 @@ use shared_mem_schema::process::{
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, EpisodeReport, HardwareState, Header, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH,
-    MAX_JOINTS, SimCommand, TorqueCommand, write_text,
+    MAX_JOINTS, SimCommand, TorqueCommand, hw_time_ns, write_text,
 };
 use std::path::PathBuf;
 use std::sync::mpsc;
@@ -103,10 +103,10 @@ fn peg_code(world: &World) -> u32 {
 
 fn stage_code(s: Stage) -> u32 {
     match s {
-        Stage::Failed => 0,
-        Stage::Touched => 1,
-        Stage::Inserted => 2,
-        Stage::Completed => 3,
+        Stage::Failed => EpisodeReport::STAGE_FAILED,
+        Stage::Touched => EpisodeReport::STAGE_TOUCHED,
+        Stage::Inserted => EpisodeReport::STAGE_INSERTED,
+        Stage::Completed => EpisodeReport::STAGE_COMPLETED,
     }
 }
 
@@ -277,11 +277,9 @@ impl Server {
                     self.world.step(&tau).context("stepping the world")?;
                 }
                 None => {
-                    let q = self
-                        .brake_q
-                        .get_or_insert_with(|| self.world.q().to_vec())
-                        .clone();
-                    self.world.set_joint_state(&q, &zeros)?;
+                    let world = &mut self.world;
+                    let q = self.brake_q.get_or_insert_with(|| world.q().to_vec());
+                    world.set_joint_state(q, &zeros)?;
                     self.world.step(&zeros).context("stepping the world")?;
                 }
             }
@@ -464,7 +462,7 @@ impl Server {
         Header::new(
             seq,
             mono_now_ns(),
-            (self.world.time_s() * 1e9).round() as u64,
+            hw_time_ns(self.world.time_s()),
             self.episode,
         )
     }
@@ -475,7 +473,7 @@ impl Server {
         if self.brake_q.is_some() || self.command.is_none() {
             header.flags |= HardwareState::BRAKES_ENGAGED;
         }
-        let r = self.world.readings().clone();
+        let r = self.world.readings();
         let nv = r.q.len();
         let mut m = HardwareState {
             header,
@@ -505,34 +503,29 @@ impl Server {
     fn publish_report(&mut self) -> Result<()> {
         self.report_seq += 1;
         let header = self.header(self.report_seq);
-        let step = self.world.step_index();
-        let peg = peg_code(&self.world);
-        let task = self.world.task().cloned();
-        let hole = self.world.hole_pose();
-        let cfg = self.world.config().task.clone();
-        let (cmd_seq, result, message) = self.last_result.clone();
-        let seed = self.seed;
+        let (world, (cmd_seq, result, message), seed) = (&self.world, &self.last_result, self.seed);
         transport::send_with(&self.report_pub, |m| {
             m.header = header;
-            m.command_seq = cmd_seq;
+            m.command_seq = *cmd_seq;
             m.seed = seed;
-            m.step = step;
-            m.command_result = result;
-            m.peg = peg;
-            if let Some(t) = &task {
+            m.step = world.step_index();
+            m.command_result = *result;
+            m.peg = peg_code(world);
+            if let Some(t) = world.task() {
                 m.stage_now = stage_code(t.stage_now);
                 m.stage_best = stage_code(t.stage);
                 m.in_contact = t.in_contact as u32;
                 m.s_m = [t.s_m.x, t.s_m.y, t.s_m.z];
                 m.s_psi_rad = t.s_psi_rad;
             }
-            if let Some(h) = hole {
+            if let Some(h) = world.hole_pose() {
                 m.hole_pos_m = h.translation.vector.into();
                 m.hole_quat_xyzw = h.rotation.coords.into();
             }
-            m.peg_width_m = cfg.peg_width_m;
-            m.hole_depth_m = cfg.hole_depth_m;
-            m.message_len = write_text(&mut m.message, &message);
+            let task = &world.config().task;
+            m.peg_width_m = task.peg_width_m;
+            m.hole_depth_m = task.hole_depth_m;
+            m.message_len = write_text(&mut m.message, message);
         })?;
         Ok(())
     }
@@ -578,8 +571,7 @@ fn render_loop(
                 let pose = cam.pose;
                 let focal = cam.focal_px;
                 let r = transport::send_with(&publisher, |m| {
-                    m.header =
-                        Header::new(seq, mono_now_ns(), (shot.t_s * 1e9).round() as u64, episode);
+                    m.header = Header::new(seq, mono_now_ns(), hw_time_ns(shot.t_s), episode);
                     m.index = frame.index;
                     m.width = w as u32;
                     m.height = h as u32;

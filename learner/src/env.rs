@@ -13,19 +13,10 @@ use hw_sim::{World, WorldConfig};
 use nalgebra::{UnitQuaternion, Vector3};
 use robot_model::Model;
 use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState};
+use shared_mem_schema::{hw_time_ns, hw_time_s};
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
 pub const ACTION_PERIOD: u64 = 50;
-
-/// Hardware time stamp of a simulated time, ns (as hw-sim stamps it).
-pub fn hw_time_ns(t_s: f64) -> u64 {
-    (t_s * 1e9).round() as u64
-}
-
-/// Seconds of a hardware stamp (as rt-controller's daemon reads it).
-pub fn hw_time_s(ns: u64) -> f64 {
-    ns as f64 * 1e-9
-}
 
 /// One environment of the fast path.
 pub struct FastEnv {

@@ -17,6 +17,7 @@ use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
+    hw_time_s,
 };
 use std::path::PathBuf;
 use std::time::Duration;
@@ -59,16 +60,6 @@ pub struct EpisodeOutcome {
     pub actions: u64,
     /// Its log.
     pub log: PathBuf,
-}
-
-/// Name of a stage code of [`EpisodeReport`].
-pub fn stage_name(code: u32) -> &'static str {
-    match code {
-        3 => "completed",
-        2 => "inserted",
-        1 => "touched",
-        _ => "failed",
-    }
 }
 
 /// The policy node's services: what it reads and what it publishes.
@@ -319,9 +310,9 @@ pub fn run(
                 best_stage = r.stage_best;
                 log.event(
                     r.header.t_hw_ns,
-                    &serde_json::json!({"event": "stage", "stage": stage_name(best_stage)}),
+                    &serde_json::json!({"event": "stage", "stage": EpisodeReport::stage_name(best_stage)}),
                 )?;
-                if best_stage == 3 && completed_at.is_none() {
+                if best_stage == EpisodeReport::STAGE_COMPLETED && completed_at.is_none() {
                     completed_at = Some(r.header.t_hw_ns);
                 }
             }
@@ -333,10 +324,9 @@ pub fn run(
                 continue;
             };
             t_end = frame.header.t_hw_ns;
-            let t_ep = (frame.header.t_hw_ns.saturating_sub(first.header.t_hw_ns)) as f64 * 1e-9;
-            let settled = completed_at.is_some_and(|t| {
-                frame.header.t_hw_ns.saturating_sub(t) as f64 * 1e-9 >= cfg.settle_s
-            });
+            let t_ep = hw_time_s(frame.header.t_hw_ns.saturating_sub(first.header.t_hw_ns));
+            let settled = completed_at
+                .is_some_and(|t| hw_time_s(frame.header.t_hw_ns.saturating_sub(t)) >= cfg.settle_s);
             if settled || t_ep >= cfg.episode_timeout_s || termination_requested() {
                 break;
             }
@@ -368,8 +358,8 @@ pub fn run(
                 next_tick = mono_now_ns() + ACTION_PERIOD * 1_000_000;
             }
         }
-        let stage = stage_name(best_stage);
-        let duration_s = (t_end.saturating_sub(first.header.t_hw_ns)) as f64 * 1e-9;
+        let stage = EpisodeReport::stage_name(best_stage);
+        let duration_s = hw_time_s(t_end.saturating_sub(first.header.t_hw_ns));
         log.event(
             t_end,
             &serde_json::json!({"event": "outcome", "stage": stage, "duration_s": duration_s,

@@ -35,6 +35,17 @@ pub struct LogError {
     pub source: mcap::McapError,
 }
 
+/// The log's channels.
+#[derive(Clone, Copy)]
+enum Stream {
+    Sensor,
+    Action,
+    Camera,
+    Status,
+    Episode,
+    Events,
+}
+
 struct Channel {
     id: u16,
     seq: u32,
@@ -156,14 +167,20 @@ impl StackLogger {
         &self.path
     }
 
-    fn write(&mut self, which: u8, log_ns: u64, pub_ns: u64, data: &[u8]) -> Result<(), LogError> {
-        let ch = match which {
-            0 => &mut self.sensor,
-            1 => &mut self.action,
-            2 => &mut self.camera,
-            3 => &mut self.status,
-            4 => &mut self.episode,
-            _ => &mut self.events,
+    fn write(
+        &mut self,
+        stream: Stream,
+        log_ns: u64,
+        pub_ns: u64,
+        data: &[u8],
+    ) -> Result<(), LogError> {
+        let ch = match stream {
+            Stream::Sensor => &mut self.sensor,
+            Stream::Action => &mut self.action,
+            Stream::Camera => &mut self.camera,
+            Stream::Status => &mut self.status,
+            Stream::Episode => &mut self.episode,
+            Stream::Events => &mut self.events,
         };
         ch.seq = ch.seq.wrapping_add(1);
         let header = MessageHeader {
@@ -180,24 +197,30 @@ impl StackLogger {
             })
     }
 
+    /// A raw struct message, stamped with its own header's times.
+    fn raw<T: Message>(&mut self, stream: Stream, m: &T) -> Result<(), LogError> {
+        let h = m.header();
+        self.write(stream, h.t_hw_ns, h.t_mono_ns, m.as_bytes())
+    }
+
     /// Logs a sensor frame.
     pub fn sensor(&mut self, m: &SensorFrame) -> Result<(), LogError> {
-        self.write(0, m.header.t_hw_ns, m.header.t_mono_ns, m.as_bytes())
+        self.raw(Stream::Sensor, m)
     }
 
     /// Logs an action (`t_hw_ns`: the observation's hardware time).
     pub fn action(&mut self, m: &PolicyAction) -> Result<(), LogError> {
-        self.write(1, m.header.t_hw_ns, m.header.t_mono_ns, m.as_bytes())
+        self.raw(Stream::Action, m)
     }
 
     /// Logs a controller status.
     pub fn status(&mut self, m: &ControllerStatus) -> Result<(), LogError> {
-        self.write(3, m.header.t_hw_ns, m.header.t_mono_ns, m.as_bytes())
+        self.raw(Stream::Status, m)
     }
 
     /// Logs an episode report.
     pub fn episode(&mut self, m: &EpisodeReport) -> Result<(), LogError> {
-        self.write(4, m.header.t_hw_ns, m.header.t_mono_ns, m.as_bytes())
+        self.raw(Stream::Episode, m)
     }
 
     /// Logs a camera frame (compact).
@@ -211,14 +234,14 @@ impl StackLogger {
         for d in &m.depth_m[..n] {
             buf.extend_from_slice(&d.to_le_bytes());
         }
-        self.write(2, m.header.t_hw_ns, m.header.t_mono_ns, &buf)
+        self.write(Stream::Camera, m.header.t_hw_ns, m.header.t_mono_ns, &buf)
     }
 
     /// Logs an event (JSON object) at hardware time `t_hw_ns`.
     pub fn event(&mut self, t_hw_ns: u64, json: &serde_json::Value) -> Result<(), LogError> {
         let text = json.to_string();
         let now = shared_mem_schema::process::mono_now_ns();
-        self.write(5, t_hw_ns, now, text.as_bytes())
+        self.write(Stream::Events, t_hw_ns, now, text.as_bytes())
     }
 
     /// Writes the summary and index; the file is complete after this.

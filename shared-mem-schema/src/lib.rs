@@ -115,6 +115,20 @@ pub unsafe trait Pod: Copy + Sized + 'static {
     }
 }
 
+/// A hardware time in seconds as [`Header::t_hw_ns`] stamps it (rounded to
+/// the nanosecond). Every stamping goes through here, and every reading
+/// through [`hw_time_s`], so the control law sees the same `now` whether the
+/// simulator is in another process or in the same one (lockstep runs are
+/// bit-identical to the fast path).
+pub fn hw_time_ns(t_s: f64) -> u64 {
+    (t_s * 1e9).round() as u64
+}
+
+/// Seconds of a [`Header::t_hw_ns`] stamp.
+pub fn hw_time_s(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
 /// Fields every message starts with.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
@@ -496,7 +510,8 @@ pub struct EpisodeReport {
     pub command_result: u32,
     /// Peg: 0 none, 1 square, 2 triangle, 3 semicircle, 4 hexagon.
     pub peg: u32,
-    /// Stage now: 0 failed (not touched), 1 touched, 2 inserted, 3 completed.
+    /// Stage now: 0 failed (not touched), 1 touched, 2 inserted, 3 completed
+    /// (see [`EpisodeReport::stage_name`]).
     pub stage_now: u32,
     /// Best stage reached this episode (same codes).
     pub stage_best: u32,
@@ -525,6 +540,25 @@ impl EpisodeReport {
     pub const OK: u32 = 0;
     /// The command was refused; `message` says why.
     pub const REJECTED: u32 = 1;
+
+    /// Stage codes of `stage_now` and `stage_best`.
+    pub const STAGE_FAILED: u32 = 0;
+    /// Touched the box.
+    pub const STAGE_TOUCHED: u32 = 1;
+    /// The tip went into the hole.
+    pub const STAGE_INSERTED: u32 = 2;
+    /// The tip reached the hole's bottom.
+    pub const STAGE_COMPLETED: u32 = 3;
+
+    /// Name of a stage code: completed, inserted, touched or failed.
+    pub fn stage_name(code: u32) -> &'static str {
+        match code {
+            Self::STAGE_COMPLETED => "completed",
+            Self::STAGE_INSERTED => "inserted",
+            Self::STAGE_TOUCHED => "touched",
+            _ => "failed",
+        }
+    }
 
     /// The message text (lossy UTF-8).
     pub fn message_text(&self) -> String {

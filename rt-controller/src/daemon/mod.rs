@@ -27,7 +27,7 @@ use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{
     ControllerMode, ControllerStatus, HardwareState, Header, LatencyHistogram, MAX_JOINTS,
-    PolicyAction, SCHEMA_VERSION, SensorFrame, TorqueCommand,
+    PolicyAction, SCHEMA_VERSION, SensorFrame, TorqueCommand, hw_time_s,
 };
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
@@ -261,10 +261,6 @@ pub struct Daemon<H: Hardware> {
     pub shared: Arc<Shared>,
 }
 
-fn ns_to_s(ns: u64) -> f64 {
-    ns as f64 * 1e-9
-}
-
 impl<H: Hardware> Daemon<H> {
     /// Builds the controller for `model` and opens the learner-facing
     /// services on `node`. All buffers are allocated here.
@@ -401,7 +397,7 @@ impl<H: Hardware> Daemon<H> {
         }
         self.state = *s;
         self.last_state_ns = now_ns;
-        let t = ns_to_s(self.state.header.t_hw_ns);
+        let t = hw_time_s(self.state.header.t_hw_ns);
         if !self.have_state || self.state.header.episode != self.episode {
             if self.have_state {
                 self.data.restart(t);
@@ -534,7 +530,7 @@ impl<H: Hardware> Daemon<H> {
         self.tau_meas
             .copy_from_slice(&self.state.tau_measured[..nv]);
         let wrench = self.state.wrench;
-        let t_s = ns_to_s(self.state.header.t_hw_ns);
+        let t_s = hw_time_s(self.state.header.t_hw_ns);
         let core_action = action.map(|a| crate::Action {
             delta_pos_m: a.delta_pos_m,
             delta_roll_rad: a.delta_roll_rad,
@@ -557,9 +553,12 @@ impl<H: Hardware> Daemon<H> {
             self.last_action_seq = a.header.seq;
         }
         self.torque_seq += 1;
-        let header = Header::new(self.torque_seq, mono_now_ns(), self.state.header.t_hw_ns, {
-            self.episode
-        });
+        let header = Header::new(
+            self.torque_seq,
+            mono_now_ns(),
+            self.state.header.t_hw_ns,
+            self.episode,
+        );
         let mut cmd = TorqueCommand {
             header,
             state_step: step,
@@ -648,7 +647,7 @@ impl<H: Hardware> Daemon<H> {
 
     /// Asks the control law to hold the current target (shutdown).
     pub fn request_hold(&mut self) {
-        let t = ns_to_s(self.state.header.t_hw_ns);
+        let t = hw_time_s(self.state.header.t_hw_ns);
         self.data.supervisor.request_hold(t);
     }
 
