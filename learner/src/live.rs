@@ -8,7 +8,7 @@
 //! addressed to step 50m, so runs are deterministic.
 
 use crate::env::ACTION_PERIOD;
-use crate::log::StackLogger;
+use crate::log::LogWriter;
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use anyhow::{Context, Result, bail};
 use hw_sim::WorldConfig;
@@ -110,7 +110,7 @@ impl PolicyNode {
         &mut self,
         episode: u64,
         seen: &mut Seen,
-        mut log: Option<&mut StackLogger>,
+        mut log: Option<&mut LogWriter>,
     ) -> Result<()> {
         let now = mono_now_ns();
         let mut err = None;
@@ -281,7 +281,12 @@ pub fn run(
         let path = cfg
             .log_dir
             .join(format!("episode-{episode:04}-seed-{seed}.mcap"));
-        let mut log = StackLogger::create(&path)?;
+        let mut log = LogWriter::create(&path)?;
+        log.config(
+            first.header.t_hw_ns,
+            &serde_json::json!({"world": &cfg.world, "lockstep": cfg.lockstep,
+                "policy": "heuristic", "namespace": &cfg.namespace}),
+        )?;
         log.event(
             first.header.t_hw_ns,
             &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,

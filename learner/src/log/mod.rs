@@ -1,0 +1,486 @@
+//! MCAP logs: the writer, the reader, crash recovery and Foxglove views.
+//!
+//! Every stream has its own channel. The raw channels carry each message as
+//! the shared-mem-schema struct's bytes (`#[repr(C)]`, native little-endian,
+//! no padding), so a log is lossless; the schema record names the struct and
+//! the schema version, and the reader refuses another version. Camera frames
+//! are stored compactly: the struct's fixed fields, then the `width × height`
+//! RGB bytes, then the `width × height` depth floats. Episode events (reset,
+//! stage reached, outcome) and the configuration are JSON. Beside them, the
+//! [`foxglove`] view channels show the images, the transforms, the
+//! end-effector pose and the wrench in Foxglove.
+//!
+//! Log time is the hardware time, publish time the monotonic clock. Files
+//! are chunked (1 MiB), zstd-compressed and indexed; the writer closes a
+//! chunk at least every [`LogOptions::flush_period_s`] of log time, so a
+//! writer killed mid-run leaves every earlier chunk readable, and
+//! [`recover`] turns such a file into a valid one. See docs/data.md.
+
+pub mod foxglove;
+mod read;
+
+pub use read::{
+    CameraImage, LogMessage, LogReader, ReadError, RecoverReport, ScanReport, TopicInfo, recover,
+    scan,
+};
+
+use mcap::records::MessageHeader;
+use shared_mem_schema::{
+    CameraFrame, ControllerStatus, EpisodeReport, Message, Pod, PolicyAction, SCHEMA_VERSION,
+    SensorFrame,
+};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+/// Message encoding of the raw struct channels.
+pub const RAW_ENCODING: &str = "vision_touch/repr-c";
+/// Message encoding of the compact camera channel.
+pub const CAMERA_ENCODING: &str = "vision_touch/camera-compact";
+/// The log profile written in the MCAP header.
+pub const PROFILE: &str = "vision_touch";
+
+/// Topics of the raw (training) channels.
+pub mod topics {
+    /// 1 kHz controller sensor frames ([`shared_mem_schema::SensorFrame`]).
+    pub const SENSOR: &str = "/controller/sensor";
+    /// 20 Hz policy actions ([`shared_mem_schema::PolicyAction`]).
+    pub const ACTION: &str = "/policy/action";
+    /// Controller status ([`shared_mem_schema::ControllerStatus`]).
+    pub const STATUS: &str = "/controller/status";
+    /// Simulator episode reports ([`shared_mem_schema::EpisodeReport`]).
+    pub const EPISODE: &str = "/sim/episode";
+    /// Camera frames, compact ([`super::CAMERA_ENCODING`]).
+    pub const CAMERA: &str = "/camera/rgbd";
+    /// Episode events, JSON.
+    pub const EVENTS: &str = "/events";
+    /// The configuration in force, JSON.
+    pub const CONFIG: &str = "/config";
+    /// Foxglove view: RGB image.
+    pub const VIEW_RGB: &str = "/camera/rgb";
+    /// Foxglove view: depth image (metres, 32FC1).
+    pub const VIEW_DEPTH: &str = "/camera/depth";
+    /// Foxglove view: camera intrinsics.
+    pub const VIEW_CALIBRATION: &str = "/camera/calibration";
+    /// Foxglove view: base → end-effector and base → camera.
+    pub const VIEW_TF: &str = "/tf";
+    /// Foxglove view: end-effector pose.
+    pub const VIEW_EE_POSE: &str = "/ee/pose";
+    /// Foxglove view: wrist wrench.
+    pub const VIEW_WRENCH: &str = "/ft/wrench";
+}
+
+/// A logging failure, naming the file.
+#[derive(Debug, thiserror::Error)]
+#[error("MCAP log {path}: {source}")]
+pub struct LogError {
+    /// The file.
+    pub path: PathBuf,
+    /// What failed.
+    #[source]
+    pub source: mcap::McapError,
+}
+
+/// How a log is written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogOptions {
+    /// Write the Foxglove view channels.
+    pub foxglove: bool,
+    /// Rate of the view channels fed by 1 kHz frames (pose, wrench,
+    /// transforms), Hz; at least every frame's rate means every frame.
+    pub view_rate_hz: f64,
+    /// Longest stretch of log time between closed chunks, s.
+    pub flush_period_s: f64,
+    /// Chunk size before compression, bytes.
+    pub chunk_bytes: u64,
+}
+
+impl Default for LogOptions {
+    fn default() -> Self {
+        Self {
+            foxglove: true,
+            view_rate_hz: 1000.0,
+            flush_period_s: 1.0,
+            chunk_bytes: 1 << 20,
+        }
+    }
+}
+
+/// The log's channels.
+#[derive(Clone, Copy)]
+enum Stream {
+    Sensor,
+    Action,
+    Camera,
+    Status,
+    Episode,
+    Events,
+    Config,
+    Rgb,
+    Depth,
+    Calibration,
+    Tf,
+    EePose,
+    Wrench,
+}
+
+const STREAMS: usize = 13;
+
+/// Writes one log (an episode of the live stack, or a collection shard).
+pub struct LogWriter {
+    path: PathBuf,
+    w: mcap::Writer<BufWriter<File>>,
+    opts: LogOptions,
+    ids: [u16; STREAMS],
+    seqs: [u32; STREAMS],
+    last_flush_ns: u64,
+    last_view_ns: Option<u64>,
+    json: String,
+    buf: Vec<u8>,
+}
+
+fn schema_text<T: Message>() -> String {
+    format!(
+        "shared_mem_schema::{} (schema version {SCHEMA_VERSION}, {} bytes, #[repr(C)], \
+         little-endian)",
+        T::NAME,
+        size_of::<T>()
+    )
+}
+
+impl LogWriter {
+    /// Creates `path` with the default options.
+    pub fn create(path: &Path) -> Result<Self, LogError> {
+        Self::create_with(path, LogOptions::default())
+    }
+
+    /// Creates `path` (zstd-compressed, chunked, indexed).
+    pub fn create_with(path: &Path, opts: LogOptions) -> Result<Self, LogError> {
+        let err = |source| LogError {
+            path: path.to_path_buf(),
+            source,
+        };
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| err(e.into()))?;
+        }
+        let file = File::create(path).map_err(|e| err(e.into()))?;
+        let mut w = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .chunk_size(Some(opts.chunk_bytes))
+            .profile(PROFILE)
+            .create(BufWriter::new(file))
+            .map_err(err)?;
+        let meta = BTreeMap::new();
+        let mut add = |name: &str, enc: &str, schema: &[u8], topic: &str, msg_enc: &str| {
+            let sid = w.add_schema(name, enc, schema)?;
+            w.add_channel(sid, topic, msg_enc, &meta)
+        };
+        let mut ids = [0u16; STREAMS];
+        let raw = [
+            (
+                Stream::Sensor,
+                "SensorFrame",
+                schema_text::<SensorFrame>(),
+                topics::SENSOR,
+            ),
+            (
+                Stream::Action,
+                "PolicyAction",
+                schema_text::<PolicyAction>(),
+                topics::ACTION,
+            ),
+            (
+                Stream::Status,
+                "ControllerStatus",
+                schema_text::<ControllerStatus>(),
+                topics::STATUS,
+            ),
+            (
+                Stream::Episode,
+                "EpisodeReport",
+                schema_text::<EpisodeReport>(),
+                topics::EPISODE,
+            ),
+        ];
+        for (s, name, text, topic) in raw {
+            ids[s as usize] =
+                add(name, RAW_ENCODING, text.as_bytes(), topic, RAW_ENCODING).map_err(err)?;
+        }
+        let cam_text = format!(
+            "shared_mem_schema::CameraFrame (schema version {SCHEMA_VERSION}): its first {} \
+             bytes, then width*height*3 RGB bytes, then width*height f32 depths",
+            std::mem::offset_of!(CameraFrame, rgb)
+        );
+        ids[Stream::Camera as usize] = add(
+            "CameraFrameCompact",
+            CAMERA_ENCODING,
+            cam_text.as_bytes(),
+            topics::CAMERA,
+            CAMERA_ENCODING,
+        )
+        .map_err(err)?;
+        let object = br#"{"type":"object"}"#;
+        ids[Stream::Events as usize] = add(
+            "vision_touch.Event",
+            "jsonschema",
+            object,
+            topics::EVENTS,
+            "json",
+        )
+        .map_err(err)?;
+        ids[Stream::Config as usize] = add(
+            "vision_touch.Config",
+            "jsonschema",
+            object,
+            topics::CONFIG,
+            "json",
+        )
+        .map_err(err)?;
+        if opts.foxglove {
+            let views = [
+                (
+                    Stream::Rgb,
+                    "foxglove.RawImage",
+                    foxglove::RAW_IMAGE,
+                    topics::VIEW_RGB,
+                ),
+                (
+                    Stream::Depth,
+                    "foxglove.RawImage",
+                    foxglove::RAW_IMAGE,
+                    topics::VIEW_DEPTH,
+                ),
+                (
+                    Stream::Calibration,
+                    "foxglove.CameraCalibration",
+                    foxglove::CAMERA_CALIBRATION,
+                    topics::VIEW_CALIBRATION,
+                ),
+                (
+                    Stream::Tf,
+                    "foxglove.FrameTransforms",
+                    foxglove::FRAME_TRANSFORMS,
+                    topics::VIEW_TF,
+                ),
+                (
+                    Stream::EePose,
+                    "foxglove.PoseInFrame",
+                    foxglove::POSE_IN_FRAME,
+                    topics::VIEW_EE_POSE,
+                ),
+                (
+                    Stream::Wrench,
+                    "vision_touch.Wrench",
+                    foxglove::WRENCH,
+                    topics::VIEW_WRENCH,
+                ),
+            ];
+            for (s, name, schema, topic) in views {
+                ids[s as usize] =
+                    add(name, "jsonschema", schema.as_bytes(), topic, "json").map_err(err)?;
+            }
+        }
+        // The schemas and channels go to disk at once, in a chunk of their
+        // own: a file killed before its first full chunk still names them.
+        w.flush().map_err(err)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            w,
+            opts,
+            ids,
+            seqs: [0; STREAMS],
+            last_flush_ns: 0,
+            last_view_ns: None,
+            json: String::new(),
+            buf: Vec::new(),
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn err(&self, source: mcap::McapError) -> LogError {
+        LogError {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    fn write(&mut self, s: Stream, log_ns: u64, pub_ns: u64, data: &[u8]) -> Result<(), LogError> {
+        let seq = &mut self.seqs[s as usize];
+        *seq = seq.wrapping_add(1);
+        let header = MessageHeader {
+            channel_id: self.ids[s as usize],
+            sequence: *seq,
+            log_time: log_ns,
+            publish_time: pub_ns,
+        };
+        self.w
+            .write_to_known_channel(&header, data)
+            .map_err(|e| LogError {
+                path: self.path.clone(),
+                source: e,
+            })?;
+        let period_ns = (self.opts.flush_period_s * 1e9) as u64;
+        if log_ns.abs_diff(self.last_flush_ns) >= period_ns {
+            self.last_flush_ns = log_ns;
+            self.w.flush().map_err(|e| self.err(e))?;
+        }
+        Ok(())
+    }
+
+    /// The JSON view message held in `self.json`.
+    fn write_json(&mut self, s: Stream, log_ns: u64, pub_ns: u64) -> Result<(), LogError> {
+        let json = std::mem::take(&mut self.json);
+        let r = self.write(s, log_ns, pub_ns, json.as_bytes());
+        self.json = json;
+        r
+    }
+
+    /// A raw struct message, stamped with its own header's times.
+    fn raw<T: Message>(&mut self, s: Stream, m: &T) -> Result<(), LogError> {
+        let h = m.header();
+        self.write(s, h.t_hw_ns, h.t_mono_ns, m.as_bytes())
+    }
+
+    /// Logs a sensor frame (and its view messages when one is due).
+    pub fn sensor(&mut self, m: &SensorFrame) -> Result<(), LogError> {
+        self.raw(Stream::Sensor, m)?;
+        if !self.opts.foxglove {
+            return Ok(());
+        }
+        let (t, p) = (m.header.t_hw_ns, m.header.t_mono_ns);
+        let period_ns = (1e9 / self.opts.view_rate_hz.max(1e-3)) as u64;
+        if self
+            .last_view_ns
+            .is_some_and(|last| t < last + period_ns && t >= last)
+        {
+            return Ok(());
+        }
+        self.last_view_ns = Some(t);
+        foxglove::pose_in_frame(
+            &mut self.json,
+            t,
+            foxglove::BASE_FRAME,
+            &m.ee_pos_m,
+            &m.ee_quat_xyzw,
+        );
+        self.write_json(Stream::EePose, t, p)?;
+        foxglove::wrench(&mut self.json, t, &m.wrench);
+        self.write_json(Stream::Wrench, t, p)?;
+        foxglove::frame_transforms(
+            &mut self.json,
+            t,
+            &[foxglove::Transform {
+                parent: foxglove::BASE_FRAME,
+                child: foxglove::EE_FRAME,
+                translation: m.ee_pos_m,
+                rotation_xyzw: m.ee_quat_xyzw,
+            }],
+        );
+        self.write_json(Stream::Tf, t, p)
+    }
+
+    /// Logs an action (`t_hw_ns`: the observation's hardware time).
+    pub fn action(&mut self, m: &PolicyAction) -> Result<(), LogError> {
+        self.raw(Stream::Action, m)
+    }
+
+    /// Logs a controller status.
+    pub fn status(&mut self, m: &ControllerStatus) -> Result<(), LogError> {
+        self.raw(Stream::Status, m)
+    }
+
+    /// Logs an episode report.
+    pub fn episode(&mut self, m: &EpisodeReport) -> Result<(), LogError> {
+        self.raw(Stream::Episode, m)
+    }
+
+    /// Logs a camera frame: compact raw, and the view images and calibration.
+    pub fn camera(&mut self, m: &CameraFrame) -> Result<(), LogError> {
+        let (w, h) = (
+            (m.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH),
+            (m.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT),
+        );
+        let n = w * h;
+        let head = &m.as_bytes()[..std::mem::offset_of!(CameraFrame, rgb)];
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        buf.extend_from_slice(head);
+        buf.extend_from_slice(&m.rgb[..n * 3]);
+        for d in &m.depth_m[..n] {
+            buf.extend_from_slice(&d.to_le_bytes());
+        }
+        let (t, p) = (m.header.t_hw_ns, m.header.t_mono_ns);
+        let r = self.write(Stream::Camera, t, p, &buf);
+        if r.is_ok() && self.opts.foxglove {
+            let depth = &buf[head.len() + n * 3..];
+            let rgb = &m.rgb[..n * 3];
+            foxglove::raw_image(
+                &mut self.json,
+                t,
+                w as u32,
+                h as u32,
+                "rgb8",
+                3 * w as u32,
+                rgb,
+            );
+            self.write_json(Stream::Rgb, t, p)?;
+            foxglove::raw_image(
+                &mut self.json,
+                t,
+                w as u32,
+                h as u32,
+                "32FC1",
+                4 * w as u32,
+                depth,
+            );
+            self.write_json(Stream::Depth, t, p)?;
+            foxglove::camera_calibration(
+                &mut self.json,
+                t,
+                w as u32,
+                h as u32,
+                m.focal_px,
+                m.principal_px,
+            );
+            self.write_json(Stream::Calibration, t, p)?;
+            foxglove::frame_transforms(
+                &mut self.json,
+                t,
+                &[foxglove::Transform {
+                    parent: foxglove::BASE_FRAME,
+                    child: foxglove::CAMERA_FRAME,
+                    translation: m.pose_pos_m,
+                    rotation_xyzw: m.pose_quat_xyzw,
+                }],
+            );
+            self.write_json(Stream::Tf, t, p)?;
+        }
+        self.buf = buf;
+        r
+    }
+
+    /// Logs an event (JSON object) at hardware time `t_hw_ns`.
+    pub fn event(&mut self, t_hw_ns: u64, json: &serde_json::Value) -> Result<(), LogError> {
+        let text = json.to_string();
+        let now = shared_mem_schema::process::mono_now_ns();
+        self.write(Stream::Events, t_hw_ns, now, text.as_bytes())
+    }
+
+    /// Logs the configuration in force (JSON object) at `t_hw_ns`.
+    pub fn config(&mut self, t_hw_ns: u64, json: &serde_json::Value) -> Result<(), LogError> {
+        let text = json.to_string();
+        let now = shared_mem_schema::process::mono_now_ns();
+        self.write(Stream::Config, t_hw_ns, now, text.as_bytes())
+    }
+
+    /// Writes the summary and index; the file is complete after this.
+    pub fn finish(mut self) -> Result<PathBuf, LogError> {
+        self.w.finish().map_err(|e| self.err(e))?;
+        Ok(self.path)
+    }
+}

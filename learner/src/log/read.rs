@@ -1,0 +1,815 @@
+//! Reading logs: the indexed reader, a structural scan that names the byte
+//! offset of the first problem, and crash recovery.
+//!
+//! The top-level records are walked here rather than through the mcap
+//! crate's streaming reader, so that every error can say where in the file
+//! it is; the mcap crate still parses each record and decompresses chunks.
+
+use super::{CAMERA_ENCODING, RAW_ENCODING, topics};
+use mcap::records::{self, Record};
+use shared_mem_schema::{CameraFrame, Header, Message, Pod, SCHEMA_VERSION};
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+const OP_FOOTER: u8 = 0x02;
+const OP_CHUNK: u8 = 0x06;
+/// Largest chunk the reader will decompress: a corrupted size field must
+/// not make it allocate without bound.
+const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
+/// A reading failure, naming the file and, for damaged files, the byte
+/// offset of the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file does not start with the MCAP magic.
+    #[error("{path}: not an MCAP file (no MCAP magic at byte offset 0)")]
+    NotMcap {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file ends before its summary: its writer stopped (killed, or
+    /// still running).
+    #[error(
+        "{path}: incomplete log: it ends at byte offset {offset} inside or before its summary \
+         ({what}); `learner log recover {path}` writes a valid copy of the {readable} bytes \
+         before the damage"
+    )]
+    Incomplete {
+        /// The file.
+        path: PathBuf,
+        /// Where the damage starts.
+        offset: u64,
+        /// Bytes readable before it.
+        readable: u64,
+        /// What was found there.
+        what: String,
+    },
+    /// A record is damaged.
+    #[error("{path}: corrupted at byte offset {offset}: {what}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// Where the damaged record starts.
+        offset: u64,
+        /// What is wrong.
+        what: String,
+    },
+    /// A message does not match what its channel promises.
+    #[error("{path}: channel {topic}: {what}")]
+    Content {
+        /// The file.
+        path: PathBuf,
+        /// The channel.
+        topic: String,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+/// One message read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogMessage {
+    /// Its channel's topic.
+    pub topic: Arc<str>,
+    /// Sequence number within the channel.
+    pub sequence: u32,
+    /// Log time (hardware time), ns.
+    pub log_time: u64,
+    /// Publish time (monotonic clock), ns.
+    pub publish_time: u64,
+    /// The payload.
+    pub data: Vec<u8>,
+}
+
+/// A channel of a log.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicInfo {
+    /// Topic.
+    pub topic: String,
+    /// Schema name.
+    pub schema: String,
+    /// Message encoding.
+    pub encoding: String,
+    /// Messages on it.
+    pub messages: u64,
+}
+
+/// A camera frame decoded from the compact raw channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraImage {
+    /// The message header.
+    pub header: Header,
+    /// Frame counter.
+    pub index: u64,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Focal length, px.
+    pub focal_px: f64,
+    /// Principal point, px.
+    pub principal_px: [f64; 2],
+    /// Camera position in the base frame, m.
+    pub pose_pos_m: [f64; 3],
+    /// Camera orientation in the base frame (x, y, z, w).
+    pub pose_quat_xyzw: [f64; 4],
+    /// RGB, row-major.
+    pub rgb: Vec<u8>,
+    /// Depth, m, row-major (0: no return).
+    pub depth_m: Vec<f32>,
+}
+
+impl CameraImage {
+    /// Decodes a compact camera message.
+    pub fn decode(data: &[u8]) -> Result<Self, String> {
+        let head_len = std::mem::offset_of!(CameraFrame, rgb);
+        if data.len() < head_len {
+            return Err(format!(
+                "camera message of {} bytes, shorter than its {head_len}-byte head",
+                data.len()
+            ));
+        }
+        let header = *Header::read_from(&data[..size_of::<Header>()]).expect("length checked");
+        if header.schema_version != SCHEMA_VERSION {
+            return Err(format!(
+                "camera frame of schema version {}, this build reads version {SCHEMA_VERSION}",
+                header.schema_version
+            ));
+        }
+        let u64_at = |o: usize| u64::from_le_bytes(data[o..o + 8].try_into().expect("8 bytes"));
+        let u32_at = |o: usize| u32::from_le_bytes(data[o..o + 4].try_into().expect("4 bytes"));
+        let f64_at = |o: usize| f64::from_le_bytes(data[o..o + 8].try_into().expect("8 bytes"));
+        let f64s = |o: usize, out: &mut [f64]| {
+            for (i, x) in out.iter_mut().enumerate() {
+                *x = f64_at(o + 8 * i);
+            }
+        };
+        use std::mem::offset_of;
+        let (width, height) = (
+            u32_at(offset_of!(CameraFrame, width)),
+            u32_at(offset_of!(CameraFrame, height)),
+        );
+        let n = width as usize * height as usize;
+        if width as usize > shared_mem_schema::MAX_IMAGE_WIDTH
+            || height as usize > shared_mem_schema::MAX_IMAGE_HEIGHT
+            || data.len() != head_len + 7 * n
+        {
+            return Err(format!(
+                "camera message of {} bytes does not hold a {width}×{height} image ({} expected)",
+                data.len(),
+                head_len + 7 * n
+            ));
+        }
+        let mut img = Self {
+            header,
+            index: u64_at(offset_of!(CameraFrame, index)),
+            width,
+            height,
+            focal_px: f64_at(offset_of!(CameraFrame, focal_px)),
+            principal_px: [0.0; 2],
+            pose_pos_m: [0.0; 3],
+            pose_quat_xyzw: [0.0; 4],
+            rgb: data[head_len..head_len + 3 * n].to_vec(),
+            depth_m: data[head_len + 3 * n..]
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+                .collect(),
+        };
+        f64s(offset_of!(CameraFrame, principal_px), &mut img.principal_px);
+        f64s(offset_of!(CameraFrame, pose_pos_m), &mut img.pose_pos_m);
+        f64s(
+            offset_of!(CameraFrame, pose_quat_xyzw),
+            &mut img.pose_quat_xyzw,
+        );
+        Ok(img)
+    }
+}
+
+/// One top-level record, or where the walk stopped.
+enum Walk<'a> {
+    Record {
+        offset: u64,
+        op: u8,
+        body: &'a [u8],
+    },
+    /// The footer and the closing magic: the file is complete.
+    End,
+    Problem {
+        offset: u64,
+        what: String,
+    },
+}
+
+/// Walks the top-level records after the opening magic.
+struct Walker<'a> {
+    buf: &'a [u8],
+    pos: usize,
+    done: bool,
+}
+
+impl<'a> Walker<'a> {
+    fn new(buf: &'a [u8]) -> Self {
+        Self {
+            buf,
+            pos: mcap::MAGIC.len(),
+            done: false,
+        }
+    }
+}
+
+impl<'a> Iterator for Walker<'a> {
+    type Item = Walk<'a>;
+
+    fn next(&mut self) -> Option<Walk<'a>> {
+        if self.done {
+            return None;
+        }
+        let (buf, at) = (self.buf, self.pos);
+        let problem = |what: String| Walk::Problem {
+            offset: at as u64,
+            what,
+        };
+        let left = buf.len() - at;
+        let item = if left == 0 {
+            problem("the file ends here, with no footer".into())
+        } else if left < 9 {
+            problem(format!("a record header needs 9 bytes, {left} left"))
+        } else {
+            let op = buf[at];
+            let len = u64::from_le_bytes(buf[at + 1..at + 9].try_into().expect("8 bytes"));
+            if len > (left - 9) as u64 {
+                problem(format!(
+                    "record (opcode 0x{op:02x}) declares {len} bytes, only {} left in the file",
+                    left - 9
+                ))
+            } else {
+                let body = &buf[at + 9..at + 9 + len as usize];
+                self.pos = at + 9 + len as usize;
+                if op == OP_FOOTER {
+                    self.done = true;
+                    return Some(if &buf[self.pos..] == mcap::MAGIC {
+                        Walk::End
+                    } else {
+                        Walk::Problem {
+                            offset: self.pos as u64,
+                            what: "the footer is not followed by the closing MCAP magic".into(),
+                        }
+                    });
+                }
+                return Some(Walk::Record {
+                    offset: at as u64,
+                    op,
+                    body,
+                });
+            }
+        };
+        self.done = true;
+        Some(item)
+    }
+}
+
+/// The records of a chunk (decompressed and CRC-checked), or why not.
+///
+/// Decompressed here rather than by the mcap crate's chunk reader, whose
+/// buffers trust the record lengths inside the chunk: a damaged chunk must
+/// be an error, not an allocation of exabytes.
+fn chunk_records(body: &[u8]) -> Result<Vec<Record<'static>>, String> {
+    let (header, data) = match mcap::read::parse_record(OP_CHUNK, body) {
+        Ok(Record::Chunk { header, data }) => (header, data),
+        Ok(_) => return Err("not a chunk".into()),
+        Err(e) => return Err(format!("chunk header: {e}")),
+    };
+    if header.uncompressed_size > MAX_CHUNK_BYTES {
+        return Err(format!(
+            "chunk claims {} bytes uncompressed (more than the {MAX_CHUNK_BYTES} allowed)",
+            header.uncompressed_size
+        ));
+    }
+    let size = header.uncompressed_size as usize;
+    let plain: Vec<u8> = match header.compression.as_str() {
+        "" => data.into_owned(),
+        "zstd" => {
+            let mut out = vec![0u8; size];
+            let n = zstd::bulk::decompress_to_buffer(&data, &mut out)
+                .map_err(|e| format!("zstd: {e}"))?;
+            out.truncate(n);
+            out
+        }
+        other => return Err(format!("unsupported chunk compression {other:?}")),
+    };
+    if plain.len() != size {
+        return Err(format!(
+            "chunk holds {} bytes uncompressed, its header says {size}",
+            plain.len()
+        ));
+    }
+    if header.uncompressed_crc != 0 && crc32fast::hash(&plain) != header.uncompressed_crc {
+        return Err("chunk CRC mismatch".into());
+    }
+    let mut out = Vec::new();
+    let mut at = 0usize;
+    while at < plain.len() {
+        let left = plain.len() - at;
+        if left < 9 {
+            return Err(format!(
+                "record header at chunk byte {at} needs 9 bytes, {left} left"
+            ));
+        }
+        let op = plain[at];
+        let len = u64::from_le_bytes(plain[at + 1..at + 9].try_into().expect("8 bytes"));
+        if len > (left - 9) as u64 {
+            return Err(format!(
+                "record (opcode 0x{op:02x}) at chunk byte {at} declares {len} bytes, {} left",
+                left - 9
+            ));
+        }
+        let body = &plain[at + 9..at + 9 + len as usize];
+        let r = mcap::read::parse_record(op, body)
+            .map_err(|e| format!("record (opcode 0x{op:02x}) at chunk byte {at}: {e}"))?;
+        out.push(r.into_owned());
+        at += 9 + len as usize;
+    }
+    Ok(out)
+}
+
+/// What a structural scan found.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ScanReport {
+    /// Complete chunks (decompressed and parsed).
+    pub chunks: u64,
+    /// Messages in them and outside them.
+    pub messages: u64,
+    /// Bytes of intact records from the start.
+    pub readable_bytes: u64,
+    /// The footer and closing magic are there.
+    pub complete: bool,
+    /// The first problem: byte offset and what.
+    pub problem: Option<(u64, String)>,
+}
+
+/// Schemas, channels and messages found by a linear walk (recovery input).
+#[derive(Default)]
+struct Salvage {
+    profile: String,
+    schemas: BTreeMap<u16, (String, String, Vec<u8>)>,
+    channels: BTreeMap<u16, records::Channel>,
+    messages: Vec<(records::MessageHeader, Vec<u8>)>,
+}
+
+fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
+    let mut rep = ScanReport::default();
+    if !buf.starts_with(mcap::MAGIC) {
+        rep.problem = Some((0, "no MCAP magic".into()));
+        return rep;
+    }
+    rep.readable_bytes = mcap::MAGIC.len() as u64;
+    let mut keep = |r: Record<'_>, rep: &mut ScanReport| match r {
+        Record::Header(h) => {
+            if let Some(s) = salvage.as_deref_mut() {
+                s.profile = h.profile;
+            }
+        }
+        Record::Schema { header, data } => {
+            if let Some(s) = salvage.as_deref_mut() {
+                s.schemas
+                    .insert(header.id, (header.name, header.encoding, data.into_owned()));
+            }
+        }
+        Record::Channel(c) => {
+            if let Some(s) = salvage.as_deref_mut() {
+                s.channels.insert(c.id, c);
+            }
+        }
+        Record::Message { header, data } => {
+            rep.messages += 1;
+            if let Some(s) = salvage.as_deref_mut() {
+                s.messages.push((header, data.into_owned()));
+            }
+        }
+        _ => {}
+    };
+    for item in Walker::new(buf) {
+        match item {
+            Walk::End => {
+                rep.complete = true;
+                rep.readable_bytes = buf.len() as u64;
+            }
+            Walk::Problem { offset, what } => rep.problem = Some((offset, what)),
+            Walk::Record { offset, op, body } => {
+                let end = offset + 9 + body.len() as u64;
+                if op == OP_CHUNK {
+                    match chunk_records(body) {
+                        Ok(records) => {
+                            rep.chunks += 1;
+                            for r in records {
+                                keep(r, &mut rep);
+                            }
+                        }
+                        Err(what) => {
+                            rep.problem = Some((offset, what));
+                            break;
+                        }
+                    }
+                } else {
+                    match mcap::read::parse_record(op, body) {
+                        Ok(r) => keep(r, &mut rep),
+                        Err(e) => {
+                            rep.problem = Some((offset, format!("record 0x{op:02x}: {e}")));
+                            break;
+                        }
+                    }
+                }
+                rep.readable_bytes = end;
+            }
+        }
+    }
+    rep
+}
+
+/// Scans a whole file: every record parsed, every chunk decompressed.
+pub fn scan(path: &Path) -> Result<ScanReport, ReadError> {
+    let buf = std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if !buf.starts_with(mcap::MAGIC) {
+        return Err(ReadError::NotMcap {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(walk_all(&buf, None))
+}
+
+/// What [`recover`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecoverReport {
+    /// Messages written to the new file.
+    pub messages: u64,
+    /// Channels written.
+    pub channels: usize,
+    /// Bytes of the input kept (intact records).
+    pub readable_bytes: u64,
+    /// Where the damage began and what it was, if anywhere.
+    pub damage: Option<(u64, String)>,
+}
+
+/// Writes a valid copy of everything intact in `input` (schemas, channels
+/// and every message before the first damaged record) to `output`. The
+/// input is never modified; `output` must be another file.
+pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, ReadError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ReadError::Io { path, source }
+    };
+    if input.canonicalize().ok() == output.canonicalize().ok() && output.exists() {
+        return Err(ReadError::Io {
+            path: output.to_path_buf(),
+            source: std::io::Error::other("the recovered copy must not overwrite its input"),
+        });
+    }
+    let buf = std::fs::read(input).map_err(io(input))?;
+    if !buf.starts_with(mcap::MAGIC) {
+        return Err(ReadError::NotMcap {
+            path: input.to_path_buf(),
+        });
+    }
+    let mut salvage = Salvage::default();
+    let rep = walk_all(&buf, Some(&mut salvage));
+    let err = |e: mcap::McapError| ReadError::Io {
+        path: output.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    };
+    let file = std::fs::File::create(output).map_err(io(output))?;
+    let profile = if salvage.profile.is_empty() {
+        super::PROFILE.to_string()
+    } else {
+        salvage.profile.clone()
+    };
+    let mut w = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .profile(profile)
+        .create(std::io::BufWriter::new(file))
+        .map_err(err)?;
+    for (id, (name, enc, data)) in &salvage.schemas {
+        w.add_schema_with_id(*id, name, enc, data).map_err(err)?;
+    }
+    let mut channels = 0;
+    for c in salvage.channels.values() {
+        if c.schema_id != 0 && !salvage.schemas.contains_key(&c.schema_id) {
+            continue;
+        }
+        w.add_channel_with_id(
+            c.id,
+            c.schema_id,
+            &c.topic,
+            &c.message_encoding,
+            &c.metadata,
+        )
+        .map_err(err)?;
+        channels += 1;
+    }
+    let mut messages = 0;
+    for (h, data) in &salvage.messages {
+        if !salvage.channels.contains_key(&h.channel_id) {
+            continue;
+        }
+        w.write_to_known_channel(h, data).map_err(err)?;
+        messages += 1;
+    }
+    w.finish().map_err(err)?;
+    Ok(RecoverReport {
+        messages,
+        channels,
+        readable_bytes: rep.readable_bytes,
+        damage: rep.problem,
+    })
+}
+
+/// A complete, indexed log held in memory.
+pub struct LogReader {
+    path: PathBuf,
+    buf: Vec<u8>,
+    summary: mcap::Summary,
+    topics: HashMap<u16, Arc<str>>,
+}
+
+impl LogReader {
+    /// Opens a complete log. A truncated or damaged file is an error naming
+    /// the byte offset where the damage starts.
+    pub fn open(path: &Path) -> Result<Self, ReadError> {
+        let buf = std::fs::read(path).map_err(|source| ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_bytes(path, buf)
+    }
+
+    /// Reads a log already in memory (`path` names it in errors).
+    pub fn from_bytes(path: &Path, buf: Vec<u8>) -> Result<Self, ReadError> {
+        let path = path.to_path_buf();
+        if !buf.starts_with(mcap::MAGIC) {
+            return Err(ReadError::NotMcap { path });
+        }
+        let summary = if buf.len() >= 2 * mcap::MAGIC.len() && buf.ends_with(mcap::MAGIC) {
+            mcap::Summary::read(&buf).ok().flatten()
+        } else {
+            None
+        };
+        let Some(summary) = summary else {
+            let rep = walk_all(&buf, None);
+            let (offset, what) = rep
+                .problem
+                .unwrap_or((buf.len() as u64, "no summary".into()));
+            return Err(if rep.complete {
+                ReadError::Corrupt { path, offset, what }
+            } else {
+                ReadError::Incomplete {
+                    path,
+                    offset,
+                    readable: rep.readable_bytes,
+                    what,
+                }
+            });
+        };
+        for ci in &summary.chunk_indexes {
+            let end = ci.chunk_start_offset.checked_add(ci.chunk_length);
+            if end.is_none_or(|e| e > buf.len() as u64) || ci.chunk_length < 9 {
+                return Err(ReadError::Corrupt {
+                    path,
+                    offset: ci.chunk_start_offset,
+                    what: "a chunk index points outside the file".into(),
+                });
+            }
+        }
+        let topics = summary
+            .channels
+            .iter()
+            .map(|(id, c)| (*id, Arc::from(c.topic.as_str())))
+            .collect();
+        Ok(Self {
+            path,
+            buf,
+            summary,
+            topics,
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Size of the file, bytes.
+    pub fn len_bytes(&self) -> u64 {
+        self.buf.len() as u64
+    }
+
+    /// The channels, with their message counts.
+    pub fn topics(&self) -> Vec<TopicInfo> {
+        let counts = self
+            .summary
+            .stats
+            .as_ref()
+            .map(|s| s.channel_message_counts.clone())
+            .unwrap_or_default();
+        let mut out: Vec<TopicInfo> = self
+            .summary
+            .channels
+            .iter()
+            .map(|(id, c)| TopicInfo {
+                topic: c.topic.clone(),
+                schema: c
+                    .schema
+                    .as_ref()
+                    .map(|s| s.name.clone())
+                    .unwrap_or_default(),
+                encoding: c.message_encoding.clone(),
+                messages: counts.get(id).copied().unwrap_or(0),
+            })
+            .collect();
+        out.sort_by(|a, b| a.topic.cmp(&b.topic));
+        out
+    }
+
+    /// Log-time span of the messages, ns.
+    pub fn time_span(&self) -> Option<(u64, u64)> {
+        let s = self.summary.stats.as_ref()?;
+        (s.message_count > 0).then_some((s.message_start_time, s.message_end_time))
+    }
+
+    /// Messages of `topics` (all when empty) with log time in
+    /// `[start, end)` (everything when `None`), in log-time order. Only the
+    /// chunks whose index says they hold such messages are decompressed.
+    pub fn read(
+        &self,
+        topics: &[&str],
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<LogMessage>, ReadError> {
+        let wanted: HashMap<u16, Arc<str>> = self
+            .topics
+            .iter()
+            .filter(|(_, t)| topics.is_empty() || topics.contains(&&***t))
+            .map(|(id, t)| (*id, t.clone()))
+            .collect();
+        let (lo, hi) = range.unwrap_or((0, u64::MAX));
+        let mut out = Vec::new();
+        for ci in &self.summary.chunk_indexes {
+            if ci.message_end_time < lo || ci.message_start_time >= hi {
+                continue;
+            }
+            if !ci.message_index_offsets.is_empty()
+                && !ci
+                    .message_index_offsets
+                    .keys()
+                    .any(|id| wanted.contains_key(id))
+            {
+                continue;
+            }
+            let start = ci.chunk_start_offset as usize;
+            let end = start + ci.chunk_length as usize;
+            let corrupt = |what: String| ReadError::Corrupt {
+                path: self.path.clone(),
+                offset: ci.chunk_start_offset,
+                what,
+            };
+            if self.buf[start] != OP_CHUNK {
+                return Err(corrupt(
+                    "the chunk index points at a record that is not a chunk".into(),
+                ));
+            }
+            for r in chunk_records(&self.buf[start + 9..end]).map_err(corrupt)? {
+                if let Record::Message { header, data } = r
+                    && let Some(topic) = wanted.get(&header.channel_id)
+                    && header.log_time >= lo
+                    && header.log_time < hi
+                {
+                    out.push(LogMessage {
+                        topic: topic.clone(),
+                        sequence: header.sequence,
+                        log_time: header.log_time,
+                        publish_time: header.publish_time,
+                        data: data.into_owned(),
+                    });
+                }
+            }
+        }
+        out.sort_by_key(|m| m.log_time);
+        Ok(out)
+    }
+
+    fn content_err(&self, topic: &str, what: String) -> ReadError {
+        ReadError::Content {
+            path: self.path.clone(),
+            topic: topic.to_string(),
+            what,
+        }
+    }
+
+    fn check_encoding(&self, topic: &str, encoding: &str) -> Result<(), ReadError> {
+        match self.summary.channels.values().find(|c| c.topic == topic) {
+            Some(c) if c.message_encoding == encoding => Ok(()),
+            Some(c) => Err(self.content_err(
+                topic,
+                format!("encoding {:?}, expected {encoding:?}", c.message_encoding),
+            )),
+            None => Err(self.content_err(topic, "no such channel in this log".into())),
+        }
+    }
+
+    /// The raw struct messages of `T`'s channel at `topic`, checked: size
+    /// and schema version must be this build's.
+    pub fn read_raw<T: Message>(
+        &self,
+        topic: &str,
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<T>, ReadError> {
+        self.check_encoding(topic, RAW_ENCODING)?;
+        let mut out = Vec::new();
+        for m in self.read(&[topic], range)? {
+            let v = T::read_from(&m.data).ok_or_else(|| {
+                self.content_err(
+                    topic,
+                    format!(
+                        "message {} has {} bytes; {} is {} bytes in schema version \
+                         {SCHEMA_VERSION}",
+                        m.sequence,
+                        m.data.len(),
+                        T::NAME,
+                        size_of::<T>()
+                    ),
+                )
+            })?;
+            let version = v.header().schema_version;
+            if version != SCHEMA_VERSION {
+                return Err(self.content_err(
+                    topic,
+                    format!(
+                        "message {} is of schema version {version}; this build reads version \
+                         {SCHEMA_VERSION}",
+                        m.sequence
+                    ),
+                ));
+            }
+            out.push(*v);
+        }
+        Ok(out)
+    }
+
+    /// The camera frames in `range`.
+    pub fn read_camera(&self, range: Option<(u64, u64)>) -> Result<Vec<CameraImage>, ReadError> {
+        self.check_encoding(topics::CAMERA, CAMERA_ENCODING)?;
+        self.read(&[topics::CAMERA], range)?
+            .iter()
+            .map(|m| {
+                CameraImage::decode(&m.data).map_err(|what| {
+                    self.content_err(topics::CAMERA, format!("message {}: {what}", m.sequence))
+                })
+            })
+            .collect()
+    }
+
+    /// The JSON messages of `topic` (events, configuration, views).
+    pub fn read_json(
+        &self,
+        topic: &str,
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<(u64, serde_json::Value)>, ReadError> {
+        self.check_encoding(topic, "json")?;
+        self.read(&[topic], range)?
+            .iter()
+            .map(|m| {
+                serde_json::from_slice(&m.data)
+                    .map(|v| (m.log_time, v))
+                    .map_err(|e| self.content_err(topic, format!("message {}: {e}", m.sequence)))
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn walker_names_the_offset_of_a_truncated_record() {
+        let mut buf = mcap::MAGIC.to_vec();
+        buf.push(0x01); // a header record
+        buf.extend_from_slice(&100u64.to_le_bytes());
+        buf.extend_from_slice(&[0; 10]);
+        let rep = walk_all(&buf, None);
+        let (offset, what) = rep.problem.unwrap();
+        assert_eq!(offset, 8);
+        assert!(what.contains("declares 100 bytes"), "{what}");
+        assert_eq!(rep.readable_bytes, 8);
+    }
+}
