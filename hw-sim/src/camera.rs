@@ -340,6 +340,8 @@ pub struct Camera {
     pub pose: Isometry3<f64>,
     /// Focal length, px.
     pub focal_px: f64,
+    /// Principal point (u, v), px.
+    pub principal_px: [f64; 2],
     prims: Vec<Primitive>,
     dirs: Vec<Vector3<f64>>,
     t: Vec<f64>,
@@ -365,9 +367,25 @@ impl Camera {
         let down = forward.cross(&right);
         let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[right, down, forward]));
         let pose = Isometry3::from_parts(eye.into(), rot.into());
+        let focal_px =
+            0.5 * config.height as f64 / (0.5 * config.vertical_fov_deg.to_radians()).tan();
+        let principal = [0.5 * config.width as f64, 0.5 * config.height as f64];
+        Self::calibrated(config, pose, focal_px, principal, prims, seed)
+    }
+
+    /// A camera of known calibration (as a log records it): `pose` is the
+    /// camera frame (x right, y down, z forward) in the base frame; of
+    /// `config`, only the image size and the depth range are used.
+    pub fn calibrated(
+        config: &CameraConfig,
+        pose: Isometry3<f64>,
+        focal_px: f64,
+        principal_px: [f64; 2],
+        prims: Vec<Primitive>,
+        seed: u64,
+    ) -> Self {
         let (w, h) = (config.width as usize, config.height as usize);
-        let focal_px = 0.5 * h as f64 / (0.5 * config.vertical_fov_deg.to_radians()).tan();
-        let (cx, cy) = (0.5 * w as f64, 0.5 * h as f64);
+        let [cx, cy] = principal_px;
         let mut dirs = Vec::with_capacity(w * h);
         for v in 0..h {
             for u in 0..w {
@@ -383,6 +401,7 @@ impl Camera {
             config: config.clone(),
             pose,
             focal_px,
+            principal_px,
             prims,
             dirs,
             t: vec![0.0; n],
@@ -407,8 +426,8 @@ impl Camera {
         let c = self.pose.inverse_transform_point(&Point3::from(*p));
         (c.z > 1e-9).then(|| {
             (
-                0.5 * self.config.width as f64 + self.focal_px * c.x / c.z,
-                0.5 * self.config.height as f64 + self.focal_px * c.y / c.z,
+                self.principal_px[0] + self.focal_px * c.x / c.z,
+                self.principal_px[1] + self.focal_px * c.y / c.z,
                 c.z,
             )
         })
@@ -440,7 +459,7 @@ impl Camera {
         self.hit.fill(NO_HIT);
         let cam_rot = self.pose.rotation.to_rotation_matrix().into_inner();
         let eye = self.pose.translation.vector;
-        let (cx, cy, f) = (0.5 * w as f64, 0.5 * h as f64, self.focal_px);
+        let ([cx, cy], f) = (self.principal_px, self.focal_px);
         for (pi, prim) in self.prims.iter().enumerate() {
             let world = poses.get(prim.body) * prim.local;
             let (bc, br) = prim.geometry.bounds();
@@ -568,6 +587,92 @@ impl Camera {
     pub fn reset(&mut self) {
         self.has_prev = false;
         self.frames = 0;
+    }
+}
+
+/// The robot's collision geometry as camera primitives (meshes are not
+/// drawn).
+pub fn robot_primitives(model: &robot_model::Model) -> Vec<Primitive> {
+    use robot_model::Shape;
+    let mut prims = Vec::new();
+    for g in model
+        .geometries
+        .iter()
+        .filter(|g| g.role == robot_model::GeometryRole::Collision)
+    {
+        let geometry = match &g.shape {
+            Shape::Box { size } => Geometry::Cuboid {
+                half: Vector3::from(*size) * 0.5,
+            },
+            Shape::Sphere { radius } => Geometry::Sphere { radius: *radius },
+            Shape::Capsule { radius, length } => Geometry::Capsule {
+                half_length: 0.5 * length,
+                radius: *radius,
+            },
+            Shape::Cylinder { radius, length } => Geometry::Cylinder {
+                half_length: 0.5 * length,
+                radius: *radius,
+            },
+            Shape::Mesh { .. } => continue,
+        };
+        // Alternate two greys along the chain so links stand apart.
+        let grey = if g.parent_joint % 2 == 0 { 0.80 } else { 0.62 };
+        prims.push(Primitive {
+            body: BodyRef::Link(g.parent_joint),
+            local: g.placement.to_isometry(),
+            geometry,
+            class: Class::Robot,
+            color: [grey, grey, grey + 0.04],
+        });
+    }
+    prims
+}
+
+/// A convex prism as an analytic shape.
+pub fn prism_geometry(prism: &crate::shapes::ConvexPrism) -> Geometry {
+    Geometry::Convex {
+        planes: prism
+            .planes()
+            .into_iter()
+            .map(|(n, c)| (Vector3::from(n), c))
+            .collect(),
+        points: prism.points().into_iter().map(Vector3::from).collect(),
+    }
+}
+
+/// The peg as a camera primitive.
+pub fn peg_primitive(peg: &crate::world::PegInfo) -> Primitive {
+    Primitive {
+        body: BodyRef::Link(peg.link),
+        local: peg.sensor_in_link,
+        geometry: prism_geometry(&peg.prism),
+        class: Class::Peg,
+        color: [0.85, 0.22, 0.15],
+    }
+}
+
+/// Copies a rendered frame and the camera's calibration into the stack's
+/// message (everything but the header). Frames larger than the message's
+/// maximum are cut to it; hw-sim refuses such camera sizes before.
+pub fn fill_message(
+    camera: &Camera,
+    frame: &CameraFrame,
+    msg: &mut shared_mem_schema::CameraFrame,
+) {
+    let w = (frame.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH);
+    let h = (frame.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT);
+    msg.index = frame.index;
+    msg.width = w as u32;
+    msg.height = h as u32;
+    msg.focal_px = camera.focal_px;
+    msg.principal_px = camera.principal_px;
+    msg.pose_pos_m = camera.pose.translation.vector.into();
+    msg.pose_quat_xyzw = camera.pose.rotation.coords.into();
+    let stride = frame.width as usize;
+    for v in 0..h {
+        let (src, dst) = (v * stride, v * w);
+        msg.rgb[3 * dst..3 * (dst + w)].copy_from_slice(&frame.rgb[3 * src..3 * (src + w)]);
+        msg.depth_m[dst..dst + w].copy_from_slice(&frame.depth_m[src..src + w]);
     }
 }
 

@@ -568,19 +568,9 @@ fn render_loop(
                     warn!("hw-sim: a {w}×{h} image exceeds the message's maximum size");
                     continue;
                 }
-                let pose = cam.pose;
-                let focal = cam.focal_px;
                 let r = transport::send_with(&publisher, |m| {
                     m.header = Header::new(seq, mono_now_ns(), hw_time_ns(shot.t_s), episode);
-                    m.index = frame.index;
-                    m.width = w as u32;
-                    m.height = h as u32;
-                    m.focal_px = focal;
-                    m.principal_px = [0.5 * w as f64, 0.5 * h as f64];
-                    m.pose_pos_m = pose.translation.vector.into();
-                    m.pose_quat_xyzw = pose.rotation.coords.into();
-                    m.rgb[..w * h * 3].copy_from_slice(&frame.rgb);
-                    m.depth_m[..w * h].copy_from_slice(&frame.depth_m);
+                    hw_sim::camera::fill_message(cam, &frame, m);
                 });
                 if let Err(e) = r {
                     warn!("hw-sim: {e}");

@@ -4,7 +4,7 @@
 //! torques, step it, read it.
 
 use crate::camera::{BodyRef, Camera, CameraFrame, CameraShot, Class, Geometry, Primitive};
-use crate::config::{ConfigError, WorldConfig};
+use crate::config::{ConfigError, TaskConfig, WorldConfig};
 use crate::convert::{from_glam, mat_to_glam, pose_from_glam, pose_to_glam, to_glam};
 use crate::rng::SimRng;
 use crate::shapes::{BoxWithHole, ConvexPrism};
@@ -131,6 +131,72 @@ pub struct PegInfo {
     pub sensor_in_link: Isometry3<f64>,
     /// Joint index (robot-model numbering) of the link that carries it.
     pub link: usize,
+}
+
+/// The joint index whose body carries the F/T sensor (and the peg).
+pub fn peg_link(model: &Model) -> usize {
+    for name in ["ft_sensor", "flange"] {
+        if let Ok(f) = model.frame_id(name) {
+            return model.frames[f].parent_joint;
+        }
+    }
+    model.nv()
+}
+
+/// The peg a task configuration describes, on `model`'s sensor link.
+pub fn peg_info(model: &Model, task: &TaskConfig) -> Result<PegInfo, SimError> {
+    let link = peg_link(model);
+    let t = task;
+    let sensor_in_link = ["ft_sensor", "flange"]
+        .iter()
+        .find_map(|n| model.frame_id(n).ok())
+        .map(|f| model.frames[f].placement.to_isometry())
+        .unwrap_or_else(Isometry3::identity);
+    let length = if t.peg_length_m > 0.0 {
+        t.peg_length_m
+    } else if let Ok(tip) = model.frame_id("peg_tip") {
+        let tip = model.frames[tip].placement.to_isometry();
+        (sensor_in_link.inverse() * tip).translation.vector.norm()
+    } else {
+        0.08
+    };
+    if length <= 0.0 {
+        return Err(ConfigError {
+            field: "task.peg_length_m".into(),
+            reason: "the peg_tip frame coincides with the sensor; set a length".into(),
+        }
+        .into());
+    }
+    let prism = ConvexPrism {
+        polygon: t.peg.outline(t.peg_width_m),
+        z0: 0.0,
+        z1: length,
+    };
+    let mass_kg = prism.volume() * t.peg_density_kg_m3;
+    // Inertia of the prism from its hull (rapier's own computation, so
+    // the sensor model and the physics agree on it).
+    let pts: Vec<_> = prism
+        .points()
+        .iter()
+        .map(|p| to_glam(&Vector3::new(p[0], p[1], p[2])))
+        .collect();
+    let mp = ColliderBuilder::convex_hull(&pts)
+        .expect("peg hull")
+        .density(t.peg_density_kg_m3)
+        .build()
+        .mass_properties();
+    let frame = crate::convert::rot_from_glam(mp.principal_inertia_local_frame)
+        .to_rotation_matrix()
+        .into_inner();
+    let principal = Matrix3::from_diagonal(&from_glam(mp.principal_inertia()));
+    Ok(PegInfo {
+        prism,
+        mass_kg,
+        com_sensor: from_glam(mp.local_com),
+        inertia_sensor: frame * principal * frame.transpose(),
+        sensor_in_link,
+        link,
+    })
 }
 
 struct Peg {
@@ -336,9 +402,8 @@ impl World {
         self.link_ids.clear();
         self.axis.clear();
         self.prismatic.clear();
-        let peg_link = self.peg_link();
         let peg_info = if cfg.task.enabled {
-            Some(self.peg_info(peg_link)?)
+            Some(peg_info(&self.model, &cfg.task)?)
         } else {
             None
         };
@@ -628,60 +693,16 @@ impl World {
             class: Class::Ground,
             color: [0.45, 0.45, 0.40],
         }];
-        for g in self
-            .model
-            .geometries
-            .iter()
-            .filter(|g| g.role == robot_model::GeometryRole::Collision)
-        {
-            let geometry = match &g.shape {
-                Shape::Box { size } => Geometry::Cuboid {
-                    half: Vector3::from(*size) * 0.5,
-                },
-                Shape::Sphere { radius } => Geometry::Sphere { radius: *radius },
-                Shape::Capsule { radius, length } => Geometry::Capsule {
-                    half_length: 0.5 * length,
-                    radius: *radius,
-                },
-                Shape::Cylinder { radius, length } => Geometry::Cylinder {
-                    half_length: 0.5 * length,
-                    radius: *radius,
-                },
-                Shape::Mesh { .. } => continue,
-            };
-            // Alternate two greys along the chain so links stand apart.
-            let grey = if g.parent_joint % 2 == 0 { 0.80 } else { 0.62 };
-            prims.push(Primitive {
-                body: BodyRef::Link(g.parent_joint),
-                local: g.placement.to_isometry(),
-                geometry,
-                class: Class::Robot,
-                color: [grey, grey, grey + 0.04],
-            });
-        }
-        let convex = |prism: &ConvexPrism| Geometry::Convex {
-            planes: prism
-                .planes()
-                .into_iter()
-                .map(|(n, c)| (Vector3::from(n), c))
-                .collect(),
-            points: prism.points().into_iter().map(Vector3::from).collect(),
-        };
+        prims.extend(crate::camera::robot_primitives(&self.model));
         if let Some(peg) = &self.peg {
-            prims.push(Primitive {
-                body: BodyRef::Link(peg.info.link),
-                local: peg.info.sensor_in_link,
-                geometry: convex(&peg.info.prism),
-                class: Class::Peg,
-                color: [0.85, 0.22, 0.15],
-            });
+            prims.push(crate::camera::peg_primitive(&peg.info));
         }
         if let Some(b) = &self.box_state {
             for piece in &b.geometry.pieces {
                 prims.push(Primitive {
                     body: BodyRef::Box,
                     local: Isometry3::identity(),
-                    geometry: convex(piece),
+                    geometry: crate::camera::prism_geometry(piece),
                     class: Class::Box,
                     color: [0.20, 0.42, 0.85],
                 });
@@ -718,70 +739,6 @@ impl World {
     /// The camera (intrinsics, pose, projection).
     pub fn camera(&self) -> &Camera {
         self.camera.as_ref().expect("built at reset")
-    }
-
-    /// The joint index whose body carries the F/T sensor (and the peg).
-    fn peg_link(&self) -> usize {
-        for name in ["ft_sensor", "flange"] {
-            if let Ok(f) = self.model.frame_id(name) {
-                return self.model.frames[f].parent_joint;
-            }
-        }
-        self.model.nv()
-    }
-
-    fn peg_info(&self, link: usize) -> Result<PegInfo, SimError> {
-        let t = &self.config.task;
-        let sensor_in_link = ["ft_sensor", "flange"]
-            .iter()
-            .find_map(|n| self.model.frame_id(n).ok())
-            .map(|f| self.model.frames[f].placement.to_isometry())
-            .unwrap_or_else(Isometry3::identity);
-        let length = if t.peg_length_m > 0.0 {
-            t.peg_length_m
-        } else if let Ok(tip) = self.model.frame_id("peg_tip") {
-            let tip = self.model.frames[tip].placement.to_isometry();
-            (sensor_in_link.inverse() * tip).translation.vector.norm()
-        } else {
-            0.08
-        };
-        if length <= 0.0 {
-            return Err(ConfigError {
-                field: "task.peg_length_m".into(),
-                reason: "the peg_tip frame coincides with the sensor; set a length".into(),
-            }
-            .into());
-        }
-        let prism = ConvexPrism {
-            polygon: t.peg.outline(t.peg_width_m),
-            z0: 0.0,
-            z1: length,
-        };
-        let mass_kg = prism.volume() * t.peg_density_kg_m3;
-        // Inertia of the prism from its hull (rapier's own computation, so
-        // the sensor model and the physics agree on it).
-        let pts: Vec<_> = prism
-            .points()
-            .iter()
-            .map(|p| to_glam(&Vector3::new(p[0], p[1], p[2])))
-            .collect();
-        let mp = ColliderBuilder::convex_hull(&pts)
-            .expect("peg hull")
-            .density(t.peg_density_kg_m3)
-            .build()
-            .mass_properties();
-        let frame = crate::convert::rot_from_glam(mp.principal_inertia_local_frame)
-            .to_rotation_matrix()
-            .into_inner();
-        let principal = Matrix3::from_diagonal(&from_glam(mp.principal_inertia()));
-        Ok(PegInfo {
-            prism,
-            mass_kg,
-            com_sensor: from_glam(mp.local_com),
-            inertia_sensor: frame * principal * frame.transpose(),
-            sensor_in_link,
-            link,
-        })
     }
 
     /// Sets the joint positions and velocities (for tests and resets).
@@ -1214,10 +1171,7 @@ impl World {
                     * peg.info.sensor_in_link
                     * Translation3::new(0.0, 0.0, peg.info.prism.z1)
             }
-            None => {
-                let link = self.peg_link();
-                self.link_pose(link)
-            }
+            None => self.link_pose(peg_link(&self.model)),
         }
     }
 

@@ -13,7 +13,7 @@ use hw_sim::{World, WorldConfig};
 use nalgebra::{UnitQuaternion, Vector3};
 use robot_model::Model;
 use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState};
-use shared_mem_schema::{hw_time_ns, hw_time_s};
+use shared_mem_schema::{Header, Pod, SensorFrame, hw_time_ns, hw_time_s};
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
 pub const ACTION_PERIOD: u64 = 50;
@@ -30,6 +30,10 @@ pub struct FastEnv {
     /// Wrench readings of every cycle (the policy's window).
     pub wrench: WrenchHistory,
     last_obs: Option<Observation>,
+    frame: SensorFrame,
+    image: hw_sim::CameraFrame,
+    camera_seq: u64,
+    action_seq: u64,
 }
 
 impl FastEnv {
@@ -51,7 +55,38 @@ impl FastEnv {
             episodes: 0,
             wrench: WrenchHistory::default(),
             last_obs: None,
+            frame: *SensorFrame::boxed_zeroed(),
+            image: hw_sim::CameraFrame::default(),
+            camera_seq: 0,
+            action_seq: 0,
         })
+    }
+
+    /// The observation of the last cycle.
+    pub fn last_observation(&self) -> Option<Observation> {
+        self.last_obs.clone()
+    }
+
+    /// The sensor frame of the last cycle, as the daemon publishes it.
+    pub fn sensor_frame(&self) -> &SensorFrame {
+        &self.frame
+    }
+
+    /// Renders the camera's view of the current state into `msg` (what
+    /// hw-sim publishes), with the ground-truth flow from the previous
+    /// render kept in [`FastEnv::rendered`]. Call it when
+    /// `world().camera_due()`, as hw-sim does.
+    pub fn render_camera(&mut self, msg: &mut shared_mem_schema::CameraFrame) {
+        self.world.render(&mut self.image);
+        self.camera_seq += 1;
+        let t = hw_time_ns(self.world.time_s());
+        hw_sim::camera::fill_message(self.world.camera(), &self.image, msg);
+        msg.header = Header::new(self.camera_seq, t, t, self.episodes);
+    }
+
+    /// The last rendered frame with its ground truth (segmentation, flow).
+    pub fn rendered(&self) -> &hw_sim::CameraFrame {
+        &self.image
     }
 
     /// The simulated world.
@@ -68,7 +103,12 @@ impl FastEnv {
     /// built afresh with `seed`), the controller restarted as the daemon
     /// restarts it when it sees a new episode.
     pub fn reset(&mut self, seed: u64) -> anyhow::Result<()> {
-        let mut cfg = self.world.config().clone();
+        let cfg = self.world.config().clone();
+        self.reset_with(cfg, seed)
+    }
+
+    /// Starts an episode in another world configuration (same robot).
+    pub fn reset_with(&mut self, mut cfg: WorldConfig, seed: u64) -> anyhow::Result<()> {
         cfg.seed = seed;
         self.world = World::with_model(self.model.clone(), cfg)?;
         let t = hw_time_s(hw_time_ns(self.world.time_s()));
@@ -76,6 +116,8 @@ impl FastEnv {
         self.episodes += 1;
         self.wrench.clear();
         self.last_obs = None;
+        self.camera_seq = 0;
+        self.action_seq = 0;
         // Until the first command the brakes hold the arm: the joints then
         // carry the gravity load, which is what the torque sensors read.
         robot_model::gravity(&self.model, &mut self.gravity, self.world.q());
@@ -92,6 +134,9 @@ impl FastEnv {
             delta_pos_m: [a[0], a[1], a[2]],
             delta_roll_rad: a[3],
         });
+        if a.is_some() {
+            self.action_seq += 1;
+        }
         rt_controller::step(
             &self.model,
             &self.ctrl,
@@ -118,6 +163,23 @@ impl FastEnv {
             ee_rot: UnitQuaternion::from_rotation_matrix(&rot),
             ee_twist: twist,
         });
+        let nv = self.model.nv();
+        let f = &mut self.frame;
+        let step = self.world.step_index();
+        f.header = Header::new(step + 1, hw_time_ns(t), hw_time_ns(t), self.episodes);
+        f.step = step;
+        f.action_seq = self.action_seq;
+        f.n_joints = nv as u32;
+        f.mode = shared_mem_schema::ControllerMode::Running as u32;
+        f.q[..nv].copy_from_slice(&r.q);
+        f.v[..nv].copy_from_slice(&r.v);
+        f.tau_cmd[..nv].copy_from_slice(self.data.torques());
+        f.tau_measured[..nv].copy_from_slice(&self.tau_meas);
+        f.ee_pos_m = [ee.pos.x, ee.pos.y, ee.pos.z];
+        let q = self.last_obs.as_ref().expect("just set").ee_rot;
+        f.ee_quat_xyzw = [q.i, q.j, q.k, q.w];
+        f.ee_twist = twist;
+        f.wrench = wrench;
         let tau = self.data.torques().to_vec();
         self.world.step(&tau)?;
         self.tau_meas

@@ -10,7 +10,10 @@
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.
 
+pub mod collect;
+pub mod dataset;
 pub mod env;
+pub mod labels;
 pub mod live;
 pub mod log;
 pub mod policy;

@@ -7,11 +7,12 @@
 //! lockstep simulator: on the frame of step 50m−1 it publishes the action
 //! addressed to step 50m, so runs are deterministic.
 
+use crate::collect::{Mix, MixedPolicy, Progress};
 use crate::env::ACTION_PERIOD;
-use crate::log::LogWriter;
+use crate::log::{LogOptions, LogWriter};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use anyhow::{Context, Result, bail};
-use hw_sim::WorldConfig;
+use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::transport::{self, Pub, Sub};
@@ -41,6 +42,108 @@ pub struct LiveConfig {
     pub lockstep: bool,
     /// Hold still this long after completion before ending, s.
     pub settle_s: f64,
+    /// Data collection: the random/heuristic mix (`None`: the heuristic
+    /// alone, inserting).
+    pub mix: Option<Mix>,
+    /// Pegs taken in turn per episode (empty: the world's).
+    pub pegs: Vec<PegShape>,
+    /// End each episode after this many actions.
+    pub max_actions: Option<u32>,
+    /// Stop once this many actions (20 Hz states) are logged, with a
+    /// progress bar.
+    pub target_states: Option<u64>,
+    /// Log options.
+    pub log: LogOptions,
+}
+
+impl LiveConfig {
+    /// The settings of `learner run` for `episodes` heuristic episodes.
+    pub fn new(namespace: &str, world: WorldConfig, log_dir: PathBuf) -> Self {
+        Self {
+            namespace: namespace.to_string(),
+            episodes: 1,
+            seed: 1,
+            world,
+            episode_timeout_s: 20.0,
+            log_dir,
+            lockstep: false,
+            settle_s: 0.3,
+            mix: None,
+            pegs: Vec::new(),
+            max_actions: None,
+            target_states: None,
+            log: LogOptions::default(),
+        }
+    }
+}
+
+/// Live collection: `learner collect --live`.
+#[derive(Debug, Clone)]
+pub struct LiveCollect {
+    /// Where the shards go (and the processes' logs).
+    pub out_dir: PathBuf,
+    /// States to collect.
+    pub states: u64,
+    /// Actions per episode.
+    pub episode_actions: u32,
+    /// Pegs taken in turn.
+    pub pegs: Vec<PegShape>,
+    /// Seed of the first episode.
+    pub seed: u64,
+    /// World configuration.
+    pub world: WorldConfig,
+    /// The policy mix.
+    pub mix: Mix,
+    /// Log options.
+    pub log: LogOptions,
+    /// rt-controller configuration file.
+    pub controller_config: Option<PathBuf>,
+}
+
+/// Collects through the real-time stack: starts hw-sim and rt-controller
+/// and runs `learner run` with the collection mix.
+pub fn collect_live(c: &LiveCollect) -> Result<()> {
+    std::fs::create_dir_all(&c.out_dir)
+        .with_context(|| format!("creating {}", c.out_dir.display()))?;
+    let world_path = c.out_dir.join("world.toml");
+    std::fs::write(
+        &world_path,
+        toml::to_string(&c.world).context("printing the world configuration")?,
+    )
+    .with_context(|| format!("writing {}", world_path.display()))?;
+    let pegs: Vec<&str> = c.pegs.iter().map(|p| p.name()).collect();
+    let mut run_args = vec![
+        "--episodes".to_string(),
+        u32::MAX.to_string(),
+        "--seed".into(),
+        c.seed.to_string(),
+        "--world".into(),
+        world_path.display().to_string(),
+        "--pegs".into(),
+        pegs.join(","),
+        "--mix-heuristic-fraction".into(),
+        c.mix.heuristic_fraction.to_string(),
+        "--episode-actions".into(),
+        c.episode_actions.to_string(),
+        "--states".into(),
+        c.states.to_string(),
+        "--view-rate-hz".into(),
+        c.log.view_rate_hz.to_string(),
+    ];
+    if !c.log.foxglove {
+        run_args.push("--no-foxglove".into());
+    }
+    let status = crate::stack::run(&crate::stack::StackConfig {
+        namespace: shared_mem_schema::DEFAULT_NAMESPACE.into(),
+        lockstep: false,
+        run_args,
+        log_dir: c.out_dir.clone(),
+        controller_config: c.controller_config.clone(),
+    })?;
+    if !status.success() {
+        bail!("the policy node failed ({status})");
+    }
+    Ok(())
 }
 
 /// How an episode ended.
@@ -269,30 +372,45 @@ pub fn run(
 ) -> Result<Vec<EpisodeOutcome>> {
     transport::quiet_logs();
     let mut node = PolicyNode::open(&cfg.namespace)?;
-    let world_toml = toml::to_string(&cfg.world).context("printing the world configuration")?;
     let mut outcomes = Vec::new();
+    let progress = cfg.target_states.map(Progress::new);
+    let mut total_actions = 0u64;
     for i in 0..cfg.episodes {
-        if termination_requested() {
+        if termination_requested() || cfg.target_states.is_some_and(|t| total_actions >= t) {
             break;
         }
         let seed = cfg.seed + i as u64;
+        let mut world = cfg.world.clone();
+        if !cfg.pegs.is_empty() {
+            world.task.enabled = true;
+            world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
+        }
+        let world_toml = toml::to_string(&world).context("printing the world configuration")?;
         let first = node.reset(seed, &world_toml, cfg.lockstep)?;
         let episode = first.header.episode;
         let path = cfg
             .log_dir
             .join(format!("episode-{episode:04}-seed-{seed}.mcap"));
-        let mut log = LogWriter::create(&path)?;
+        let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
+        let task = task_geometry(&first, &world);
+        let mut mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
+        let policy_name = mixed.as_ref().map_or("heuristic", |m| m.kind().name());
         log.config(
             first.header.t_hw_ns,
-            &serde_json::json!({"world": &cfg.world, "lockstep": cfg.lockstep,
-                "policy": "heuristic", "namespace": &cfg.namespace}),
+            &serde_json::json!({"world": &world, "robot": &world.robot, "lockstep": cfg.lockstep,
+                "policy": policy_name, "mode": "live", "namespace": &cfg.namespace,
+                "episode": episode, "seed": seed}),
         )?;
+        let hole = task.hole_pose;
         log.event(
             first.header.t_hw_ns,
             &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,
-                "lockstep": cfg.lockstep, "world": &cfg.world}),
+                "peg": world.task.peg.name(), "policy": policy_name,
+                "lockstep": cfg.lockstep, "world": &world,
+                "hole_pos_m": hole.translation.vector.as_slice(),
+                "hole_quat_xyzw": hole.rotation.coords.as_slice(),
+                "hole_depth_m": task.depth_m}),
         )?;
-        let task = task_geometry(&first, &cfg.world);
         let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
         let mut seen = Seen {
             frame: None,
@@ -330,9 +448,15 @@ pub fn run(
             };
             t_end = frame.header.t_hw_ns;
             let t_ep = hw_time_s(frame.header.t_hw_ns.saturating_sub(first.header.t_hw_ns));
-            let settled = completed_at
-                .is_some_and(|t| hw_time_s(frame.header.t_hw_ns.saturating_sub(t)) >= cfg.settle_s);
-            if settled || t_ep >= cfg.episode_timeout_s || termination_requested() {
+            // Collection runs its episodes to their length; insertion
+            // episodes end once the peg has settled at the bottom.
+            let settled = cfg.max_actions.is_none()
+                && completed_at.is_some_and(|t| {
+                    hw_time_s(frame.header.t_hw_ns.saturating_sub(t)) >= cfg.settle_s
+                });
+            let enough = cfg.max_actions.is_some_and(|n| actions >= n as u64)
+                || cfg.target_states.is_some_and(|t| total_actions >= t);
+            if settled || enough || t_ep >= cfg.episode_timeout_s || termination_requested() {
                 break;
             }
             if mono_now_ns() - seen.last_frame_wall_ns > 2_000_000_000 {
@@ -352,11 +476,18 @@ pub fn run(
                 continue;
             }
             let obs = Observation::from_frame(&frame);
-            let a = policy.act(&obs, &seen.wrench, &task);
+            let a = match mixed.as_mut() {
+                Some(m) => m.act(&obs, &seen.wrench, &task),
+                None => policy.act(&obs, &seen.wrench, &task),
+            };
             let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
             let m = node.send_action(episode, frame.header.t_hw_ns, apply_at, a)?;
             log.action(&m)?;
             actions += 1;
+            total_actions += 1;
+            if let Some(p) = &progress {
+                p.update(total_actions, outcomes.len() as u64);
+            }
             acted_for_step = frame.step;
             next_tick += ACTION_PERIOD * 1_000_000;
             if next_tick < mono_now_ns() {
@@ -382,6 +513,9 @@ pub fn run(
         };
         on_outcome(&outcome);
         outcomes.push(outcome);
+    }
+    if let Some(p) = &progress {
+        p.finish(total_actions, outcomes.len() as u64);
     }
     Ok(outcomes)
 }

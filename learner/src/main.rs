@@ -49,7 +49,12 @@ struct EpisodeArgs {
 enum Cmd {
     /// The live policy node: heuristic insertion episodes against a running
     /// hw-sim and rt-controller, logged to MCAP.
-    Run(EpisodeArgs),
+    Run {
+        #[command(flatten)]
+        episodes: EpisodeArgs,
+        #[command(flatten)]
+        collect: RunCollectArgs,
+    },
     /// The whole stack: starts hw-sim, rt-controller and `learner run` as
     /// separate processes, runs the episodes, stops everything.
     Stack {
@@ -59,9 +64,291 @@ enum Cmd {
         #[arg(long)]
         controller_config: Option<PathBuf>,
     },
+    /// Collects episodes for the self-supervised dataset (random and
+    /// heuristic policies), one MCAP shard per episode.
+    Collect(CollectArgs),
     /// MCAP log tools: summary, integrity check, crash recovery.
     #[command(subcommand)]
     Log(LogCmd),
+    /// The self-supervised dataset: build from logs, inspect.
+    #[command(subcommand)]
+    Dataset(DatasetCmd),
+}
+
+/// `learner run` as a collector (what `learner collect --live` passes).
+#[derive(Debug, clap::Args)]
+struct RunCollectArgs {
+    /// Pegs taken in turn per episode, comma-separated (or all).
+    #[arg(long)]
+    pegs: Option<String>,
+    /// Collect with the random/heuristic mix, this share heuristic.
+    #[arg(long)]
+    mix_heuristic_fraction: Option<f64>,
+    /// End each episode after this many actions.
+    #[arg(long)]
+    episode_actions: Option<u32>,
+    /// Stop after this many states (actions), with a progress bar.
+    #[arg(long)]
+    states: Option<u64>,
+    /// Leave out the Foxglove view channels.
+    #[arg(long)]
+    no_foxglove: bool,
+    /// Rate of the 1 kHz view channels, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    view_rate_hz: f64,
+}
+
+#[derive(Debug, clap::Args)]
+struct CollectArgs {
+    /// 20 Hz states to collect.
+    #[arg(long, default_value_t = 1000)]
+    states: u64,
+    /// Output directory.
+    #[arg(long, default_value = "data/collect")]
+    out: PathBuf,
+    /// Actions per episode (20 per second).
+    #[arg(long, default_value_t = 100)]
+    episode_actions: u32,
+    /// Pegs, comma-separated, taken in turn: square, triangle, semicircle,
+    /// hexagon, or all.
+    #[arg(long, default_value = "all")]
+    pegs: String,
+    /// Seed of the first episode.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Share of episodes run by the heuristic; the rest are random.
+    #[arg(long, default_value_t = 0.5)]
+    heuristic_fraction: f64,
+    /// Worker threads (fast mode); default: all cores.
+    #[arg(long)]
+    workers: Option<usize>,
+    /// World configuration (TOML); its peg is replaced per episode.
+    #[arg(long)]
+    world: Option<PathBuf>,
+    /// rt-controller configuration (TOML; its `[controller]` is used).
+    #[arg(long)]
+    controller_config: Option<PathBuf>,
+    /// Leave out the Foxglove view channels (smaller shards).
+    #[arg(long)]
+    no_foxglove: bool,
+    /// Rate of the 1 kHz view channels (pose, wrench), Hz.
+    #[arg(long, default_value_t = 100.0)]
+    view_rate_hz: f64,
+    /// Through the real-time stack (hw-sim, rt-controller, learner run as
+    /// processes) instead of in-process lockstep.
+    #[arg(long)]
+    live: bool,
+}
+
+fn parse_pegs(list: &str) -> Result<Vec<PegShape>> {
+    if list == "all" {
+        return Ok(PegShape::ALL.to_vec());
+    }
+    list.split(',').map(|p| parse_peg(p.trim())).collect()
+}
+
+fn load_world(path: Option<&PathBuf>) -> Result<WorldConfig> {
+    Ok(match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading the world configuration {}", p.display()))?;
+            WorldConfig::from_toml(&text).with_context(|| format!("in {}", p.display()))?
+        }
+        None => WorldConfig::default(),
+    })
+}
+
+fn run_collect(a: CollectArgs) -> Result<()> {
+    use learner::collect::{self, CollectConfig, Mix};
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&a.heuristic_fraction),
+        "--heuristic-fraction {} must be within 0..1",
+        a.heuristic_fraction
+    );
+    let pegs = parse_pegs(&a.pegs)?;
+    let world = load_world(a.world.as_ref())?;
+    let log = learner::log::LogOptions {
+        foxglove: !a.no_foxglove,
+        view_rate_hz: a.view_rate_hz,
+        ..Default::default()
+    };
+    let mix = Mix {
+        heuristic_fraction: a.heuristic_fraction,
+        ..Mix::default()
+    };
+    if a.live {
+        return live::collect_live(&live::LiveCollect {
+            out_dir: a.out.clone(),
+            states: a.states,
+            episode_actions: a.episode_actions,
+            pegs,
+            seed: a.seed,
+            world,
+            mix,
+            log,
+            controller_config: a.controller_config.clone(),
+        });
+    }
+    let controller = match &a.controller_config {
+        Some(p) => rt_controller::daemon::config::DaemonConfig::from_file(p)?.controller,
+        None => rt_controller::ControllerConfig::default(),
+    };
+    let workers = a
+        .workers
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let cfg = CollectConfig {
+        out_dir: a.out.clone(),
+        states: a.states,
+        episode_actions: a.episode_actions,
+        pegs,
+        seed: a.seed,
+        workers,
+        world,
+        controller,
+        mix,
+        log,
+    };
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    // Ctrl-C: the workers finish their episodes' files and stop.
+    let summary = std::thread::scope(|s| {
+        s.spawn(|| {
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                if shared_mem_schema::process::termination_requested() {
+                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        });
+        let r = collect::collect_fast(&cfg, &stop);
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        r
+    })?;
+    let bytes: u64 = summary
+        .shards
+        .iter()
+        .filter_map(|s| std::fs::metadata(&s.file).ok())
+        .map(|m| m.len())
+        .sum();
+    println!(
+        "collected {} states in {} episodes with {workers} workers in {:.1} s ({:.0} states/s, \
+         {:.2} GB); shards and manifest.jsonl in {}",
+        summary.states,
+        summary.shards.len(),
+        summary.wall_s,
+        summary.states as f64 / summary.wall_s.max(1e-9),
+        bytes as f64 * 1e-9,
+        a.out.display()
+    );
+    Ok(())
+}
+
+#[derive(Debug, Subcommand)]
+enum DatasetCmd {
+    /// Builds training shards with labels from MCAP logs (files or
+    /// directories).
+    Build {
+        /// Logs or directories of logs.
+        #[arg(required = true)]
+        logs: Vec<PathBuf>,
+        /// Output directory.
+        #[arg(long, default_value = "data/dataset")]
+        out: PathBuf,
+        /// Contact: force change against free space above this, N.
+        #[arg(long, default_value_t = 3.0)]
+        contact_threshold_n: f64,
+        /// Worker threads; default: all cores.
+        #[arg(long)]
+        workers: Option<usize>,
+    },
+    /// Counts, label balance and a PNG contact sheet.
+    Inspect {
+        /// Dataset directory.
+        dir: PathBuf,
+        /// Contact sheet (RGB, depth, flow, mask per row).
+        #[arg(long, default_value = "contact-sheet.png")]
+        sheet: PathBuf,
+        /// Rows in the sheet.
+        #[arg(long, default_value_t = 8)]
+        rows: usize,
+    },
+}
+
+fn run_dataset(cmd: DatasetCmd) -> Result<()> {
+    use learner::dataset::{self, BuildConfig, Dataset};
+    match cmd {
+        DatasetCmd::Build {
+            logs,
+            out,
+            contact_threshold_n,
+            workers,
+        } => {
+            let files = dataset::find_logs(&logs)?;
+            anyhow::ensure!(!files.is_empty(), "no .mcap logs in {logs:?}");
+            let cfg = BuildConfig {
+                contact_threshold_n,
+                ..Default::default()
+            };
+            let workers = workers
+                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            let progress = learner::collect::Progress::new(files.len() as u64);
+            let mut done = 0;
+            let t = std::time::Instant::now();
+            let meta = dataset::build(&files, &out, &cfg, workers, |path, r| {
+                done += 1;
+                if let Err(e) = r {
+                    eprintln!("\nskipped {}: {e}", path.display());
+                }
+                progress.update(done, done);
+            })?;
+            progress.finish(done, done);
+            println!(
+                "built {} samples from {} episodes ({} logs skipped) in {:.1} s into {}",
+                meta.samples,
+                meta.episodes.len(),
+                meta.skipped.len(),
+                t.elapsed().as_secs_f64(),
+                out.display()
+            );
+            Ok(())
+        }
+        DatasetCmd::Inspect { dir, sheet, rows } => {
+            let ds = Dataset::open(&dir)?;
+            let m = &ds.meta;
+            println!(
+                "{}: {} samples, {} episodes, {} shards, images {}×{}",
+                dir.display(),
+                m.samples,
+                m.episodes.len(),
+                m.shards.len(),
+                m.width,
+                m.height
+            );
+            let mut by: std::collections::BTreeMap<(String, String), u64> = Default::default();
+            for e in &m.episodes {
+                *by.entry((e.peg.clone(), e.policy.clone())).or_default() += e.samples;
+            }
+            for ((peg, policy), n) in by {
+                println!("  {peg:<11} {policy:<10} {n:>8} samples");
+            }
+            println!(
+                "contact now {:.1} %, contact at the next step {:.1} %, pairing (a negative \
+                 exists) {:.1} %, flow mask {:.2} % of pixels",
+                100.0 * ds.contact_ratio(),
+                100.0 * ds.stats.contact_next_ratio,
+                100.0 * ds.pairing_ratio(),
+                100.0 * ds.stats.mask_ratio
+            );
+            if !m.skipped.is_empty() {
+                println!("{} logs skipped:", m.skipped.len());
+                for (f, why) in &m.skipped {
+                    println!("  {f}: {why}");
+                }
+            }
+            dataset::contact_sheet(&ds, rows, &sheet)?;
+            println!("contact sheet: {}", sheet.display());
+            Ok(())
+        }
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -191,17 +478,29 @@ fn run_log(cmd: LogCmd) -> Result<()> {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Cmd::Log(cmd) => run_log(cmd),
-        Cmd::Run(a) => {
-            let cfg = LiveConfig {
-                namespace: a.namespace.clone(),
-                episodes: a.episodes,
-                seed: a.seed,
-                world: world_config(&a)?,
-                episode_timeout_s: a.episode_timeout_s,
-                log_dir: a.log_dir.clone(),
-                lockstep: a.lockstep,
-                settle_s: 0.3,
+        Cmd::Collect(a) => run_collect(a),
+        Cmd::Dataset(c) => run_dataset(c),
+        Cmd::Run {
+            episodes: a,
+            collect: c,
+        } => {
+            let mut cfg = LiveConfig::new(&a.namespace, world_config(&a)?, a.log_dir.clone());
+            cfg.episodes = a.episodes;
+            cfg.seed = a.seed;
+            cfg.episode_timeout_s = a.episode_timeout_s;
+            cfg.lockstep = a.lockstep;
+            cfg.pegs = match &c.pegs {
+                Some(p) => parse_pegs(p)?,
+                None => Vec::new(),
             };
+            cfg.mix = c.mix_heuristic_fraction.map(|f| learner::collect::Mix {
+                heuristic_fraction: f,
+                ..Default::default()
+            });
+            cfg.max_actions = c.episode_actions;
+            cfg.target_states = c.states;
+            cfg.log.foxglove = !c.no_foxglove;
+            cfg.log.view_rate_hz = c.view_rate_hz;
             let outcomes = live::run(&cfg, |o| {
                 println!(
                     "episode {} (seed {}): {}{} after {:.2} s, {} actions; log {}",

@@ -303,6 +303,73 @@ impl HeuristicPolicy {
     }
 }
 
+/// Tuning of the random exploration policy.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RandomConfig {
+    /// Largest position step per axis per action, m.
+    pub max_step_m: f64,
+    /// Largest roll step per action, rad.
+    pub max_roll_rad: f64,
+    /// Half extent (x, y) of the region around the hole it wanders in, m.
+    pub region_half_m: f64,
+    /// Height range of the tip above the hole's opening (min, max), m;
+    /// the minimum is below the opening so that it touches the box.
+    pub region_z_m: (f64, f64),
+}
+
+impl Default for RandomConfig {
+    fn default() -> Self {
+        Self {
+            max_step_m: 0.006,
+            max_roll_rad: 0.05,
+            region_half_m: 0.04,
+            region_z_m: (-0.01, 0.06),
+        }
+    }
+}
+
+/// The random half of the paper's data-collection mix: uniform random
+/// steps, turned inwards when the tip is outside a region around the box,
+/// so that the walk keeps coming back to (and touching) the box.
+#[derive(Debug, Clone)]
+pub struct RandomPolicy {
+    /// Tuning.
+    pub cfg: RandomConfig,
+    rng: hw_sim::rng::SimRng,
+}
+
+impl RandomPolicy {
+    /// A policy drawing from `seed`.
+    pub fn new(cfg: RandomConfig, seed: u64) -> Self {
+        Self {
+            cfg,
+            rng: hw_sim::rng::SimRng::new(seed, 17),
+        }
+    }
+
+    /// The next action.
+    pub fn act(&mut self, obs: &Observation, task: &TaskGeometry) -> Action4 {
+        let c = &self.cfg;
+        let (s, _) = relative_to_hole(&obs.ee_pos, &obs.ee_rot, task);
+        let lo = [-c.region_half_m, -c.region_half_m, c.region_z_m.0];
+        let hi = [c.region_half_m, c.region_half_m, c.region_z_m.1];
+        let mut d = Vector3::zeros();
+        for k in 0..3 {
+            let x = self.rng.uniform(-c.max_step_m, c.max_step_m);
+            d[k] = if s[k] < lo[k] {
+                x.abs()
+            } else if s[k] > hi[k] {
+                -x.abs()
+            } else {
+                x
+            };
+        }
+        let d = task.hole_pose.rotation * d;
+        let roll = self.rng.uniform(-c.max_roll_rad, c.max_roll_rad);
+        [d.x, d.y, d.z, roll]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -318,6 +385,34 @@ mod tests {
         assert_eq!(xs.first(), Some(&8.0));
         assert_eq!(xs.last(), Some(&39.0));
         assert_eq!(h.mean_force(2).x, 38.5);
+    }
+
+    #[test]
+    fn random_walk_turns_back_into_its_region() {
+        let task = TaskGeometry {
+            hole_pose: Isometry3::translation(0.5, 0.0, 0.1),
+            symmetry: 4,
+            depth_m: 0.04,
+        };
+        let mut p = RandomPolicy::new(RandomConfig::default(), 3);
+        let mut obs = Observation {
+            t_hw_ns: 0,
+            step: 0,
+            episode: 0,
+            ee_pos: Vector3::new(0.7, -0.2, 0.4),
+            ee_rot: UnitQuaternion::identity(),
+            ee_twist: [0.0; 6],
+        };
+        // Far outside on every axis: every step points back.
+        for _ in 0..50 {
+            let a = p.act(&obs, &task);
+            assert!(a[0] <= 0.0 && a[1] >= 0.0 && a[2] <= 0.0, "{a:?}");
+            assert!(a[3].abs() <= 0.05);
+        }
+        // Inside: both signs occur.
+        obs.ee_pos = Vector3::new(0.5, 0.0, 0.12);
+        let xs: Vec<f64> = (0..50).map(|_| p.act(&obs, &task)[0]).collect();
+        assert!(xs.iter().any(|&x| x > 0.0) && xs.iter().any(|&x| x < 0.0));
     }
 
     #[test]

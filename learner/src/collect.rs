@@ -1,0 +1,463 @@
+//! Data collection for the self-supervised dataset: episodes with the
+//! paper's mix of a random policy and a heuristic one that makes contact
+//! with the box (Sec. "Experiments": "We roll out a random policy as well as
+//! a heuristic policy while collecting the data"), over the four pegs and
+//! randomised box poses, one MCAP shard per episode.
+//!
+//! Fast mode runs [`FastEnv`] (simulator and control core in one process, in
+//! lockstep) on every core, one environment per worker thread; the live mode
+//! is `learner run` with the same mix through the real-time stack. Both
+//! write the same log format, so the dataset builder reads either.
+
+use crate::env::{ACTION_PERIOD, FastEnv};
+use crate::log::{LogOptions, LogWriter};
+use crate::policy::{
+    Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
+};
+use anyhow::{Context, Result};
+use hw_sim::{PegShape, WorldConfig};
+use rt_controller::ControllerConfig;
+use shared_mem_schema::{EpisodeReport, Pod, PolicyAction, hw_time_ns};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// The policy mix.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mix {
+    /// Share of episodes run by the heuristic (the rest: random).
+    pub heuristic_fraction: f64,
+    /// Gaussian noise added to the heuristic's position steps, m (σ).
+    pub heuristic_noise_m: f64,
+    /// The random policy's tuning.
+    pub random: RandomConfig,
+}
+
+impl Default for Mix {
+    fn default() -> Self {
+        Self {
+            heuristic_fraction: 0.5,
+            heuristic_noise_m: 0.001,
+            random: RandomConfig::default(),
+        }
+    }
+}
+
+/// Which policy an episode runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpisodePolicy {
+    /// The scripted insertion.
+    Heuristic,
+    /// The bounded random walk.
+    Random,
+}
+
+impl EpisodePolicy {
+    /// Name used in logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Heuristic => "heuristic",
+            Self::Random => "random",
+        }
+    }
+}
+
+/// The mixed policy of one episode.
+pub struct MixedPolicy {
+    kind: EpisodePolicy,
+    heuristic: HeuristicPolicy,
+    random: RandomPolicy,
+    noise_m: f64,
+    rng: hw_sim::rng::SimRng,
+}
+
+impl MixedPolicy {
+    /// Draws the episode's policy from `seed`.
+    pub fn new(mix: &Mix, seed: u64) -> Self {
+        let mut rng = hw_sim::rng::SimRng::new(seed, 23);
+        let kind = if rng.unit() < mix.heuristic_fraction {
+            EpisodePolicy::Heuristic
+        } else {
+            EpisodePolicy::Random
+        };
+        Self {
+            kind,
+            heuristic: HeuristicPolicy::new(HeuristicConfig::default()),
+            random: RandomPolicy::new(mix.random.clone(), seed),
+            noise_m: mix.heuristic_noise_m,
+            rng,
+        }
+    }
+
+    /// The policy drawn.
+    pub fn kind(&self) -> EpisodePolicy {
+        self.kind
+    }
+
+    /// The next action.
+    pub fn act(
+        &mut self,
+        obs: &crate::policy::Observation,
+        wrench: &crate::policy::WrenchHistory,
+        task: &TaskGeometry,
+    ) -> Action4 {
+        match self.kind {
+            EpisodePolicy::Heuristic => {
+                let mut a = self.heuristic.act(obs, wrench, task);
+                for x in &mut a[..3] {
+                    *x += self.noise_m * self.rng.normal();
+                }
+                a
+            }
+            EpisodePolicy::Random => self.random.act(obs, task),
+        }
+    }
+}
+
+/// What `learner collect` does in fast mode.
+#[derive(Debug, Clone)]
+pub struct CollectConfig {
+    /// Where the shards go.
+    pub out_dir: PathBuf,
+    /// 20 Hz states to collect (episodes run until this many are written).
+    pub states: u64,
+    /// Actions per episode.
+    pub episode_actions: u32,
+    /// Pegs, taken in turn.
+    pub pegs: Vec<PegShape>,
+    /// Seed of the first episode (episode i uses `seed + i`).
+    pub seed: u64,
+    /// Worker threads (environments).
+    pub workers: usize,
+    /// The world (its peg is replaced per episode).
+    pub world: WorldConfig,
+    /// The control law.
+    pub controller: ControllerConfig,
+    /// The policy mix.
+    pub mix: Mix,
+    /// Log options.
+    pub log: LogOptions,
+}
+
+/// What one episode wrote.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct EpisodeShard {
+    /// Episode number.
+    pub episode: u64,
+    /// Its seed.
+    pub seed: u64,
+    /// Peg.
+    pub peg: String,
+    /// Policy.
+    pub policy: String,
+    /// 20 Hz states (camera frames) written.
+    pub states: u64,
+    /// Best stage reached.
+    pub stage: String,
+    /// The file.
+    pub file: PathBuf,
+}
+
+/// Result of a collection run.
+#[derive(Debug, Clone)]
+pub struct CollectSummary {
+    /// Episodes written.
+    pub shards: Vec<EpisodeShard>,
+    /// States written.
+    pub states: u64,
+    /// Wall time, s.
+    pub wall_s: f64,
+}
+
+/// A progress line on stderr: a bar on a terminal, a line every few
+/// seconds otherwise.
+pub struct Progress {
+    total: u64,
+    start: Instant,
+    tty: bool,
+    last: Mutex<Instant>,
+}
+
+impl Progress {
+    /// Progress towards `total` states.
+    pub fn new(total: u64) -> Self {
+        // SAFETY: isatty only reads the descriptor's state.
+        let tty = unsafe { libc::isatty(2) } == 1;
+        Self {
+            total,
+            start: Instant::now(),
+            tty,
+            last: Mutex::new(Instant::now() - Duration::from_secs(60)),
+        }
+    }
+
+    /// Reports `done` states (throttled).
+    pub fn update(&self, done: u64, episodes: u64) {
+        let every = if self.tty {
+            Duration::from_millis(250)
+        } else {
+            Duration::from_secs(5)
+        };
+        let mut last = self.last.lock().expect("not poisoned");
+        if last.elapsed() < every && done != self.total {
+            return;
+        }
+        *last = Instant::now();
+        let line = self.line(done, episodes);
+        let mut err = std::io::stderr().lock();
+        let _ = if self.tty {
+            write!(err, "\r{line}\x1b[K")
+        } else {
+            writeln!(err, "{line}")
+        };
+        let _ = err.flush();
+    }
+
+    /// Ends the bar's line.
+    pub fn finish(&self, done: u64, episodes: u64) {
+        let line = self.line(done, episodes);
+        let mut err = std::io::stderr().lock();
+        let _ = if self.tty {
+            writeln!(err, "\r{line}\x1b[K")
+        } else {
+            writeln!(err, "{line}")
+        };
+    }
+
+    fn line(&self, done: u64, episodes: u64) -> String {
+        let el = self.start.elapsed().as_secs_f64();
+        let rate = done as f64 / el.max(1e-9);
+        let frac = (done as f64 / self.total.max(1) as f64).min(1.0);
+        let width = 30;
+        let full = (frac * width as f64).round() as usize;
+        let eta = if rate > 0.0 && done < self.total {
+            fmt_duration((self.total - done) as f64 / rate)
+        } else {
+            "-".into()
+        };
+        format!(
+            "[{}{}] {done}/{} states, {episodes} episodes, {rate:.0} states/s, elapsed {}, left {eta}",
+            "#".repeat(full),
+            ".".repeat(width - full),
+            self.total,
+            fmt_duration(el)
+        )
+    }
+}
+
+/// `1h02m`, `3m07s`, `12s`.
+pub fn fmt_duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    if s >= 3600 {
+        format!("{}h{:02}m", s / 3600, s % 3600 / 60)
+    } else if s >= 60 {
+        format!("{}m{:02}s", s / 60, s % 60)
+    } else {
+        format!("{s}s")
+    }
+}
+
+/// The task geometry the policies need, from the simulated world.
+pub fn task_of(world: &hw_sim::World) -> Result<TaskGeometry> {
+    Ok(TaskGeometry {
+        hole_pose: world.hole_pose().context("the world has no task")?,
+        symmetry: world.config().task.peg.symmetry_order(),
+        depth_m: world.box_geometry().context("the world has no box")?.depth,
+    })
+}
+
+/// Runs one episode in `env` and writes it to `path`; `on_state` is called
+/// after every 20 Hz state written. Returns the shard's description.
+#[allow(clippy::too_many_arguments)]
+pub fn run_episode(
+    env: &mut FastEnv,
+    world: WorldConfig,
+    controller: &ControllerConfig,
+    mix: &Mix,
+    episode: u64,
+    seed: u64,
+    actions: u32,
+    path: &Path,
+    log_opts: &LogOptions,
+    mut on_state: impl FnMut() -> bool,
+) -> Result<EpisodeShard> {
+    let peg = world.task.peg;
+    env.reset_with(world.clone(), seed)?;
+    let task = task_of(env.world())?;
+    let mut policy = MixedPolicy::new(mix, seed);
+    let mut log = LogWriter::create_with(path, log_opts.clone())?;
+    log.config(
+        0,
+        &serde_json::json!({"world": env.world().config(), "controller": controller,
+            "robot": &world.robot, "policy": policy.kind().name(), "mode": "fast",
+            "episode": episode, "seed": seed}),
+    )?;
+    let hole = task.hole_pose;
+    log.event(
+        0,
+        &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,
+            "peg": peg.name(), "policy": policy.kind().name(),
+            "hole_pos_m": hole.translation.vector.as_slice(),
+            "hole_quat_xyzw": hole.rotation.coords.as_slice(),
+            "hole_depth_m": task.depth_m}),
+    )?;
+    let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
+    let mut states = 0u64;
+    let mut best = 0u32;
+    let mut stage_of = |env: &FastEnv, log: &mut LogWriter| -> Result<()> {
+        let s = env.world().task().map_or(0, |t| t.stage as u32);
+        if s > best {
+            best = s;
+            let t = hw_time_ns(env.world().time_s());
+            log.event(
+                t,
+                &serde_json::json!({"event": "stage", "stage": EpisodeReport::stage_name(s)}),
+            )?;
+        }
+        Ok(())
+    };
+    // Camera frame of the start state.
+    env.render_camera(&mut cam);
+    log.camera(&cam)?;
+    let mut obs = None;
+    let mut stop = false;
+    let mut n_actions = 0u64;
+    for _ in 0..actions {
+        // The first cycle has no observation yet: it holds the start pose.
+        let action = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
+        if let Some(a) = action {
+            // Sequence numbers count this episode's actions from 1, as the
+            // sensor frames' `action_seq` does.
+            n_actions += 1;
+            let mut m = PolicyAction::new(n_actions, 0, [a[0], a[1], a[2]], a[3]);
+            let step = env.world().step_index();
+            m.header.t_hw_ns = hw_time_ns(step as f64 * 1e-3).saturating_sub(1_000_000);
+            m.header.t_mono_ns = m.header.t_hw_ns;
+            m.header.episode = episode;
+            m.apply_at_step = step;
+            log.action(&m)?;
+        }
+        for c in 0..ACTION_PERIOD {
+            env.cycle(if c == 0 { action.as_ref() } else { None })?;
+            log.sensor(env.sensor_frame())?;
+        }
+        obs = Some(env.last_observation().context("cycles ran")?);
+        stage_of(env, &mut log)?;
+        if env.world().camera_due() {
+            env.render_camera(&mut cam);
+            log.camera(&cam)?;
+            if action.is_none() {
+                continue;
+            }
+            // A state: a frame, the action taken from it and the frame after.
+            states += 1;
+            if !on_state() {
+                stop = true;
+                break;
+            }
+        }
+    }
+    // The sensor frame of the last camera frame's step: its sample needs
+    // the next step's reading.
+    if !stop {
+        env.cycle(None)?;
+        log.sensor(env.sensor_frame())?;
+    }
+    let t = hw_time_ns(env.world().time_s());
+    let stage = EpisodeReport::stage_name(best).to_string();
+    log.event(
+        t,
+        &serde_json::json!({"event": "outcome", "stage": &stage, "states": states,
+            "interrupted": stop}),
+    )?;
+    let file = log.finish()?;
+    Ok(EpisodeShard {
+        episode,
+        seed,
+        peg: peg.name().into(),
+        policy: policy.kind().name().into(),
+        states,
+        stage,
+        file,
+    })
+}
+
+/// Fast-mode collection on `cfg.workers` threads. `stop` ends it early
+/// (each worker finishes its episode's file cleanly).
+pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSummary> {
+    anyhow::ensure!(!cfg.pegs.is_empty(), "no pegs to collect with");
+    anyhow::ensure!(cfg.episode_actions > 0, "episodes need at least one action");
+    std::fs::create_dir_all(&cfg.out_dir)
+        .with_context(|| format!("creating {}", cfg.out_dir.display()))?;
+    let start = Instant::now();
+    let next_episode = AtomicU64::new(0);
+    let done = AtomicU64::new(0);
+    let episodes_done = AtomicU64::new(0);
+    let progress = Progress::new(cfg.states);
+    let shards = Mutex::new(Vec::new());
+    let manifest = Mutex::new(
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(cfg.out_dir.join("manifest.jsonl"))
+            .context("opening manifest.jsonl")?,
+    );
+    std::thread::scope(|s| -> Result<()> {
+        let mut handles = Vec::new();
+        for _ in 0..cfg.workers.max(1) {
+            handles.push(s.spawn(|| -> Result<()> {
+                let mut env: Option<FastEnv> = None;
+                loop {
+                    if stop.load(Ordering::Relaxed) || done.load(Ordering::Relaxed) >= cfg.states {
+                        return Ok(());
+                    }
+                    let i = next_episode.fetch_add(1, Ordering::Relaxed);
+                    let mut world = cfg.world.clone();
+                    world.task.enabled = true;
+                    world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
+                    if env.is_none() {
+                        env = Some(FastEnv::new(world.clone(), cfg.controller.clone())?);
+                    }
+                    let env = env.as_mut().expect("built");
+                    let path = cfg.out_dir.join(format!("episode-{i:06}.mcap"));
+                    let shard = run_episode(
+                        env,
+                        world,
+                        &cfg.controller,
+                        &cfg.mix,
+                        i,
+                        cfg.seed + i,
+                        cfg.episode_actions,
+                        &path,
+                        &cfg.log,
+                        || {
+                            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                            progress.update(n, episodes_done.load(Ordering::Relaxed));
+                            !stop.load(Ordering::Relaxed)
+                        },
+                    )
+                    .with_context(|| format!("episode {i} ({})", path.display()))?;
+                    episodes_done.fetch_add(1, Ordering::Relaxed);
+                    let line = serde_json::to_string(&shard)?;
+                    writeln!(manifest.lock().expect("not poisoned"), "{line}")?;
+                    shards.lock().expect("not poisoned").push(shard);
+                }
+            }));
+        }
+        for h in handles {
+            h.join().expect("collection worker panicked")?;
+        }
+        Ok(())
+    })?;
+    let states = done.load(Ordering::Relaxed);
+    progress.finish(states, episodes_done.load(Ordering::Relaxed));
+    let mut shards = shards.into_inner().expect("not poisoned");
+    shards.sort_by_key(|s| s.episode);
+    Ok(CollectSummary {
+        states: shards.iter().map(|s| s.states).sum(),
+        shards,
+        wall_s: start.elapsed().as_secs_f64(),
+    })
+}

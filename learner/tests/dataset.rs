@@ -1,0 +1,246 @@
+//! The data pipeline end to end: a short fast-mode collection, the dataset
+//! built from its logs, labels against the simulator's ground truth, the
+//! loader, and damaged inputs.
+
+use learner::collect::{CollectConfig, Mix, collect_fast};
+use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
+use learner::env::{ACTION_PERIOD, FastEnv};
+use learner::labels::{Calibration, FlowLabeler};
+use learner::log::LogOptions;
+use learner::policy::{HeuristicConfig, HeuristicPolicy};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vt-dataset-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn world() -> hw_sim::WorldConfig {
+    let mut w = hw_sim::WorldConfig::default();
+    w.task.enabled = true;
+    w
+}
+
+#[test]
+fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
+    let mut env = FastEnv::new(world(), rt_controller::ControllerConfig::default()).unwrap();
+    env.reset(5).unwrap();
+    let task = learner::collect::task_of(env.world()).unwrap();
+    let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
+    let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Pod>::boxed_zeroed();
+    env.render_camera(&mut msg);
+    let cam = env.world().camera().clone();
+    let cal = Calibration {
+        width: msg.width,
+        height: msg.height,
+        focal_px: msg.focal_px,
+        principal_px: msg.principal_px,
+        pos_m: msg.pose_pos_m,
+        quat_xyzw: msg.pose_quat_xyzw,
+    };
+    assert_eq!(cal.focal_px, cam.focal_px);
+    let model = env.world().model().clone();
+    let mut labeler = FlowLabeler::new(model, &env.world().config().task, &cal).unwrap();
+    let mut prev_q = env.world().q().to_vec();
+    let mut prev_depth = env.rendered().depth_m.clone();
+    let mut obs = None;
+    let (mut compared, mut moving) = (0, 0);
+    for _ in 0..40 {
+        let a = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
+        for c in 0..ACTION_PERIOD {
+            env.cycle(if c == 0 { a.as_ref() } else { None }).unwrap();
+        }
+        obs = env.last_observation();
+        assert!(env.world().camera_due());
+        env.render_camera(&mut msg);
+        let gt = env.rendered();
+        let q = env.world().q().to_vec();
+        labeler.label(&prev_q, &q, &prev_depth, 0.01);
+        let (mut both, mut either, mut err) = (0usize, 0usize, 0.0f64);
+        for i in 0..gt.flow_mask.len() {
+            let (g, l) = (gt.flow_mask[i] == 1, labeler.mask[i] == 1);
+            either += (g || l) as usize;
+            if g && l {
+                both += 1;
+                let d = [
+                    gt.flow_px[i][0] - labeler.flow_px[i][0],
+                    gt.flow_px[i][1] - labeler.flow_px[i][1],
+                ];
+                err += (d[0].hypot(d[1])) as f64;
+                moving += (gt.flow_px[i][0].hypot(gt.flow_px[i][1]) > 0.05) as usize;
+            }
+        }
+        let iou = both as f64 / either.max(1) as f64;
+        let epe = err / both.max(1) as f64;
+        assert!(iou > 0.97, "mask IoU {iou:.3}");
+        assert!(epe < 0.02, "mean endpoint difference {epe:.4} px");
+        compared += both;
+        prev_q = q;
+        prev_depth = gt.depth_m.clone();
+    }
+    assert!(
+        compared > 10_000 && moving > 1000,
+        "{compared} pixels, {moving} moving"
+    );
+}
+
+/// A short collection shared by the tests below.
+fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::collect::CollectSummary {
+    let cfg = CollectConfig {
+        out_dir: dir.to_path_buf(),
+        states: 1,
+        episode_actions: actions,
+        pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon],
+        seed: 11,
+        workers: 2,
+        world: world(),
+        controller: rt_controller::ControllerConfig::default(),
+        mix: Mix {
+            heuristic_fraction: fraction,
+            ..Mix::default()
+        },
+        log: LogOptions {
+            view_rate_hz: 50.0,
+            ..LogOptions::default()
+        },
+    };
+    collect_fast(&cfg, &AtomicBool::new(false)).unwrap()
+}
+
+#[test]
+fn a_short_collection_builds_the_expected_dataset() {
+    let logs = scratch("logs");
+    let summary = collect(&logs, 1.0, 60);
+    // Two workers, one state asked for: each worker ends its episode.
+    assert_eq!(summary.shards.len(), 2);
+    assert_eq!(summary.states, 2 * 59);
+    assert!(logs.join("manifest.jsonl").exists());
+
+    // A damaged log beside them is skipped and named; the rest builds.
+    let bad = logs.join("zz-broken.mcap");
+    let good = std::fs::read(&summary.shards[0].file).unwrap();
+    std::fs::write(&bad, &good[..good.len() / 2]).unwrap();
+
+    let out = scratch("ds");
+    let files = dataset::find_logs(std::slice::from_ref(&logs)).unwrap();
+    assert_eq!(files.len(), 3);
+    let cfg = BuildConfig {
+        block_samples: 16,
+        shard_samples: 64,
+        ..BuildConfig::default()
+    };
+    let mut skipped = Vec::new();
+    let meta = dataset::build(&files, &out, &cfg, 2, |p, r| {
+        if let Err(e) = r {
+            skipped.push((p.to_path_buf(), e));
+        }
+    })
+    .unwrap();
+    assert_eq!(skipped.len(), 1);
+    assert!(skipped[0].1.contains("offset"), "{}", skipped[0].1);
+    assert_eq!(meta.samples, summary.states, "one sample per state");
+    assert_eq!(meta.episodes.len(), 2);
+    assert_eq!(meta.shards.len(), 2, "118 samples in shards of 64");
+
+    let ds = Dataset::open(&out).unwrap();
+    let s = &ds.stats;
+    // The heuristic goes down into the box: some contact, mostly free.
+    assert!(
+        s.contact_next_ratio > 0.05 && s.contact_next_ratio < 0.9,
+        "contact ratio {}",
+        s.contact_next_ratio
+    );
+    // At least one episode (the square) touches and leaves the box.
+    assert!(ds.pairing_ratio() >= 0.45, "pairing {}", ds.pairing_ratio());
+    assert!(
+        s.mask_ratio > 0.02 && s.mask_ratio < 0.4,
+        "mask {}",
+        s.mask_ratio
+    );
+    assert!(s.depth.mean[0] > 0.5 && s.depth.mean[0] < 3.0);
+    assert!(s.action.std.iter().all(|&x| x > 1e-5));
+
+    // Stored samples equal a fresh labelling of the same log.
+    let direct = dataset::episode_samples(&files[0], &cfg, &mut Default::default()).unwrap();
+    let block = ds.read_block(0, 0).unwrap();
+    for (k, b) in block.iter().enumerate() {
+        let mut d = direct.samples[k].clone();
+        d.episode = b.episode;
+        assert_eq!(&d, b, "sample {k}");
+    }
+    // Labels are consistent: the next position is where the next sample
+    // starts, and the action moved the target the way it says.
+    for w in direct.samples.windows(2) {
+        assert_eq!(
+            w[0].ee_next,
+            [w[1].proprio[0], w[1].proprio[1], w[1].proprio[2]]
+        );
+    }
+
+    // One epoch of the loader: every sample exactly once, batches full but
+    // the last, negatives with the opposite contact state.
+    let loader = Loader::new(
+        &ds,
+        LoaderConfig {
+            batch: 25,
+            seed: 3,
+            shuffle_blocks: 2,
+            ..LoaderConfig::default()
+        },
+    );
+    let mut seen = vec![0u32; ds.len() as usize];
+    let (mut batches, mut negatives) = (0, 0);
+    let mut order = Vec::new();
+    for b in loader {
+        let b = b.unwrap();
+        batches += 1;
+        assert!(b.len == 25 || seen.iter().filter(|&&c| c == 0).count() == b.len);
+        for (k, &id) in b.ids.iter().enumerate() {
+            seen[id as usize] += 1;
+            order.push(id);
+            if b.paired[k] == 0 {
+                negatives += 1;
+                assert_ne!(b.samples[k].wrench, ds.wrench_of(id), "haptics swapped");
+            } else {
+                assert_eq!(b.samples[k].wrench, ds.wrench_of(id));
+            }
+        }
+    }
+    assert!(seen.iter().all(|&c| c == 1), "each sample once per epoch");
+    assert_eq!(batches, (ds.len() as usize).div_ceil(25));
+    assert!(negatives > 20, "{negatives} negatives");
+    assert!(
+        order.windows(2).filter(|w| w[1] == w[0] + 1).count() < order.len() / 4,
+        "shuffled"
+    );
+
+    // A contact sheet is written.
+    let sheet = out.join("sheet.png");
+    dataset::contact_sheet(&ds, 4, &sheet).unwrap();
+    assert!(std::fs::read(&sheet).unwrap().starts_with(b"\x89PNG"));
+
+    // Damaged datasets: a cut shard names its block's offset, a foreign
+    // format version is refused.
+    let shard = out.join(&ds.meta.shards[1].0);
+    let bytes = std::fs::read(&shard).unwrap();
+    std::fs::write(&shard, &bytes[..bytes.len() / 2]).unwrap();
+    let last = ds.meta.shards[1].1.len() - 1;
+    let e = ds.read_block(1, last).unwrap_err().to_string();
+    assert!(
+        e.contains("byte offset") && e.contains("shard-00001"),
+        "{e}"
+    );
+    let text = std::fs::read_to_string(out.join("meta.json")).unwrap();
+    std::fs::write(
+        out.join("meta.json"),
+        text.replace("\"format_version\": 1", "\"format_version\": 9"),
+    )
+    .unwrap();
+    let e = Dataset::open(&out).err().unwrap().to_string();
+    assert!(e.contains("format version 9"), "{e}");
+    let _ = std::fs::remove_dir_all(&logs);
+    let _ = std::fs::remove_dir_all(&out);
+}
