@@ -805,41 +805,7 @@ impl Dataset {
 
     /// Reads and decodes one block.
     pub fn read_block(&self, shard: usize, block: usize) -> Result<Vec<Sample>> {
-        let (name, blocks) = &self.meta.shards[shard];
-        let b = &blocks[block];
-        let path = self.dir.join(name);
-        let mut f = std::fs::File::open(&path)
-            .with_context(|| format!("dataset shard {}", path.display()))?;
-        let mut z = vec![0u8; b.length as usize];
-        f.seek(SeekFrom::Start(b.offset))?;
-        f.read_exact(&mut z).with_context(|| {
-            format!(
-                "dataset shard {}: block at byte offset {} is cut short",
-                path.display(),
-                b.offset
-            )
-        })?;
-        let (w, h) = (self.meta.width, self.meta.height);
-        let size = sample_bytes(w, h);
-        let mut plain = vec![0u8; size * b.samples as usize];
-        let n = zstd::bulk::decompress_to_buffer(&z, &mut plain).map_err(|e| {
-            anyhow::anyhow!(
-                "dataset shard {}: block at byte offset {}: {e}",
-                path.display(),
-                b.offset
-            )
-        })?;
-        ensure!(
-            n == plain.len(),
-            "dataset shard {}: block at byte offset {} holds {n} bytes, expected {}",
-            path.display(),
-            b.offset,
-            plain.len()
-        );
-        Ok(plain
-            .chunks_exact(size)
-            .map(|c| Sample::decode(c, w, h))
-            .collect())
+        read_block(&self.dir, &self.meta, shard, block)
     }
 
     /// The wrench window of sample `id` (the pairing table).
@@ -873,6 +839,45 @@ impl Dataset {
     pub fn contact_ratio(&self) -> f64 {
         self.contacts.iter().map(|&c| c as u64).sum::<u64>() as f64 / self.len().max(1) as f64
     }
+}
+
+/// Reads and decodes one block of the dataset in `dir` described by `meta`.
+fn read_block(dir: &Path, meta: &Meta, shard: usize, block: usize) -> Result<Vec<Sample>> {
+    let (name, blocks) = &meta.shards[shard];
+    let b = &blocks[block];
+    let path = dir.join(name);
+    let mut f =
+        std::fs::File::open(&path).with_context(|| format!("dataset shard {}", path.display()))?;
+    let mut z = vec![0u8; b.length as usize];
+    f.seek(SeekFrom::Start(b.offset))?;
+    f.read_exact(&mut z).with_context(|| {
+        format!(
+            "dataset shard {}: block at byte offset {} is cut short",
+            path.display(),
+            b.offset
+        )
+    })?;
+    let (w, h) = (meta.width, meta.height);
+    let size = sample_bytes(w, h);
+    let mut plain = vec![0u8; size * b.samples as usize];
+    let n = zstd::bulk::decompress_to_buffer(&z, &mut plain).map_err(|e| {
+        anyhow::anyhow!(
+            "dataset shard {}: block at byte offset {}: {e}",
+            path.display(),
+            b.offset
+        )
+    })?;
+    ensure!(
+        n == plain.len(),
+        "dataset shard {}: block at byte offset {} holds {n} bytes, expected {}",
+        path.display(),
+        b.offset,
+        plain.len()
+    );
+    Ok(plain
+        .chunks_exact(size)
+        .map(|c| Sample::decode(c, w, h))
+        .collect())
 }
 
 /// A batch, flattened row-major, sample-major.
@@ -939,18 +944,12 @@ impl<'a> Loader<'a> {
         let (tx, rx) = std::sync::mpsc::sync_channel(4);
         let dir = ds.dir.clone();
         let meta = ds.meta.clone();
+        // Only the block index travels to the reader: reopening the
+        // dataset there would load its pairing table a second time.
         let reader = std::thread::spawn(move || {
-            let ds = Dataset::open(&dir);
-            let ds = match ds {
-                Ok(d) => d,
-                Err(e) => {
-                    let _ = tx.send(Err(e));
-                    return;
-                }
-            };
             for (s, k) in blocks {
                 let first = meta.shards[s].1[k].first_id;
-                let r = ds.read_block(s, k).map(|v| {
+                let r = read_block(&dir, &meta, s, k).map(|v| {
                     v.into_iter()
                         .enumerate()
                         .map(|(i, x)| (first + i as u64, x))

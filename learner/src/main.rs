@@ -384,14 +384,7 @@ fn parse_peg(name: &str) -> Result<PegShape> {
 }
 
 fn world_config(a: &EpisodeArgs) -> Result<WorldConfig> {
-    let mut w = match &a.world {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading the world configuration {}", p.display()))?;
-            WorldConfig::from_toml(&text).with_context(|| format!("in {}", p.display()))?
-        }
-        None => WorldConfig::default(),
-    };
+    let mut w = load_world(a.world.as_ref())?;
     w.task.enabled = true;
     w.task.peg = parse_peg(&a.peg)?;
     Ok(w)
