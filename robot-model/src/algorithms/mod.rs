@@ -34,7 +34,7 @@ pub(crate) fn axis_rotation(k: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
 /// `p * R(axis, angle)`. Rotations about a coordinate axis (every joint of
 /// the shipped arms) only mix two columns of `p`, a fraction of the cost of
 /// a general 3×3 product.
-#[inline]
+#[inline(always)]
 fn rotate_about(
     p: &Matrix3<f64>,
     axis: &Vector3<f64>,
@@ -56,7 +56,9 @@ fn rotate_about(
 }
 
 /// The joint's frame in its parent joint's frame at coordinate `q`.
-#[inline]
+// Forced: left out of line it returns its Se3 through memory, 14% of CRBA
+// (docs/performance.md).
+#[inline(always)]
 pub(crate) fn joint_placement(j: &Joint, q: f64) -> Se3 {
     match j.kind {
         JointKind::Revolute | JointKind::Continuous => Se3 {
