@@ -14,33 +14,44 @@ use std::time::Instant;
 mod common;
 use common::Rig as Loop;
 
-/// Drives the peg to the bottom of its hole with 20 Hz actions.
-fn inserted(peg: PegShape) -> Loop {
+/// The world of `peg` with its box fixed under the initial pose.
+fn fixed_box(peg: PegShape) -> Loop {
     let mut config = WorldConfig::default();
     config.task.peg = peg;
     config.task.box_xy_range_m = [0.0, 0.0];
     config.task.box_yaw_range_rad = 0.0;
-    let mut l = Loop::new(config);
+    Loop::new(config)
+}
+
+/// The scripted 20 Hz action toward the bottom of the hole: above the box
+/// and rolled into line first, then down, at most 5 mm per action.
+fn toward_bottom(l: &Loop) -> Action {
     let hole = l.world.hole_pose().unwrap();
     let depth = l.world.box_geometry().unwrap().depth;
-    for k in 0..8000 {
-        let action = (k % 50 == 0).then(|| {
-            let tip = l.world.peg_tip_pose().translation.vector;
-            let goal = hole * nalgebra::Point3::new(0.0, 0.0, -depth - 0.005);
-            let mut d = goal.coords - tip;
-            // Above the box first, then down.
-            if (tip.xy() - goal.coords.xy()).norm() > 0.002 {
-                d.z = (hole.translation.z + 0.02 - tip.z).max(-0.005);
-            }
-            let n = d.norm();
-            if n > 0.005 {
-                d *= 0.005 / n;
-            }
-            Action {
-                delta_pos_m: [d.x, d.y, d.z],
-                delta_roll_rad: 0.0,
-            }
-        });
+    let tip = l.world.peg_tip_pose().translation.vector;
+    let goal = hole * nalgebra::Point3::new(0.0, 0.0, -depth - 0.005);
+    let mut d = goal.coords - tip;
+    // The triangle and semicircle holes are not symmetric under the
+    // initial roll.
+    let psi = l.world.task().unwrap().s_psi_rad;
+    if (tip.xy() - goal.coords.xy()).norm() > 0.002 || psi.abs() > 0.02 {
+        d.z = (hole.translation.z + 0.02 - tip.z).max(-0.005);
+    }
+    let n = d.norm();
+    if n > 0.005 {
+        d *= 0.005 / n;
+    }
+    Action {
+        delta_pos_m: [d.x, d.y, d.z],
+        delta_roll_rad: (-psi).clamp(-0.05, 0.05),
+    }
+}
+
+/// Drives the peg to the bottom of its hole with 20 Hz actions.
+fn inserted(peg: PegShape) -> Loop {
+    let mut l = fixed_box(peg);
+    for k in 0..10_000 {
+        let action = (k % 50 == 0).then(|| toward_bottom(&l));
         l.cycle(action.as_ref());
     }
     l
@@ -107,6 +118,59 @@ fn main() {
             peg.name(),
             times[times.len() / 2],
             times[times.len() * 9 / 10]
+        );
+    }
+
+    println!();
+    println!(
+        "| peg | 500-step episode: hw-sim (physics + 500 frames), wall s | with rt-controller's step, wall s | stage |"
+    );
+    println!("|---|---|---|---|");
+    for peg in PegShape::ALL {
+        let (mut sim, mut total) = (Vec::new(), Vec::new());
+        let mut stage = Stage::Failed;
+        for _ in 0..3 {
+            let mut l = fixed_box(peg);
+            let mut frame = CameraFrame::default();
+            let mut in_sim = std::time::Duration::ZERO;
+            let t0 = Instant::now();
+            for _ in 0..500 {
+                let a = toward_bottom(&l);
+                for k in 0..50 {
+                    let r = l.world.readings();
+                    let state = rt_controller::RobotState {
+                        q: &r.q,
+                        v: &r.v,
+                        tau_measured: None,
+                        wrench: Some(&r.wrench),
+                    };
+                    let t_s = r.t_s;
+                    rt_controller::step(
+                        &l.model,
+                        &l.ctrl,
+                        &mut l.data,
+                        &state,
+                        (k == 0).then_some(&a),
+                        t_s,
+                    );
+                    let t1 = Instant::now();
+                    l.world.step(l.data.torques()).unwrap();
+                    if l.world.camera_due() {
+                        l.world.render(&mut frame);
+                    }
+                    in_sim += t1.elapsed();
+                }
+            }
+            total.push(t0.elapsed().as_secs_f64());
+            sim.push(in_sim.as_secs_f64());
+            stage = l.world.task().unwrap().stage;
+        }
+        println!(
+            "| {} | {:.3} | {:.3} | {} |",
+            peg.name(),
+            median(sim),
+            median(total),
+            stage.name()
         );
     }
 }

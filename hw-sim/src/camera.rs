@@ -75,24 +75,39 @@ pub enum Geometry {
 }
 
 impl Geometry {
-    /// Bounding sphere (centre, radius) in the primitive frame.
-    fn bounds(&self) -> (Vector3<f64>, f64) {
+    /// Spheres (centre, radius; radius 0 for a point) in the primitive
+    /// frame whose convex hull contains the shape: the renderer projects
+    /// them to bound the pixels that can see it. Corners for polyhedra and
+    /// end spheres for capsules and cylinders bound far tighter on screen
+    /// than one bounding sphere does for the long, thin links and wall
+    /// pieces.
+    fn cover(&self) -> Vec<(Vector3<f64>, f64)> {
+        let ends = |h: f64, r: f64| {
+            vec![
+                (Vector3::new(0.0, 0.0, -h), r),
+                (Vector3::new(0.0, 0.0, h), r),
+            ]
+        };
         match self {
             Geometry::Capsule {
                 half_length,
                 radius,
-            } => (Vector3::zeros(), half_length + radius),
-            Geometry::Cylinder {
+            }
+            | Geometry::Cylinder {
                 half_length,
                 radius,
-            } => (Vector3::zeros(), half_length.hypot(*radius)),
-            Geometry::Sphere { radius } => (Vector3::zeros(), *radius),
-            Geometry::Cuboid { half } => (Vector3::zeros(), half.norm()),
-            Geometry::Convex { points, .. } => {
-                let c = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-                let r = points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
-                (c, r)
-            }
+            } => ends(*half_length, *radius),
+            Geometry::Sphere { radius } => vec![(Vector3::zeros(), *radius)],
+            Geometry::Cuboid { half } => (0..8)
+                .map(|k| {
+                    let s = |bit: usize| if k & bit == 0 { -1.0 } else { 1.0 };
+                    (
+                        Vector3::new(s(1) * half.x, s(2) * half.y, s(4) * half.z),
+                        0.0,
+                    )
+                })
+                .collect(),
+            Geometry::Convex { points, .. } => points.iter().map(|p| (*p, 0.0)).collect(),
         }
     }
 
@@ -343,6 +358,8 @@ pub struct Camera {
     /// Principal point (u, v), px.
     pub principal_px: [f64; 2],
     prims: Vec<Primitive>,
+    /// Per primitive: its covering spheres ([`Geometry::cover`]).
+    covers: Vec<Vec<(Vector3<f64>, f64)>>,
     dirs: Vec<Vector3<f64>>,
     t: Vec<f64>,
     hit: Vec<u32>,
@@ -402,6 +419,7 @@ impl Camera {
             pose,
             focal_px,
             principal_px,
+            covers: prims.iter().map(|p| p.geometry.cover()).collect(),
             prims,
             dirs,
             t: vec![0.0; n],
@@ -462,24 +480,27 @@ impl Camera {
         let ([cx, cy], f) = (self.principal_px, self.focal_px);
         for (pi, prim) in self.prims.iter().enumerate() {
             let world = poses.get(prim.body) * prim.local;
-            let (bc, br) = prim.geometry.bounds();
-            let c = self
-                .pose
-                .inverse_transform_point(&(world * Point3::from(bc)));
-            let (u0, u1, v0, v1) = if c.z - br <= 1e-3 {
-                (0, w, 0, h)
-            } else {
+            // Screen rectangle: the union of the covering spheres' projected
+            // bounds, or the whole image if any reaches behind the eye.
+            let mut rect = (w, 0, h, 0);
+            for (bc, br) in &self.covers[pi] {
+                let c = self
+                    .pose
+                    .inverse_transform_point(&(world * Point3::from(*bc)));
+                if c.z - br <= 1e-3 {
+                    rect = (0, w, 0, h);
+                    break;
+                }
                 let (zn, zf) = (c.z - br, c.z + br);
                 let lo = |a: f64| (a / zn).min(a / zf);
                 let hi = |a: f64| (a / zn).max(a / zf);
                 let clampi = |x: f64, m: usize| x.floor().clamp(0.0, m as f64) as usize;
-                (
-                    clampi(cx + f * lo(c.x - br), w),
-                    clampi(cx + f * hi(c.x + br) + 1.0, w),
-                    clampi(cy + f * lo(c.y - br), h),
-                    clampi(cy + f * hi(c.y + br) + 1.0, h),
-                )
-            };
+                rect.0 = rect.0.min(clampi(cx + f * lo(c.x - br), w));
+                rect.1 = rect.1.max(clampi(cx + f * hi(c.x + br) + 1.0, w));
+                rect.2 = rect.2.min(clampi(cy + f * lo(c.y - br), h));
+                rect.3 = rect.3.max(clampi(cy + f * hi(c.y + br) + 1.0, h));
+            }
+            let (u0, u1, v0, v1) = rect;
             if u0 >= u1 || v0 >= v1 {
                 continue;
             }
@@ -531,7 +552,9 @@ impl Camera {
                 if rgb_std > 0.0 {
                     c += rgb_std * self.rng.normal();
                 }
-                frame.rgb[3 * i + k] = c.round().clamp(0.0, 255.0) as u8;
+                // Round half up; `f64::round` is a libm call on this ISA
+                // baseline (10% of a frame).
+                frame.rgb[3 * i + k] = (c.clamp(0.0, 255.0) + 0.5) as u8;
             }
             let mut depth = t;
             if depth_std > 0.0 {

@@ -376,9 +376,10 @@ impl World {
         ip.num_solver_iterations = cfg.solver_iterations;
         ip.length_unit = cfg.length_unit_m;
         ip.friction_model = FrictionModel::Coulomb;
-        // Contact recycling would keep stale contact points over a drift of
-        // 0.05 × length unit; the pegs' millimetre clearances want fresh ones.
-        ip.contact_recycling = false;
+        // rapier's default recycling distance (0.05 length units, 0.5 mm)
+        // is too coarse for millimetre clearances; ours is in metres.
+        ip.contact_recycling = cfg.contact_recycle_distance_m > 0.0;
+        ip.normalized_contact_recycle_distance = cfg.contact_recycle_distance_m / cfg.length_unit_m;
 
         // Ground: a slab whose top face is z = 0.
         let ground_body = physics

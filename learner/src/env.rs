@@ -180,8 +180,7 @@ impl FastEnv {
         f.ee_quat_xyzw = [q.i, q.j, q.k, q.w];
         f.ee_twist = twist;
         f.wrench = wrench;
-        let tau = self.data.torques().to_vec();
-        self.world.step(&tau)?;
+        self.world.step(self.data.torques())?;
         self.tau_meas
             .copy_from_slice(&self.world.readings().tau_applied);
         Ok(())

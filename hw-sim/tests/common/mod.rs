@@ -43,7 +43,7 @@ impl Rig {
 
     /// One 1 kHz cycle: read the sensors, control step, physics step.
     pub fn cycle(&mut self, action: Option<&Action>) {
-        let r = self.world.readings().clone();
+        let r = self.world.readings();
         let state = RobotState {
             q: &r.q,
             v: &r.v,
@@ -58,8 +58,9 @@ impl Rig {
             action,
             r.t_s,
         );
-        let tau = self.data.torques().to_vec();
-        self.world.step(&tau).expect("finite torques");
+        self.world
+            .step(self.data.torques())
+            .expect("finite torques");
         if let (Some(task), Some(b)) = (self.world.task(), self.world.box_geometry()) {
             let s = task.s_m;
             // Outside the hole: farther from its centre than its outline
