@@ -23,8 +23,9 @@ fn fixed_box(peg: PegShape) -> Loop {
     Loop::new(config)
 }
 
-/// The scripted 20 Hz action toward the bottom of the hole: above the box
-/// and rolled into line first, then down, at most 5 mm per action.
+/// The scripted 20 Hz action toward the bottom of the hole: while above the
+/// box, over the hole and rolled into line first; then down, at most 5 mm
+/// per action.
 fn toward_bottom(l: &Loop) -> Action {
     let hole = l.world.hole_pose().unwrap();
     let depth = l.world.box_geometry().unwrap().depth;
@@ -34,7 +35,8 @@ fn toward_bottom(l: &Loop) -> Action {
     // The triangle and semicircle holes are not symmetric under the
     // initial roll.
     let psi = l.world.task().unwrap().s_psi_rad;
-    if (tip.xy() - goal.coords.xy()).norm() > 0.002 || psi.abs() > 0.02 {
+    let above = l.world.task().unwrap().s_m.z > 0.0;
+    if above && ((tip.xy() - goal.coords.xy()).norm() > 0.002 || psi.abs() > 0.01) {
         d.z = (hole.translation.z + 0.02 - tip.z).max(-0.005);
     }
     let n = d.norm();

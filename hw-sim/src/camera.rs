@@ -361,9 +361,12 @@ pub struct Camera {
     /// Per primitive: its covering spheres ([`Geometry::cover`]).
     covers: Vec<Vec<(Vector3<f64>, f64)>>,
     dirs: Vec<Vector3<f64>>,
-    t: Vec<f64>,
-    hit: Vec<u32>,
-    normal: Vec<Vector3<f64>>,
+    /// The nearest hits of the frame being rendered.
+    layer: Layer,
+    /// The floor's and the box's hits, for the box pose they were cast at.
+    still: Option<Layer>,
+    /// The still layer shaded without noise: RGB, depth, class per pixel.
+    still_px: Vec<([u8; 3], f32, u8)>,
     /// Per pixel of the last frame: the body and the hit point in its frame.
     prev: Vec<Option<(BodyRef, Vector3<f64>)>>,
     cur: Vec<Option<(BodyRef, Vector3<f64>)>>,
@@ -373,6 +376,50 @@ pub struct Camera {
 }
 
 const NO_HIT: u32 = u32::MAX;
+
+/// Lambert shading with an ambient floor, 0.35..1.
+fn lambert(normal: &Vector3<f64>, light: &Vector3<f64>) -> f64 {
+    0.35 + 0.65 * normal.dot(light).max(0.0)
+}
+
+/// A colour value to an 8-bit level, rounding half up (`f64::round` is a
+/// libm call on this ISA baseline, 10% of a frame).
+fn to_level(c: f64) -> u8 {
+    (c.clamp(0.0, 255.0) + 0.5) as u8
+}
+
+/// Nearest hit per pixel: ray parameter (depth along the optical axis, since
+/// the directions have z = 1), primitive index and world normal.
+#[derive(Clone)]
+struct Layer {
+    t: Vec<f64>,
+    hit: Vec<u32>,
+    normal: Vec<Vector3<f64>>,
+    /// The box pose the layer was cast at (the still layer only).
+    box_pose: Option<Isometry3<f64>>,
+}
+
+impl Layer {
+    fn new(n: usize) -> Self {
+        Self {
+            t: vec![f64::INFINITY; n],
+            hit: vec![NO_HIT; n],
+            normal: vec![Vector3::zeros(); n],
+            box_pose: None,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.t.fill(f64::INFINITY);
+        self.hit.fill(NO_HIT);
+    }
+
+    fn copy_from(&mut self, other: &Layer) {
+        self.t.clone_from(&other.t);
+        self.hit.clone_from(&other.hit);
+        self.normal.clone_from(&other.normal);
+    }
+}
 const LIGHT: [f64; 3] = [0.35, -0.45, 0.82];
 
 impl Camera {
@@ -422,9 +469,9 @@ impl Camera {
             covers: prims.iter().map(|p| p.geometry.cover()).collect(),
             prims,
             dirs,
-            t: vec![0.0; n],
-            hit: vec![NO_HIT; n],
-            normal: vec![Vector3::zeros(); n],
+            layer: Layer::new(n),
+            still: None,
+            still_px: Vec::with_capacity(n),
             prev: vec![None; n],
             cur: vec![None; n],
             has_prev: false,
@@ -460,25 +507,17 @@ impl Camera {
         self.render(&poses, shot.t_s, &shot.occlusions, shot.noise, frame);
     }
 
-    /// Renders `poses` into `frame` (buffers are reused), with the flow from
-    /// the previous render. `occlusions` are `[x, y, w, h]` rectangles
-    /// (`None`: the whole image). `noise` is (depth σ in m, RGB σ in levels).
-    pub fn render(
-        &mut self,
-        poses: &BodyPoses,
-        t_s: f64,
-        occlusions: &[Option<[u32; 4]>],
-        noise: (f64, f64),
-        frame: &mut CameraFrame,
-    ) {
+    /// Casts the camera's rays at every primitive whose body `skip` does
+    /// not exclude, keeping the nearest hit per pixel in `layer`.
+    fn cast(&self, poses: &BodyPoses, skip: impl Fn(BodyRef) -> bool, layer: &mut Layer) {
         let (w, h) = (self.config.width as usize, self.config.height as usize);
-        let n = w * h;
-        self.t.fill(f64::INFINITY);
-        self.hit.fill(NO_HIT);
         let cam_rot = self.pose.rotation.to_rotation_matrix().into_inner();
         let eye = self.pose.translation.vector;
         let ([cx, cy], f) = (self.principal_px, self.focal_px);
         for (pi, prim) in self.prims.iter().enumerate() {
+            if skip(prim.body) {
+                continue;
+            }
             let world = poses.get(prim.body) * prim.local;
             // Screen rectangle: the union of the covering spheres' projected
             // bounds, or the whole image if any reaches behind the eye.
@@ -514,15 +553,70 @@ impl Camera {
                     let i = v * w + u;
                     let d = m * self.dirs[i];
                     if let Some((t, nrm)) = prim.geometry.intersect(&o, &d)
-                        && t < self.t[i]
+                        && t < layer.t[i]
                     {
-                        self.t[i] = t;
-                        self.hit[i] = pi as u32;
-                        self.normal[i] = world.rotation * nrm;
+                        layer.t[i] = t;
+                        layer.hit[i] = pi as u32;
+                        layer.normal[i] = world.rotation * nrm;
                     }
                 }
             }
         }
+    }
+
+    /// Renders `poses` into `frame` (buffers are reused), with the flow from
+    /// the previous render. `occlusions` are `[x, y, w, h]` rectangles
+    /// (`None`: the whole image). `noise` is (depth σ in m, RGB σ in levels).
+    pub fn render(
+        &mut self,
+        poses: &BodyPoses,
+        t_s: f64,
+        occlusions: &[Option<[u32; 4]>],
+        noise: (f64, f64),
+        frame: &mut CameraFrame,
+    ) {
+        let (w, h) = (self.config.width as usize, self.config.height as usize);
+        let n = w * h;
+        // The floor and the box do not move within an episode: their depth
+        // layer is cast once per box pose and copied under every frame, so
+        // a frame casts rays only at the arm and the peg.
+        let fresh = self
+            .still
+            .as_ref()
+            .is_none_or(|l| l.box_pose != poses.box_pose);
+        if fresh {
+            let mut layer = self.still.take().unwrap_or_else(|| Layer::new(n));
+            layer.clear();
+            layer.box_pose = poses.box_pose;
+            self.cast(
+                poses,
+                |b| b != BodyRef::Static && b != BodyRef::Box,
+                &mut layer,
+            );
+            let light = Vector3::from(LIGHT).normalize();
+            self.still_px.clear();
+            self.still_px.extend((0..n).map(|i| {
+                let (hit, t) = (layer.hit[i], layer.t[i]);
+                if hit == NO_HIT || t > self.config.max_depth_m {
+                    return ([0; 3], 0.0, Class::None as u8);
+                }
+                let prim = &self.prims[hit as usize];
+                let shade = lambert(&layer.normal[i], &light);
+                let rgb = prim.color.map(|c| to_level(255.0 * c * shade));
+                (rgb, t as f32, prim.class as u8)
+            }));
+            self.still = Some(layer);
+        }
+        let mut layer = std::mem::replace(&mut self.layer, Layer::new(0));
+        layer.copy_from(self.still.as_ref().expect("cast above"));
+        self.cast(
+            poses,
+            |b| matches!(b, BodyRef::Static | BodyRef::Box),
+            &mut layer,
+        );
+        self.layer = layer;
+        let cam_rot = self.pose.rotation.to_rotation_matrix().into_inner();
+        let eye = self.pose.translation.vector;
 
         frame.width = w as u32;
         frame.height = h as u32;
@@ -535,9 +629,20 @@ impl Camera {
         frame.flow_mask.resize(n, 0);
         let light = Vector3::from(LIGHT).normalize();
         let (depth_std, rgb_std) = noise;
+        let noiseless = depth_std <= 0.0 && rgb_std <= 0.0;
+        let still = self.still.as_ref().expect("cast above");
         for i in 0..n {
-            let hit = self.hit[i];
-            let t = self.t[i];
+            let hit = self.layer.hit[i];
+            let t = self.layer.t[i];
+            if noiseless && hit == still.hit[i] {
+                // The still scene shows here: its pixel is already shaded.
+                let (rgb, depth, class) = self.still_px[i];
+                frame.rgb[3 * i..3 * i + 3].copy_from_slice(&rgb);
+                frame.depth_m[i] = depth;
+                frame.class[i] = class;
+                self.cur[i] = None;
+                continue;
+            }
             if hit == NO_HIT || t > self.config.max_depth_m {
                 frame.rgb[3 * i..3 * i + 3].fill(0);
                 frame.depth_m[i] = 0.0;
@@ -546,15 +651,13 @@ impl Camera {
                 continue;
             }
             let prim = &self.prims[hit as usize];
-            let shade = 0.35 + 0.65 * self.normal[i].dot(&light).max(0.0);
+            let shade = lambert(&self.layer.normal[i], &light);
             for k in 0..3 {
                 let mut c = 255.0 * prim.color[k] * shade;
                 if rgb_std > 0.0 {
                     c += rgb_std * self.rng.normal();
                 }
-                // Round half up; `f64::round` is a libm call on this ISA
-                // baseline (10% of a frame).
-                frame.rgb[3 * i + k] = (c.clamp(0.0, 255.0) + 0.5) as u8;
+                frame.rgb[3 * i + k] = to_level(c);
             }
             let mut depth = t;
             if depth_std > 0.0 {
@@ -610,6 +713,7 @@ impl Camera {
     pub fn reset(&mut self) {
         self.has_prev = false;
         self.frames = 0;
+        self.still = None;
     }
 }
 

@@ -183,3 +183,63 @@ fn occlusion_blanks_the_view_and_frames_are_deterministic() {
     assert!(a[1].depth_m.iter().any(|&d| d > 0.0));
     assert!(a[1].flow_mask.contains(&1), "the falling arm must flow");
 }
+
+/// The floor and the box are cast once per box pose and reused: a frame
+/// after the box moved must equal a fresh camera's, and repeated frames of
+/// one pose must equal the first.
+#[test]
+fn the_still_scene_is_recast_when_the_box_moves() {
+    let prims = vec![
+        Primitive {
+            body: BodyRef::Static,
+            local: Isometry3::translation(0.0, 0.0, -0.05),
+            geometry: Geometry::Cuboid {
+                half: Vector3::new(3.0, 3.0, 0.05),
+            },
+            class: Class::Ground,
+            color: [0.4, 0.4, 0.4],
+        },
+        Primitive {
+            body: BodyRef::Box,
+            local: Isometry3::identity(),
+            geometry: Geometry::Cuboid {
+                half: Vector3::new(0.1, 0.1, 0.1),
+            },
+            class: Class::Box,
+            color: [0.2, 0.4, 0.8],
+        },
+        Primitive {
+            body: BodyRef::Link(1),
+            local: Isometry3::identity(),
+            geometry: Geometry::Capsule {
+                half_length: 0.2,
+                radius: 0.05,
+            },
+            class: Class::Robot,
+            color: [0.9, 0.5, 0.1],
+        },
+    ];
+    let cfg = CameraConfig::default();
+    let links = [Isometry3::identity(), Isometry3::translation(0.4, 0.1, 0.4)];
+    let at = |x: f64| BodyPoses {
+        links: &links,
+        box_pose: Some(Isometry3::translation(x, 0.0, 0.1)),
+    };
+    let shot = |cam: &mut Camera, x: f64| {
+        let mut f = CameraFrame::default();
+        cam.render(&at(x), 0.0, &[], (0.0, 0.0), &mut f);
+        (f.rgb, f.depth_m, f.class)
+    };
+    let mut cam = Camera::new(&cfg, prims.clone(), 0);
+    let first = shot(&mut cam, 0.45);
+    assert!(first.2.contains(&(Class::Box as u8)));
+    assert_eq!(
+        shot(&mut cam, 0.45),
+        first,
+        "a repeated pose renders the same"
+    );
+    let moved = shot(&mut cam, 0.60);
+    assert_ne!(moved, first, "the box moved in view");
+    let fresh = shot(&mut Camera::new(&cfg, prims, 0), 0.60);
+    assert_eq!(moved, fresh, "the moved box must be cast anew");
+}
