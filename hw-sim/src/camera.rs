@@ -365,8 +365,15 @@ pub struct Camera {
     layer: Layer,
     /// The floor's and the box's hits, for the box pose they were cast at.
     still: Option<Layer>,
-    /// The still layer shaded without noise: RGB, depth, class per pixel.
-    still_px: Vec<([u8; 3], f32, u8)>,
+    /// The still layer shaded without noise, as a frame holds it.
+    still_rgb: Vec<u8>,
+    still_depth: Vec<f32>,
+    still_class: Vec<u8>,
+    /// Where `cur` and `prev` hold points (outside: `None`).
+    cur_rect: Rect,
+    prev_rect: Rect,
+    /// Shade every pixel every frame (a test's reference for the fast path).
+    exhaustive: bool,
     /// Per pixel of the last frame: the body and the hit point in its frame.
     prev: Vec<Option<(BodyRef, Vector3<f64>)>>,
     cur: Vec<Option<(BodyRef, Vector3<f64>)>>,
@@ -376,6 +383,64 @@ pub struct Camera {
 }
 
 const NO_HIT: u32 = u32::MAX;
+
+/// A pixel rectangle `[u0, u1) × [v0, v1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Rect {
+    u0: usize,
+    u1: usize,
+    v0: usize,
+    v1: usize,
+}
+
+impl Rect {
+    const EMPTY: Rect = Rect {
+        u0: usize::MAX,
+        u1: 0,
+        v0: usize::MAX,
+        v1: 0,
+    };
+
+    fn full(w: usize, h: usize) -> Rect {
+        Rect {
+            u0: 0,
+            u1: w,
+            v0: 0,
+            v1: h,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.u0 >= self.u1 || self.v0 >= self.v1
+    }
+
+    fn union(self, o: Rect) -> Rect {
+        if o.is_empty() {
+            return self;
+        }
+        if self.is_empty() {
+            return o;
+        }
+        Rect {
+            u0: self.u0.min(o.u0),
+            u1: self.u1.max(o.u1),
+            v0: self.v0.min(o.v0),
+            v1: self.v1.max(o.v1),
+        }
+    }
+
+    /// Its rows as index ranges of a row-major image `w` wide.
+    fn rows(self, w: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+        let (u0, u1) = (self.u0, self.u1.max(self.u0));
+        let v1 = if self.is_empty() { self.v0 } else { self.v1 };
+        (self.v0..v1).map(move |v| v * w + u0..v * w + u1)
+    }
+
+    /// Its pixel indices, row by row.
+    fn pixels(self, w: usize) -> impl Iterator<Item = usize> {
+        self.rows(w).flatten()
+    }
+}
 
 /// Lambert shading with an ambient floor, 0.35..1.
 fn lambert(normal: &Vector3<f64>, light: &Vector3<f64>) -> f64 {
@@ -412,12 +477,6 @@ impl Layer {
     fn clear(&mut self) {
         self.t.fill(f64::INFINITY);
         self.hit.fill(NO_HIT);
-    }
-
-    fn copy_from(&mut self, other: &Layer) {
-        self.t.clone_from(&other.t);
-        self.hit.clone_from(&other.hit);
-        self.normal.clone_from(&other.normal);
     }
 }
 const LIGHT: [f64; 3] = [0.35, -0.45, 0.82];
@@ -471,7 +530,12 @@ impl Camera {
             dirs,
             layer: Layer::new(n),
             still: None,
-            still_px: Vec::with_capacity(n),
+            still_rgb: Vec::new(),
+            still_depth: Vec::new(),
+            still_class: Vec::new(),
+            cur_rect: Rect::EMPTY,
+            prev_rect: Rect::EMPTY,
+            exhaustive: false,
             prev: vec![None; n],
             cur: vec![None; n],
             has_prev: false,
@@ -507,40 +571,58 @@ impl Camera {
         self.render(&poses, shot.t_s, &shot.occlusions, shot.noise, frame);
     }
 
+    /// The pixels that can see primitive `pi` at pose `world`: the union of
+    /// its covering spheres' projected bounds, or the whole image if any
+    /// reaches behind the eye.
+    fn screen_rect(&self, pi: usize, world: &Isometry3<f64>) -> Rect {
+        let (w, h) = (self.config.width as usize, self.config.height as usize);
+        let ([cx, cy], f) = (self.principal_px, self.focal_px);
+        let mut rect = Rect::EMPTY;
+        for (bc, br) in &self.covers[pi] {
+            let c = self
+                .pose
+                .inverse_transform_point(&(world * Point3::from(*bc)));
+            if c.z - br <= 1e-3 {
+                return Rect::full(w, h);
+            }
+            let (zn, zf) = (c.z - br, c.z + br);
+            let lo = |a: f64| (a / zn).min(a / zf);
+            let hi = |a: f64| (a / zn).max(a / zf);
+            let clampi = |x: f64, m: usize| x.floor().clamp(0.0, m as f64) as usize;
+            rect = rect.union(Rect {
+                u0: clampi(cx + f * lo(c.x - br), w),
+                u1: clampi(cx + f * hi(c.x + br) + 1.0, w),
+                v0: clampi(cy + f * lo(c.y - br), h),
+                v1: clampi(cy + f * hi(c.y + br) + 1.0, h),
+            });
+        }
+        rect
+    }
+
+    /// The union of the screen rectangles of the primitives `skip` keeps.
+    fn region(&self, poses: &BodyPoses, skip: impl Fn(BodyRef) -> bool) -> Rect {
+        self.prims
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| !skip(p.body))
+            .fold(Rect::EMPTY, |r, (pi, p)| {
+                r.union(self.screen_rect(pi, &(poses.get(p.body) * p.local)))
+            })
+    }
+
     /// Casts the camera's rays at every primitive whose body `skip` does
     /// not exclude, keeping the nearest hit per pixel in `layer`.
     fn cast(&self, poses: &BodyPoses, skip: impl Fn(BodyRef) -> bool, layer: &mut Layer) {
-        let (w, h) = (self.config.width as usize, self.config.height as usize);
+        let w = self.config.width as usize;
         let cam_rot = self.pose.rotation.to_rotation_matrix().into_inner();
         let eye = self.pose.translation.vector;
-        let ([cx, cy], f) = (self.principal_px, self.focal_px);
         for (pi, prim) in self.prims.iter().enumerate() {
             if skip(prim.body) {
                 continue;
             }
             let world = poses.get(prim.body) * prim.local;
-            // Screen rectangle: the union of the covering spheres' projected
-            // bounds, or the whole image if any reaches behind the eye.
-            let mut rect = (w, 0, h, 0);
-            for (bc, br) in &self.covers[pi] {
-                let c = self
-                    .pose
-                    .inverse_transform_point(&(world * Point3::from(*bc)));
-                if c.z - br <= 1e-3 {
-                    rect = (0, w, 0, h);
-                    break;
-                }
-                let (zn, zf) = (c.z - br, c.z + br);
-                let lo = |a: f64| (a / zn).min(a / zf);
-                let hi = |a: f64| (a / zn).max(a / zf);
-                let clampi = |x: f64, m: usize| x.floor().clamp(0.0, m as f64) as usize;
-                rect.0 = rect.0.min(clampi(cx + f * lo(c.x - br), w));
-                rect.1 = rect.1.max(clampi(cx + f * hi(c.x + br) + 1.0, w));
-                rect.2 = rect.2.min(clampi(cy + f * lo(c.y - br), h));
-                rect.3 = rect.3.max(clampi(cy + f * hi(c.y + br) + 1.0, h));
-            }
-            let (u0, u1, v0, v1) = rect;
-            if u0 >= u1 || v0 >= v1 {
+            let rect = self.screen_rect(pi, &world);
+            if rect.is_empty() {
                 continue;
             }
             // Ray in the primitive frame: origin once, directions through a
@@ -548,17 +630,14 @@ impl Camera {
             let inv = world.inverse();
             let o = inv.transform_point(&Point3::from(eye)).coords;
             let m = inv.rotation.to_rotation_matrix().into_inner() * cam_rot;
-            for v in v0..v1 {
-                for u in u0..u1 {
-                    let i = v * w + u;
-                    let d = m * self.dirs[i];
-                    if let Some((t, nrm)) = prim.geometry.intersect(&o, &d)
-                        && t < layer.t[i]
-                    {
-                        layer.t[i] = t;
-                        layer.hit[i] = pi as u32;
-                        layer.normal[i] = world.rotation * nrm;
-                    }
+            for i in rect.pixels(w) {
+                let d = m * self.dirs[i];
+                if let Some((t, nrm)) = prim.geometry.intersect(&o, &d)
+                    && t < layer.t[i]
+                {
+                    layer.t[i] = t;
+                    layer.hit[i] = pi as u32;
+                    layer.normal[i] = world.rotation * nrm;
                 }
             }
         }
@@ -577,9 +656,10 @@ impl Camera {
     ) {
         let (w, h) = (self.config.width as usize, self.config.height as usize);
         let n = w * h;
-        // The floor and the box do not move within an episode: their depth
-        // layer is cast once per box pose and copied under every frame, so
-        // a frame casts rays only at the arm and the peg.
+        let moving = |b: BodyRef| !matches!(b, BodyRef::Static | BodyRef::Box);
+        // The floor and the box do not move within an episode: their hits are
+        // cast and shaded once per box pose, and a frame casts rays only at
+        // the arm and the peg.
         let fresh = self
             .still
             .as_ref()
@@ -588,33 +668,46 @@ impl Camera {
             let mut layer = self.still.take().unwrap_or_else(|| Layer::new(n));
             layer.clear();
             layer.box_pose = poses.box_pose;
-            self.cast(
-                poses,
-                |b| b != BodyRef::Static && b != BodyRef::Box,
-                &mut layer,
-            );
+            self.cast(poses, moving, &mut layer);
             let light = Vector3::from(LIGHT).normalize();
-            self.still_px.clear();
-            self.still_px.extend((0..n).map(|i| {
+            self.still_rgb.resize(3 * n, 0);
+            self.still_depth.resize(n, 0.0);
+            self.still_class.resize(n, 0);
+            for i in 0..n {
                 let (hit, t) = (layer.hit[i], layer.t[i]);
-                if hit == NO_HIT || t > self.config.max_depth_m {
-                    return ([0; 3], 0.0, Class::None as u8);
-                }
-                let prim = &self.prims[hit as usize];
-                let shade = lambert(&layer.normal[i], &light);
-                let rgb = prim.color.map(|c| to_level(255.0 * c * shade));
-                (rgb, t as f32, prim.class as u8)
-            }));
+                let (rgb, depth, class) = if hit == NO_HIT || t > self.config.max_depth_m {
+                    ([0; 3], 0.0, Class::None as u8)
+                } else {
+                    let prim = &self.prims[hit as usize];
+                    let shade = lambert(&layer.normal[i], &light);
+                    let rgb = prim.color.map(|c| to_level(255.0 * c * shade));
+                    (rgb, t as f32, prim.class as u8)
+                };
+                self.still_rgb[3 * i..3 * i + 3].copy_from_slice(&rgb);
+                self.still_depth[i] = depth;
+                self.still_class[i] = class;
+            }
             self.still = Some(layer);
         }
+        let (depth_std, rgb_std) = noise;
+        // Without noise only the pixels that can see the arm or the peg
+        // differ from the shaded still scene; with noise every pixel draws.
+        let fast = depth_std <= 0.0 && rgb_std <= 0.0 && !self.exhaustive;
+        let region = if fast {
+            self.region(poses, |b| !moving(b))
+        } else {
+            Rect::full(w, h)
+        };
         let mut layer = std::mem::replace(&mut self.layer, Layer::new(0));
-        layer.copy_from(self.still.as_ref().expect("cast above"));
-        self.cast(
-            poses,
-            |b| matches!(b, BodyRef::Static | BodyRef::Box),
-            &mut layer,
-        );
+        let still = self.still.as_ref().expect("cast above");
+        for row in region.rows(w) {
+            layer.t[row.clone()].copy_from_slice(&still.t[row.clone()]);
+            layer.hit[row.clone()].copy_from_slice(&still.hit[row.clone()]);
+            layer.normal[row.clone()].copy_from_slice(&still.normal[row]);
+        }
+        self.cast(poses, |b| !moving(b), &mut layer);
         self.layer = layer;
+        let still = self.still.as_ref().expect("cast above");
         let cam_rot = self.pose.rotation.to_rotation_matrix().into_inner();
         let eye = self.pose.translation.vector;
 
@@ -628,26 +721,25 @@ impl Camera {
         frame.flow_px.resize(n, [0.0; 2]);
         frame.flow_mask.resize(n, 0);
         let light = Vector3::from(LIGHT).normalize();
-        let (depth_std, rgb_std) = noise;
-        let noiseless = depth_std <= 0.0 && rgb_std <= 0.0;
-        let still = self.still.as_ref().expect("cast above");
-        for i in 0..n {
+        // `cur` holds points only inside the region it was last filled over.
+        for i in self.cur_rect.pixels(w) {
+            self.cur[i] = None;
+        }
+        if fast {
+            frame.rgb.copy_from_slice(&self.still_rgb);
+            frame.depth_m.copy_from_slice(&self.still_depth);
+            frame.class.copy_from_slice(&self.still_class);
+        }
+        for i in region.pixels(w) {
             let hit = self.layer.hit[i];
             let t = self.layer.t[i];
-            if noiseless && hit == still.hit[i] {
-                // The still scene shows here: its pixel is already shaded.
-                let (rgb, depth, class) = self.still_px[i];
-                frame.rgb[3 * i..3 * i + 3].copy_from_slice(&rgb);
-                frame.depth_m[i] = depth;
-                frame.class[i] = class;
-                self.cur[i] = None;
-                continue;
+            if fast && hit == still.hit[i] {
+                continue; // the still scene, already in the frame
             }
             if hit == NO_HIT || t > self.config.max_depth_m {
                 frame.rgb[3 * i..3 * i + 3].fill(0);
                 frame.depth_m[i] = 0.0;
                 frame.class[i] = Class::None as u8;
-                self.cur[i] = None;
                 continue;
             }
             let prim = &self.prims[hit as usize];
@@ -665,34 +757,33 @@ impl Camera {
             }
             frame.depth_m[i] = depth as f32;
             frame.class[i] = prim.class as u8;
-            self.cur[i] = if matches!(prim.class, Class::Robot | Class::Peg) {
+            if matches!(prim.class, Class::Robot | Class::Peg) {
                 let world_pt = eye + cam_rot * self.dirs[i] * t;
                 let local = poses
                     .get(prim.body)
                     .inverse_transform_point(&Point3::from(world_pt));
-                Some((prim.body, local.coords))
-            } else {
-                None
-            };
+                self.cur[i] = Some((prim.body, local.coords));
+            }
         }
+        self.cur_rect = region;
 
         // Flow: each point seen on a moving body in the previous frame,
         // carried with its body to now and projected.
-        for i in 0..n {
-            frame.flow_px[i] = [0.0, 0.0];
-            frame.flow_mask[i] = 0;
-            if !self.has_prev {
-                continue;
-            }
-            if let Some((body, local)) = self.prev[i] {
-                let p = poses.get(body) * Point3::from(local);
-                if let Some((u, v, _)) = self.project(&p.coords) {
-                    let (u0, v0) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
-                    frame.flow_px[i] = [(u - u0) as f32, (v - v0) as f32];
-                    frame.flow_mask[i] = 1;
+        frame.flow_px.fill([0.0, 0.0]);
+        frame.flow_mask.fill(0);
+        if self.has_prev {
+            for i in self.prev_rect.pixels(w) {
+                if let Some((body, local)) = self.prev[i] {
+                    let p = poses.get(body) * Point3::from(local);
+                    if let Some((u, v, _)) = self.project(&p.coords) {
+                        let (u0, v0) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                        frame.flow_px[i] = [(u - u0) as f32, (v - v0) as f32];
+                        frame.flow_mask[i] = 1;
+                    }
                 }
             }
         }
+        std::mem::swap(&mut self.prev_rect, &mut self.cur_rect);
         std::mem::swap(&mut self.prev, &mut self.cur);
         self.has_prev = true;
         self.frames += 1;
@@ -714,6 +805,13 @@ impl Camera {
         self.has_prev = false;
         self.frames = 0;
         self.still = None;
+    }
+
+    /// Shades every pixel of every frame instead of only those that can see
+    /// the arm or the peg: the reference the fast path is tested against.
+    #[doc(hidden)]
+    pub fn set_exhaustive(&mut self, on: bool) {
+        self.exhaustive = on;
     }
 }
 

@@ -243,3 +243,28 @@ fn the_still_scene_is_recast_when_the_box_moves() {
     let fresh = shot(&mut Camera::new(&cfg, prims, 0), 0.60);
     assert_eq!(moved, fresh, "the moved box must be cast anew");
 }
+
+/// Without noise a frame shades only the pixels the arm and the peg can
+/// reach; every frame, flow included, must equal shading every pixel.
+#[test]
+fn shading_only_near_the_arm_equals_shading_every_pixel() {
+    // Unpowered, the arm falls: every frame moves and flows.
+    let mut world = World::new(WorldConfig::default()).unwrap();
+    let mut fast = world.camera().clone();
+    let mut full = world.camera().clone();
+    full.set_exhaustive(true);
+    let mut frames = 0;
+    for step in 0..400 {
+        world.step(&[0.0; 7]).unwrap();
+        if step % 50 == 49 {
+            let shot = world.camera_shot();
+            let (mut a, mut b) = (CameraFrame::default(), CameraFrame::default());
+            fast.render_shot(&shot, &mut a);
+            full.render_shot(&shot, &mut b);
+            assert_eq!(a, b, "frame {frames}");
+            assert!(frames == 0 || a.flow_mask.contains(&1));
+            frames += 1;
+        }
+    }
+    assert_eq!(frames, 8);
+}
