@@ -282,7 +282,10 @@ pub struct World {
     ground: ColliderHandle,
     pushes: Vec<ScheduledPush>,
     occlusions: Vec<ScheduledOcclusion>,
-    noise_rng: SimRng,
+    /// Noise streams: joint positions, velocities, force, moment.
+    noise_rngs: [SimRng; 4],
+    /// The F/T low-pass filter's gain per step.
+    ft_alpha: f64,
     step_index: u64,
     q: Vec<f64>,
     v: Vec<f64>,
@@ -340,7 +343,8 @@ impl World {
             ground: ColliderHandle::invalid(),
             pushes: Vec::new(),
             occlusions: Vec::new(),
-            noise_rng: SimRng::new(0, 0),
+            noise_rngs: [0, 1, 2, 3].map(|k| SimRng::new(0, k)),
+            ft_alpha: 1.0,
             step_index: 0,
             q: vec![0.0; nv],
             v: vec![0.0; nv],
@@ -549,7 +553,14 @@ impl World {
         // Episode randomness: one stream per use.
         let mut box_rng = SimRng::new(seed, 1);
         let mut perturb_rng = SimRng::new(seed, 2);
-        self.noise_rng = SimRng::new(seed, 3);
+        // Streams 1–2 are the box and the perturbations, 4 the camera.
+        self.noise_rngs = [3, 5, 6, 7].map(|k| SimRng::new(seed, k));
+        let hz = cfg.noise.ft_filter_hz;
+        self.ft_alpha = if hz > 0.0 {
+            1.0 - (-std::f64::consts::TAU * hz * cfg.dt_s).exp()
+        } else {
+            1.0
+        };
 
         let q0 = if cfg.initial_q.is_empty() {
             default_initial_q(&self.model)
@@ -1055,24 +1066,26 @@ impl World {
         let n = &self.config.noise;
         let r = &mut self.readings;
         r.t_s = self.step_index as f64 * self.config.dt_s;
+        // One stream per channel, drawn only when its noise is on: noise-free
+        // channels cost nothing and turning one on leaves the others' draws.
+        let [q_rng, v_rng, f_rng, m_rng] = &mut self.noise_rngs;
+        let draw = |rng: &mut SimRng, std: f64| {
+            if std > 0.0 { std * rng.normal() } else { 0.0 }
+        };
         for k in 0..self.q.len() {
-            r.q[k] = self.q[k] + n.q_std_rad * self.noise_rng.normal();
-            r.v[k] = self.v[k] + n.v_std_rad_s * self.noise_rng.normal();
+            r.q[k] = self.q[k] + draw(q_rng, n.q_std_rad);
+            r.v[k] = self.v[k] + draw(v_rng, n.v_std_rad_s);
             r.tau_applied[k] = self.tau_applied[k];
         }
-        let alpha = if n.ft_filter_hz > 0.0 {
-            1.0 - (-std::f64::consts::TAU * n.ft_filter_hz * self.config.dt_s).exp()
-        } else {
-            1.0
-        };
+        let alpha = self.ft_alpha;
         for i in 0..6 {
             self.wrench_filtered[i] += alpha * (self.wrench_true[i] - self.wrench_filtered[i]);
-            let std = if i < 3 {
-                n.force_std_n
+            let noise = if i < 3 {
+                draw(f_rng, n.force_std_n)
             } else {
-                n.torque_std_nm
+                draw(m_rng, n.torque_std_nm)
             };
-            r.wrench[i] = self.wrench_filtered[i] + n.ft_bias[i] + std * self.noise_rng.normal();
+            r.wrench[i] = self.wrench_filtered[i] + n.ft_bias[i] + noise;
         }
     }
 

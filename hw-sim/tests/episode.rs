@@ -92,6 +92,25 @@ fn same_seed_same_run_bit_for_bit() {
     assert_ne!(a.0, d.0, "a different seed must give a different run");
 }
 
+/// Each sensor channel draws from its own stream: turning force noise on
+/// leaves the joint-position noise as it was, and a channel without noise
+/// reads the plain value.
+#[test]
+fn noise_channels_do_not_shift_each_other() {
+    let mut c = WorldConfig::default();
+    c.noise.q_std_rad = 1e-4;
+    c.seed = 7;
+    let quiet = run(&c, 200);
+    c.noise.force_std_n = 0.5;
+    let noisy = run(&c, 200);
+    assert_eq!(quiet.0, noisy.0, "force noise moved the joint readings");
+    assert_ne!(quiet.1, noisy.1, "force noise had no effect");
+    c.noise.q_std_rad = 0.0;
+    let mut world = World::new(c).unwrap();
+    world.step(&hold_torques(&world)).unwrap();
+    assert_eq!(world.readings().q, world.q(), "no q noise, yet q was perturbed");
+}
+
 #[test]
 fn seeds_place_the_box_within_its_region() {
     let c = WorldConfig::default();
