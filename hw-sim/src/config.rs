@@ -123,7 +123,9 @@ pub struct TaskConfig {
     pub box_center_xy_m: Vec<f64>,
     /// Half-widths of the placement region around the centre, m.
     pub box_xy_range_m: [f64; 2],
-    /// Half-range of the box yaw, rad.
+    /// Half-range of the box yaw, rad, about the yaw at which the hole fits
+    /// the peg at the initial pose (so the peg starts within this roll of
+    /// alignment).
     pub box_yaw_range_rad: f64,
     /// How far the tip must be below the top face to count as inserted, m.
     pub inserted_depth_m: f64,

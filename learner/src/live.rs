@@ -13,7 +13,7 @@ use crate::log::{LogOptions, LogWriter};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use anyhow::{Context, Result, bail};
 use hw_sim::{PegShape, WorldConfig};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Translation3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
@@ -353,11 +353,10 @@ impl PolicyNode {
 
 /// The task as the policy needs it, from a simulator report.
 pub fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
-    let [x, y, z, w] = r.hole_quat_xyzw;
     TaskGeometry {
         hole_pose: Isometry3::from_parts(
             Translation3::from(r.hole_pos_m),
-            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+            crate::policy::unit_quaternion(r.hole_quat_xyzw),
         ),
         symmetry: world.task.peg.symmetry_order(),
         depth_m: r.hole_depth_m,

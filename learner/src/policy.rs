@@ -98,9 +98,22 @@ impl Observation {
             step: f.step,
             episode: f.header.episode,
             ee_pos: Vector3::from(f.ee_pos_m),
-            ee_rot: UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
+            ee_rot: unit_quaternion([x, y, z, w]),
             ee_twist: f.ee_twist,
         }
+    }
+}
+
+/// A rotation sent as a unit quaternion `[x, y, z, w]`, taken as is when it
+/// is unit to within 1e-12: renormalising it would move it by an ulp, and
+/// lockstep runs would no longer match the fast path bit for bit.
+pub fn unit_quaternion(xyzw: [f64; 4]) -> UnitQuaternion<f64> {
+    let [x, y, z, w] = xyzw;
+    let q = nalgebra::Quaternion::new(w, x, y, z);
+    if (q.norm() - 1.0).abs() < 1e-12 {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::from_quaternion(q)
     }
 }
 
