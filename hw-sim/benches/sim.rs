@@ -151,22 +151,7 @@ fn main() {
             for _ in 0..500 {
                 let a = toward_bottom(&l);
                 for k in 0..50 {
-                    let r = l.world.readings();
-                    let state = rt_controller::RobotState {
-                        q: &r.q,
-                        v: &r.v,
-                        tau_measured: None,
-                        wrench: Some(&r.wrench),
-                    };
-                    let t_s = r.t_s;
-                    rt_controller::step(
-                        &l.model,
-                        &l.ctrl,
-                        &mut l.data,
-                        &state,
-                        (k == 0).then_some(&a),
-                        t_s,
-                    );
+                    l.control((k == 0).then_some(&a));
                     let t1 = Instant::now();
                     l.world.step(l.data.torques()).unwrap();
                     if l.world.camera_due() {

@@ -11,7 +11,7 @@
 
 use hw_sim::camera::{BodyPoses, Camera, CameraFrame, Primitive};
 use hw_sim::config::{CameraConfig, TaskConfig};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 use robot_model::Model;
 
 /// Flow labels from kinematics and geometry.
@@ -48,10 +48,9 @@ pub struct Calibration {
 impl Calibration {
     /// The camera frame in the base frame.
     pub fn pose(&self) -> Isometry3<f64> {
-        let [x, y, z, w] = self.quat_xyzw;
         Isometry3::from_parts(
             Translation3::from(Vector3::from(self.pos_m)),
-            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+            crate::policy::unit_quaternion(self.quat_xyzw),
         )
     }
 }
@@ -155,6 +154,7 @@ pub fn in_contact(forces: &[[f64; 3]], free: &[f64; 3], threshold_n: f64) -> boo
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::UnitQuaternion;
 
     #[test]
     fn contact_threshold_on_the_mean_change() {

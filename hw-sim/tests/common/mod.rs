@@ -43,6 +43,24 @@ impl Rig {
 
     /// One 1 kHz cycle: read the sensors, control step, physics step.
     pub fn cycle(&mut self, action: Option<&Action>) {
+        self.control(action);
+        self.world
+            .step(self.data.torques())
+            .expect("finite torques");
+        if let (Some(task), Some(b)) = (self.world.task(), self.world.box_geometry()) {
+            let s = task.s_m;
+            // Outside the hole: farther from its centre than its outline
+            // reaches, minus the peg's own half-width.
+            let reach = b.hole.iter().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
+            if s.x.hypot(s.y) > reach + 0.02 {
+                self.lowest_outside_hole_m = self.lowest_outside_hole_m.min(s.z);
+            }
+        }
+    }
+
+    /// The control step alone: rt-controller on the current readings, its
+    /// torques left in `self.data`.
+    pub fn control(&mut self, action: Option<&Action>) {
         let r = self.world.readings();
         let state = RobotState {
             q: &r.q,
@@ -58,18 +76,6 @@ impl Rig {
             action,
             r.t_s,
         );
-        self.world
-            .step(self.data.torques())
-            .expect("finite torques");
-        if let (Some(task), Some(b)) = (self.world.task(), self.world.box_geometry()) {
-            let s = task.s_m;
-            // Outside the hole: farther from its centre than its outline
-            // reaches, minus the peg's own half-width.
-            let reach = b.hole.iter().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
-            if s.x.hypot(s.y) > reach + 0.02 {
-                self.lowest_outside_hole_m = self.lowest_outside_hole_m.min(s.z);
-            }
-        }
     }
 
     /// Runs `actions` at 20 Hz (one per 50 cycles), then `hold_s` more.
