@@ -7,12 +7,11 @@
 //! `cargo bench -p hw-sim --bench sim` (prints a table; asserts nothing).
 
 use hw_sim::{CameraFrame, PegShape, Stage, WorldConfig};
-use rt_controller::Action;
 use std::time::Instant;
 
 #[path = "../tests/common/mod.rs"]
 mod common;
-use common::Rig as Loop;
+use common::{Action, Rig as Loop, ZERO};
 
 /// The world of `peg` with its box fixed under the initial pose.
 fn fixed_box(peg: PegShape) -> Loop {
@@ -52,10 +51,7 @@ fn toward_bottom(l: &Loop) -> Action {
     if n > step {
         d *= step / n;
     }
-    Action {
-        delta_pos_m: [d.x, d.y, d.z],
-        delta_roll_rad: (-psi).clamp(-0.05, 0.05),
-    }
+    [d.x, d.y, d.z, (-psi).clamp(-0.05, 0.05)]
 }
 
 /// Drives the peg to the bottom of its hole with 20 Hz actions.
@@ -78,8 +74,8 @@ fn main() {
     println!("|---|---|---|---|");
     for peg in PegShape::ALL {
         let mut l = inserted(peg);
-        let stage = l.world.task().unwrap().stage;
-        let tau = l.data.torques().to_vec();
+        let stage = l.world.task().unwrap().best_stage;
+        let tau = l.data().torques().to_vec();
         let mut physics = Vec::new();
         let mut full = Vec::new();
         for _ in 0..5 {
@@ -88,20 +84,16 @@ fn main() {
                 l.world.step(&tau).unwrap();
             }
             physics.push(1.0 / t0.elapsed().as_secs_f64());
-            let zero = Action {
-                delta_pos_m: [0.0; 3],
-                delta_roll_rad: 0.0,
-            };
             let t0 = Instant::now();
             for k in 0..1000 {
-                l.cycle((k % 50 == 0).then_some(&zero));
+                l.cycle((k % 50 == 0).then_some(&ZERO));
             }
             full.push(1.0 / t0.elapsed().as_secs_f64());
         }
         assert!(l.world.task().unwrap().in_contact || stage != Stage::Completed);
         // The controller must still be running: a faulted one only holds
         // gravity, and the contact would not be the pressing one measured.
-        assert_eq!(l.data.last.mode, rt_controller::Mode::Running, "{peg:?}");
+        assert_eq!(l.data().last.mode, rt_controller::Mode::Running, "{peg:?}");
         println!(
             "| {} | {} (in contact: {}) | {:.1} | {:.1} |",
             peg.name(),
@@ -153,7 +145,7 @@ fn main() {
                 for k in 0..50 {
                     l.control((k == 0).then_some(&a));
                     let t1 = Instant::now();
-                    l.world.step(l.data.torques()).unwrap();
+                    l.apply();
                     if l.world.camera_due() {
                         l.world.render(&mut frame);
                     }
@@ -162,8 +154,8 @@ fn main() {
             }
             total.push(t0.elapsed().as_secs_f64());
             sim.push(in_sim.as_secs_f64());
-            stage = l.world.task().unwrap().stage;
-            assert_eq!(l.data.last.mode, rt_controller::Mode::Running, "{peg:?}");
+            stage = l.world.task().unwrap().best_stage;
+            assert_eq!(l.data().last.mode, rt_controller::Mode::Running, "{peg:?}");
         }
         println!(
             "| {} | {:.3} | {:.3} | {} |",

@@ -4,8 +4,9 @@
 //! with a 7-DoF torque-controlled arm built from a `robot-model` URDF, the
 //! peg-in-hole tasks (square, triangle, semicircle and hexagon pegs), a 6-axis
 //! wrist force/torque sensor read at every physics step, a fixed RGB-D camera
-//! with ground-truth optical flow, perturbations and episode metrics. Its
-//! binary (arriving with the real-time stack) serves that world over shared
+//! with ground-truth optical flow, perturbations and episode metrics, and the
+//! robot's side of the wire messages ([`hardware::SimHardware`]: state out,
+//! torque command in, brakes). Its binary serves that world over shared
 //! memory in real-time or lockstep mode.
 //!
 //! It must not contain controller logic: torques come in, sensor readings go
@@ -22,6 +23,7 @@
 pub mod camera;
 pub mod config;
 pub mod convert;
+pub mod hardware;
 pub mod png;
 pub mod rng;
 pub mod shapes;
@@ -29,5 +31,7 @@ pub mod world;
 
 pub use camera::{CameraFrame, Class};
 pub use config::{ConfigError, WorldConfig};
+pub use hardware::SimHardware;
 pub use shapes::PegShape;
-pub use world::{SensorReadings, SimError, Stage, TaskState, World};
+pub use shared_mem_schema::Stage;
+pub use world::{SensorReadings, SimError, TaskState, World};

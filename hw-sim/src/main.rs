@@ -14,14 +14,14 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use hw_sim::camera::{Camera, CameraShot};
-use hw_sim::{Stage, World, WorldConfig};
+use hw_sim::{SimHardware, World, WorldConfig};
 use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
 };
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, EpisodeReport, HardwareState, Header, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH,
-    MAX_JOINTS, SimCommand, TorqueCommand, hw_time_ns, write_text,
+    SimCommand, TorqueCommand, hw_time_ns, write_text,
 };
 use std::path::PathBuf;
 use std::sync::mpsc;
@@ -101,15 +101,6 @@ fn peg_code(world: &World) -> u32 {
     }
 }
 
-fn stage_code(s: Stage) -> u32 {
-    match s {
-        Stage::Failed => EpisodeReport::STAGE_FAILED,
-        Stage::Touched => EpisodeReport::STAGE_TOUCHED,
-        Stage::Inserted => EpisodeReport::STAGE_INSERTED,
-        Stage::Completed => EpisodeReport::STAGE_COMPLETED,
-    }
-}
-
 struct Server {
     args: Args,
     world: World,
@@ -121,19 +112,15 @@ struct Server {
     torque_sub: Sub<TorqueCommand>,
     command_sub: Sub<SimCommand>,
     render_tx: Option<mpsc::SyncSender<RenderJob>>,
-    state_seq: u64,
     report_seq: u64,
     camera_seq: u64,
     /// Newest valid command of the current episode.
     command: Option<TorqueCommand>,
-    /// Brake position while engaged.
-    brake_q: Option<Vec<f64>>,
-    last_command_seq: u64,
+    /// The robot's side of the messages (state out, command in, brakes).
+    hardware: SimHardware,
     last_result: (u64, u32, String),
     rejected_commands: u64,
     shutdown: bool,
-    /// Workspace for the brakes' gravity load.
-    dynamics: robot_model::Data,
 }
 
 fn run(args: Args) -> Result<()> {
@@ -150,7 +137,7 @@ fn run(args: Args) -> Result<()> {
     };
     config.seed = args.seed;
     let world = World::new(config).context("building the simulated world")?;
-    let world_model_data = world.model().create_data();
+    let hardware = SimHardware::new(&world);
     let ns = args.namespace.clone();
     let node = transport::create_node("hw-sim")?;
     let state_pub = transport::publisher::<HardwareState>(&node, &ns)?;
@@ -187,16 +174,13 @@ fn run(args: Args) -> Result<()> {
         torque_sub,
         command_sub,
         render_tx,
-        state_seq: 0,
         report_seq: 0,
         camera_seq: 0,
         command: None,
-        brake_q: None,
-        last_command_seq: 0,
+        hardware,
         last_result: (0, EpisodeReport::OK, String::new()),
         rejected_commands: 0,
         shutdown: false,
-        dynamics: world_model_data,
     };
     info!(
         "hw-sim: robot {}, peg {}, {} mode, namespace '{}', dt {} s",
@@ -235,9 +219,6 @@ impl Server {
         } else {
             u64::MAX
         };
-        let nv = self.world.model().nv();
-        let zeros = vec![0.0; nv];
-        let mut tau = vec![0.0; nv];
         self.publish_state();
         self.publish_report()?;
         let mut deadline = mono_now_ns();
@@ -269,20 +250,9 @@ impl Server {
             if self.shutdown {
                 break;
             }
-            match have {
-                Some(c) => {
-                    tau.copy_from_slice(&c.tau[..nv]);
-                    self.brake_q = None;
-                    self.last_command_seq = c.header.seq;
-                    self.world.step(&tau).context("stepping the world")?;
-                }
-                None => {
-                    let world = &mut self.world;
-                    let q = self.brake_q.get_or_insert_with(|| world.q().to_vec());
-                    world.set_joint_state(q, &zeros)?;
-                    self.world.step(&zeros).context("stepping the world")?;
-                }
-            }
+            self.hardware
+                .apply(&mut self.world, have.as_ref())
+                .context("stepping the world")?;
             self.publish_state();
             if self.world.camera_due() {
                 self.publish_report()?;
@@ -323,7 +293,7 @@ impl Server {
             if c.header.episode != episode {
                 return; // answers a state of the previous episode
             }
-            if !valid_command(c, nv) {
+            if !SimHardware::valid_command(c, nv) {
                 refused += 1;
                 return;
             }
@@ -445,7 +415,7 @@ impl Server {
         self.seed = c.seed;
         self.episode += 1;
         self.command = None;
-        self.brake_q = None;
+        self.hardware.reset();
         self.new_episode_camera();
         info!("hw-sim: episode {} (seed {})", self.episode, self.seed);
         self.publish_state();
@@ -468,33 +438,9 @@ impl Server {
     }
 
     fn publish_state(&mut self) {
-        self.state_seq += 1;
-        let mut header = self.header(self.state_seq);
-        if self.brake_q.is_some() || self.command.is_none() {
-            header.flags |= HardwareState::BRAKES_ENGAGED;
-        }
-        let r = self.world.readings();
-        let nv = r.q.len();
-        let mut m = HardwareState {
-            header,
-            step: self.world.step_index(),
-            applied_command_seq: self.last_command_seq,
-            n_joints: nv as u32,
-            reserved: 0,
-            q: [0.0; MAX_JOINTS],
-            v: [0.0; MAX_JOINTS],
-            tau_measured: [0.0; MAX_JOINTS],
-            wrench: r.wrench,
-        };
-        m.q[..nv].copy_from_slice(&r.q);
-        m.v[..nv].copy_from_slice(&r.v);
-        if header.flags & HardwareState::BRAKES_ENGAGED != 0 {
-            // Braked joints carry the gravity load: what torque sensors read.
-            robot_model::gravity(self.world.model(), &mut self.dynamics, self.world.q());
-            m.tau_measured[..nv].copy_from_slice(self.dynamics.g.as_slice());
-        } else {
-            m.tau_measured[..nv].copy_from_slice(&r.tau_applied);
-        }
+        let mut m = HardwareState::empty(0);
+        self.hardware
+            .state(&self.world, self.episode, mono_now_ns(), &mut m);
         if let Err(e) = transport::send(&self.state_pub, &m) {
             warn!("hw-sim: {e}");
         }
@@ -512,8 +458,8 @@ impl Server {
             m.command_result = *result;
             m.peg = peg_code(world);
             if let Some(t) = world.task() {
-                m.stage_now = stage_code(t.stage_now);
-                m.stage_best = stage_code(t.stage);
+                m.stage_now = t.stage_now.code();
+                m.stage_best = t.best_stage.code();
                 m.in_contact = t.in_contact as u32;
                 m.s_m = [t.s_m.x, t.s_m.y, t.s_m.z];
                 m.s_psi_rad = t.s_psi_rad;
@@ -529,12 +475,6 @@ impl Server {
         })?;
         Ok(())
     }
-}
-
-fn valid_command(c: &TorqueCommand, nv: usize) -> bool {
-    c.header.schema_version == shared_mem_schema::SCHEMA_VERSION
-        && c.n_joints as usize == nv
-        && c.tau[..nv].iter().all(|t| t.is_finite())
 }
 
 /// Renders shots in order and publishes them.

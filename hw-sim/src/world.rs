@@ -17,6 +17,7 @@ use rapier3d_f64::prelude::{
 };
 use rapier3d_f64::utils::OrthonormalBasis;
 use robot_model::{JointKind, Model, ModelError, Shape};
+use shared_mem_schema::Stage;
 
 /// Why a world could not be built or stepped.
 #[derive(Debug, thiserror::Error)]
@@ -56,33 +57,6 @@ pub enum SimError {
     State(String),
 }
 
-/// The episode stages of the paper's evaluation (Sec. "Evaluation
-/// metrics"), ordered: a later stage implies the earlier ones were reached.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// The peg never touched the box.
-    Failed,
-    /// The peg touched the box.
-    Touched,
-    /// The peg's tip went into the hole.
-    Inserted,
-    /// The peg's tip reached the hole's bottom.
-    Completed,
-}
-
-impl Stage {
-    /// Lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Stage::Failed => "failed",
-            Stage::Touched => "touched",
-            Stage::Inserted => "inserted",
-            Stage::Completed => "completed",
-        }
-    }
-}
-
 /// The task state at the current step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TaskState {
@@ -97,7 +71,7 @@ pub struct TaskState {
     /// The stage reached at this step.
     pub stage_now: Stage,
     /// The best stage reached in the episode so far.
-    pub stage: Stage,
+    pub best_stage: Stage,
 }
 
 /// What the sensors read at the current step (noise and bias included).
@@ -279,7 +253,6 @@ pub struct World {
     effort: Vec<f64>,
     peg: Option<Peg>,
     box_state: Option<BoxState>,
-    ground: ColliderHandle,
     pushes: Vec<ScheduledPush>,
     occlusions: Vec<ScheduledOcclusion>,
     /// Noise streams: joint positions, velocities, force, moment.
@@ -340,7 +313,6 @@ impl World {
             prismatic: Vec::new(),
             peg: None,
             box_state: None,
-            ground: ColliderHandle::invalid(),
             pushes: Vec::new(),
             occlusions: Vec::new(),
             noise_rngs: [0, 1, 2, 3].map(|k| SimRng::new(0, k)),
@@ -389,7 +361,7 @@ impl World {
         let ground_body = physics
             .bodies
             .insert(RigidBodyBuilder::fixed().translation(to_glam(&Vector3::new(0.0, 0.0, -0.05))));
-        self.ground = physics.colliders.insert_with_parent(
+        physics.colliders.insert_with_parent(
             ColliderBuilder::cuboid(3.0, 3.0, 0.05)
                 .collision_groups(groups(GROUND, ARM | PEG))
                 .friction(cfg.task.friction),
@@ -1055,7 +1027,7 @@ impl World {
         };
         let best = self
             .task
-            .map(|t| t.stage)
+            .map(|t| t.best_stage)
             .unwrap_or(Stage::Failed)
             .max(stage_now);
         self.task = Some(TaskState {
@@ -1063,7 +1035,7 @@ impl World {
             s_psi_rad: psi,
             in_contact: contact,
             stage_now,
-            stage: best,
+            best_stage: best,
         });
     }
 
@@ -1214,27 +1186,6 @@ impl World {
     /// The rapier world, read-only (rendering, queries, cross-checks).
     pub fn physics(&self) -> &PhysicsWorld {
         &self.physics
-    }
-
-    /// rapier's generalized accelerations of the last step, per joint.
-    pub fn rapier_accelerations(&self) -> Vec<f64> {
-        let (mb, _) = self
-            .physics
-            .multibody_joints
-            .get(self.joints[0])
-            .expect("multibody");
-        let a = mb.generalized_acceleration();
-        self.dof.iter().map(|&d| a[d]).collect()
-    }
-
-    /// Rigid-body handle of the body moved by joint `j` (0: the base).
-    pub fn body_handle(&self, j: usize) -> RigidBodyHandle {
-        self.bodies[j]
-    }
-
-    /// The ground collider.
-    pub fn ground(&self) -> ColliderHandle {
-        self.ground
     }
 }
 

@@ -10,17 +10,17 @@ use nalgebra::{Point3, Vector3};
 fn mean_wrench(rig: &mut Rig, cycles: usize) -> ([f64; 6], Vector3<f64>) {
     let mut sum = [0.0; 6];
     let mut f_cmd = Vector3::zeros();
-    let zero = rt_controller::Action {
-        delta_pos_m: [0.0; 3],
-        delta_roll_rad: 0.0,
-    };
     for k in 0..cycles {
-        rig.cycle(if k % 50 == 0 { Some(&zero) } else { None });
+        rig.cycle(if k % 50 == 0 {
+            Some(&common::ZERO)
+        } else {
+            None
+        });
         let w = rig.world.wrench_true();
         for i in 0..6 {
             sum[i] += w[i] / cycles as f64;
         }
-        f_cmd += rig.data.osc.force.fixed_rows::<3>(0).into_owned() / cycles as f64;
+        f_cmd += rig.data().osc.force.fixed_rows::<3>(0).into_owned() / cycles as f64;
     }
     (sum, f_cmd)
 }

@@ -17,7 +17,7 @@ use crate::policy::{
 use anyhow::{Context, Result};
 use hw_sim::{PegShape, WorldConfig};
 use rt_controller::ControllerConfig;
-use shared_mem_schema::{EpisodeReport, Pod, PolicyAction, hw_time_ns};
+use shared_mem_schema::{Pod, Stage, hw_time_ns};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -155,7 +155,7 @@ pub struct EpisodeShard {
     /// 20 Hz states (camera frames) written.
     pub states: u64,
     /// Best stage reached.
-    pub stage: String,
+    pub stage: Stage,
     /// The file.
     pub file: PathBuf,
 }
@@ -305,16 +305,13 @@ pub fn run_episode(
     )?;
     let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
     let mut states = 0u64;
-    let mut best = 0u32;
+    let mut best = Stage::Failed;
     let mut stage_of = |env: &FastEnv, log: &mut LogWriter| -> Result<()> {
-        let s = env.world().task().map_or(0, |t| t.stage as u32);
+        let s = env.world().task().map_or(Stage::Failed, |t| t.best_stage);
         if s > best {
             best = s;
             let t = hw_time_ns(env.world().time_s());
-            log.event(
-                t,
-                &serde_json::json!({"event": "stage", "stage": EpisodeReport::stage_name(s)}),
-            )?;
+            log.event(t, &serde_json::json!({"event": "stage", "stage": s}))?;
         }
         Ok(())
     };
@@ -323,24 +320,14 @@ pub fn run_episode(
     log.camera(&cam)?;
     let mut obs = None;
     let mut stop = false;
-    let mut n_actions = 0u64;
     for _ in 0..actions {
         // The first cycle has no observation yet: it holds the start pose.
         let action = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
-        if let Some(a) = action {
-            // Sequence numbers count this episode's actions from 1, as the
-            // sensor frames' `action_seq` does.
-            n_actions += 1;
-            let mut m = PolicyAction::new(n_actions, 0, [a[0], a[1], a[2]], a[3]);
-            let step = env.world().step_index();
-            m.header.t_hw_ns = hw_time_ns(step as f64 * 1e-3).saturating_sub(1_000_000);
-            m.header.t_mono_ns = m.header.t_hw_ns;
-            m.header.episode = episode;
-            m.apply_at_step = step;
-            log.action(&m)?;
-        }
         for c in 0..ACTION_PERIOD {
-            env.cycle(if c == 0 { action.as_ref() } else { None })?;
+            // The message the controller got, as the stack logs it.
+            if let Some(m) = env.cycle(if c == 0 { action.as_ref() } else { None })? {
+                log.action(&m)?;
+            }
             log.sensor(env.sensor_frame())?;
         }
         obs = Some(env.last_observation().context("cycles ran")?);
@@ -366,7 +353,7 @@ pub fn run_episode(
         log.sensor(env.sensor_frame())?;
     }
     let t = hw_time_ns(env.world().time_s());
-    let stage = EpisodeReport::stage_name(best).to_string();
+    let stage = best;
     log.event(
         t,
         &serde_json::json!({"event": "outcome", "stage": &stage, "states": states,

@@ -428,12 +428,7 @@ pub fn episode_samples(
             depth: c0.depth_m.clone(),
             wrench,
             proprio,
-            action: [
-                a.delta_pos_m[0] as f32,
-                a.delta_pos_m[1] as f32,
-                a.delta_pos_m[2] as f32,
-                a.delta_roll_rad as f32,
-            ],
+            action: a.delta().map(|x| x as f32),
             flow: l.flow_px.iter().flat_map(|f| [f[0], f[1]]).collect(),
             mask: l.mask.clone(),
             ee_next: [ee1[0] as f32, ee1[1] as f32, ee1[2] as f32],

@@ -9,11 +9,12 @@
 //! cycle before the one its action is applied in.
 
 use crate::policy::{Action4, Observation, WrenchHistory};
-use hw_sim::{World, WorldConfig};
-use nalgebra::{UnitQuaternion, Vector3};
+use hw_sim::{SimHardware, World, WorldConfig};
 use robot_model::Model;
-use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState};
-use shared_mem_schema::{Header, Pod, SensorFrame, hw_time_ns, hw_time_s};
+use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
+use shared_mem_schema::{
+    HardwareState, Header, Pod, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
+};
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
 pub const ACTION_PERIOD: u64 = 50;
@@ -22,14 +23,14 @@ pub const ACTION_PERIOD: u64 = 50;
 pub struct FastEnv {
     world: World,
     model: Model,
-    ctrl: Controller,
-    data: ControllerData,
-    tau_meas: Vec<f64>,
-    gravity: robot_model::Data,
+    hardware: SimHardware,
+    control: ControlCycle,
+    state: HardwareState,
+    command: TorqueCommand,
     episodes: u64,
     /// Wrench readings of every cycle (the policy's window).
     pub wrench: WrenchHistory,
-    last_obs: Option<Observation>,
+    cycled: bool,
     frame: SensorFrame,
     image: hw_sim::CameraFrame,
     camera_seq: u64,
@@ -42,29 +43,36 @@ impl FastEnv {
     pub fn new(world: WorldConfig, controller: ControllerConfig) -> anyhow::Result<Self> {
         let world = World::new(world)?;
         let model = world.model().clone();
-        let ctrl = Controller::new(&model, controller)?;
-        let data = ctrl.create_data(&model);
-        let gravity = model.create_data();
+        let control = ControlCycle::new(&model, controller)?;
+        let frame = *SensorFrame::boxed_zeroed();
         Ok(Self {
-            tau_meas: vec![0.0; model.nv()],
+            hardware: SimHardware::new(&world),
             world,
             model,
-            ctrl,
-            data,
-            gravity,
+            control,
+            state: HardwareState::empty(0),
+            command: TorqueCommand {
+                header: frame.header,
+                state_step: 0,
+                action_seq: 0,
+                n_joints: 0,
+                reserved: 0,
+                tau: frame.tau_cmd,
+            },
             episodes: 0,
             wrench: WrenchHistory::default(),
-            last_obs: None,
-            frame: *SensorFrame::boxed_zeroed(),
+            cycled: false,
+            frame,
             image: hw_sim::CameraFrame::default(),
             camera_seq: 0,
             action_seq: 0,
         })
     }
 
-    /// The observation of the last cycle.
+    /// The observation of the last cycle (what the policy node reads from
+    /// its sensor frame).
     pub fn last_observation(&self) -> Option<Observation> {
-        self.last_obs.clone()
+        self.cycled.then(|| Observation::from_frame(&self.frame))
     }
 
     /// The sensor frame of the last cycle, as the daemon publishes it.
@@ -96,12 +104,12 @@ impl FastEnv {
 
     /// The control law's workspace.
     pub fn controller_data(&self) -> &ControllerData {
-        &self.data
+        &self.control.data
     }
 
     /// Starts an episode: as hw-sim's reset with a configuration (a world
-    /// built afresh with `seed`), the controller restarted as the daemon
-    /// restarts it when it sees a new episode.
+    /// built afresh with `seed`); the controller restarts when it sees the
+    /// new episode, as the daemon does.
     pub fn reset(&mut self, seed: u64) -> anyhow::Result<()> {
         let cfg = self.world.config().clone();
         self.reset_with(cfg, seed)
@@ -111,79 +119,51 @@ impl FastEnv {
     pub fn reset_with(&mut self, mut cfg: WorldConfig, seed: u64) -> anyhow::Result<()> {
         cfg.seed = seed;
         self.world = World::with_model(self.model.clone(), cfg)?;
-        let t = hw_time_s(hw_time_ns(self.world.time_s()));
-        self.data.restart(t);
+        self.hardware.reset();
         self.episodes += 1;
         self.wrench.clear();
-        self.last_obs = None;
+        self.cycled = false;
         self.camera_seq = 0;
         self.action_seq = 0;
-        // Until the first command the brakes hold the arm: the joints then
-        // carry the gravity load, which is what the torque sensors read.
-        robot_model::gravity(&self.model, &mut self.gravity, self.world.q());
-        self.tau_meas.copy_from_slice(self.gravity.g.as_slice());
         Ok(())
     }
 
-    /// One control cycle and physics step; `action` is applied in it.
-    pub fn cycle(&mut self, action: Option<&Action4>) -> anyhow::Result<()> {
-        let r = self.world.readings();
-        let t = hw_time_s(hw_time_ns(self.world.time_s()));
-        let wrench = r.wrench;
-        let a = action.map(|a| Action {
-            delta_pos_m: [a[0], a[1], a[2]],
-            delta_roll_rad: a[3],
-        });
-        if a.is_some() {
+    /// One control cycle and physics step; `action` is applied in it. The
+    /// same cycle as the deployed stack's in lockstep: hw-sim's hardware
+    /// state → rt-controller's [`ControlCycle`] → the physics step, with
+    /// every time stamp taken from the simulated clock. Returns the action
+    /// message the controller got, as a policy node would have sent it
+    /// (numbered from 1 per episode, stamped with the observation it
+    /// answers, addressed to this step).
+    pub fn cycle(&mut self, action: Option<&Action4>) -> anyhow::Result<Option<PolicyAction>> {
+        let t = hw_time_ns(self.world.time_s());
+        self.hardware
+            .state(&self.world, self.episodes, t, &mut self.state);
+        let observed = if self.cycled {
+            self.frame.header.t_hw_ns
+        } else {
+            t
+        };
+        let action = action.map(|&a| {
             self.action_seq += 1;
-        }
-        rt_controller::step(
-            &self.model,
-            &self.ctrl,
-            &mut self.data,
-            &RobotState {
-                q: &r.q,
-                v: &r.v,
-                tau_measured: Some(&self.tau_meas),
-                wrench: Some(&wrench),
-            },
-            a.as_ref(),
-            t,
-        );
-        self.wrench.push(wrench);
-        let ee = &self.data.ee;
-        let rot = nalgebra::Rotation3::from_matrix_unchecked(ee.rot);
-        let mut twist = [0.0; 6];
-        twist.copy_from_slice(ee.twist.as_slice());
-        self.last_obs = Some(Observation {
-            t_hw_ns: hw_time_ns(self.world.time_s()),
-            step: self.world.step_index(),
-            episode: self.episodes,
-            ee_pos: Vector3::new(ee.pos.x, ee.pos.y, ee.pos.z),
-            ee_rot: UnitQuaternion::from_rotation_matrix(&rot),
-            ee_twist: twist,
+            let mut m = PolicyAction::new(self.action_seq, observed, a);
+            m.header.t_hw_ns = observed;
+            m.header.episode = self.episodes;
+            m.apply_at_step = self.state.step;
+            m
         });
-        let nv = self.model.nv();
-        let f = &mut self.frame;
-        let step = self.world.step_index();
-        f.header = Header::new(step + 1, hw_time_ns(t), hw_time_ns(t), self.episodes);
-        f.step = step;
-        f.action_seq = self.action_seq;
-        f.n_joints = nv as u32;
-        f.mode = shared_mem_schema::ControllerMode::Running as u32;
-        f.q[..nv].copy_from_slice(&r.q);
-        f.v[..nv].copy_from_slice(&r.v);
-        f.tau_cmd[..nv].copy_from_slice(self.data.torques());
-        f.tau_measured[..nv].copy_from_slice(&self.tau_meas);
-        f.ee_pos_m = [ee.pos.x, ee.pos.y, ee.pos.z];
-        let q = self.last_obs.as_ref().expect("just set").ee_rot;
-        f.ee_quat_xyzw = [q.i, q.j, q.k, q.w];
-        f.ee_twist = twist;
-        f.wrench = wrench;
-        self.world.step(self.data.torques())?;
-        self.tau_meas
-            .copy_from_slice(&self.world.readings().tau_applied);
-        Ok(())
+        self.control.cycle(
+            &self.model,
+            &self.state,
+            action.as_ref(),
+            t,
+            &mut self.command,
+            &mut self.frame,
+        );
+        self.cycled = true;
+        self.wrench.push(self.frame.wrench);
+        self.hardware.apply(&mut self.world, Some(&self.command))?;
+        Ok(action)
     }
 
     /// Runs cycles up to the one before the next action step and returns
@@ -193,6 +173,6 @@ impl FastEnv {
         while !self.world.step_index().is_multiple_of(ACTION_PERIOD) {
             self.cycle(None)?;
         }
-        Ok(self.last_obs.clone().expect("a cycle ran"))
+        Ok(Observation::from_frame(&self.frame))
     }
 }

@@ -18,7 +18,7 @@ use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
-    hw_time_s,
+    Stage, hw_time_s,
 };
 use std::path::PathBuf;
 use std::time::Duration;
@@ -153,8 +153,8 @@ pub struct EpisodeOutcome {
     pub episode: u64,
     /// Its seed.
     pub seed: u64,
-    /// Best stage reached: completed, inserted, touched or failed.
-    pub stage: &'static str,
+    /// Best stage reached.
+    pub stage: Stage,
     /// The run was interrupted (SIGINT/SIGTERM) during the episode.
     pub interrupted: bool,
     /// Hardware time it took, s.
@@ -271,12 +271,10 @@ impl PolicyNode {
         a: [f64; 4],
     ) -> Result<PolicyAction> {
         self.action_seq += 1;
-        let m = PolicyAction {
-            header: Header::new(self.action_seq, mono_now_ns(), t_hw_ns, episode),
-            apply_at_step,
-            delta_pos_m: [a[0], a[1], a[2]],
-            delta_roll_rad: a[3],
-        };
+        let mut m = PolicyAction::new(self.action_seq, mono_now_ns(), a);
+        m.header.t_hw_ns = t_hw_ns;
+        m.header.episode = episode;
+        m.apply_at_step = apply_at_step;
         transport::send(&self.action, &m)?;
         Ok(m)
     }
@@ -421,20 +419,20 @@ pub fn run(
         let mut actions = 0u64;
         let mut next_tick = mono_now_ns();
         let mut acted_for_step = u64::MAX;
-        let mut best_stage = 0u32;
+        let mut best_stage = Stage::Failed;
         let mut completed_at: Option<u64> = None;
         let mut t_end;
         loop {
             node.pump(episode, &mut seen, Some(&mut log))?;
             if let Some(r) = &seen.report
-                && r.stage_best > best_stage
+                && r.best_stage() > best_stage
             {
-                best_stage = r.stage_best;
+                best_stage = r.best_stage();
                 log.event(
                     r.header.t_hw_ns,
-                    &serde_json::json!({"event": "stage", "stage": EpisodeReport::stage_name(best_stage)}),
+                    &serde_json::json!({"event": "stage", "stage": best_stage}),
                 )?;
-                if best_stage == EpisodeReport::STAGE_COMPLETED && completed_at.is_none() {
+                if best_stage == Stage::Completed && completed_at.is_none() {
                     completed_at = Some(r.header.t_hw_ns);
                 }
             }
@@ -493,7 +491,7 @@ pub fn run(
                 next_tick = mono_now_ns() + ACTION_PERIOD * 1_000_000;
             }
         }
-        let stage = EpisodeReport::stage_name(best_stage);
+        let stage = best_stage;
         let duration_s = hw_time_s(t_end.saturating_sub(first.header.t_hw_ns));
         log.event(
             t_end,

@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use hw_sim::{PegShape, WorldConfig};
+use hw_sim::{PegShape, Stage, WorldConfig};
 use learner::live::{self, LiveConfig};
 use learner::stack::{self, StackConfig};
 use shared_mem_schema::process::install_termination_handler;
@@ -506,7 +506,10 @@ fn run(cli: Cli) -> Result<()> {
                     o.log.display()
                 );
             })?;
-            let done = outcomes.iter().filter(|o| o.stage == "completed").count();
+            let done = outcomes
+                .iter()
+                .filter(|o| o.stage == Stage::Completed)
+                .count();
             println!(
                 "{done} of {} episodes completed the insertion",
                 outcomes.len()

@@ -57,7 +57,7 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
         frames.push(f);
         if i % 50 == 0 {
             w.camera(&camera(i / 50, 32, 24)).unwrap();
-            let mut a = PolicyAction::new(i / 50, 7, [0.001, 0.0, -0.002], 0.01);
+            let mut a = PolicyAction::new(i / 50, 7, [0.001, 0.0, -0.002, 0.01]);
             a.header.t_hw_ns = i * 1_000_000;
             a.apply_at_step = i + 1;
             w.action(&a).unwrap();
@@ -168,14 +168,16 @@ fn another_schema_version_is_refused_by_name() {
     let path = scratch("version.mcap");
     let mut w = LogWriter::create(&path).unwrap();
     let mut f = sensor(1);
-    f.header.schema_version = 2;
+    let foreign = shared_mem_schema::SCHEMA_VERSION + 1;
+    f.header.schema_version = foreign;
     w.sensor(&f).unwrap();
     w.finish().unwrap();
     let r = LogReader::open(&path).unwrap();
     let e = r.read_raw::<SensorFrame>(topics::SENSOR, None).unwrap_err();
     let text = e.to_string();
     assert!(
-        text.contains("schema version 2") && text.contains("version 1"),
+        text.contains(&format!("schema version {foreign}"))
+            && text.contains(&format!("version {}", shared_mem_schema::SCHEMA_VERSION)),
         "{text}"
     );
     assert!(text.contains("/controller/sensor"), "{text}");

@@ -85,8 +85,14 @@ fn matches_pinocchio() {
             "Pinocchio is required here but `{} -c 'import pinocchio'` fails; run .ci/run's set-up",
             python()
         );
-        eprintln!(
-            "SKIPPED: Pinocchio not importable by {}; set ROBOT_MODEL_PINOCCHIO_PYTHON",
+        // Written past the test harness's capture (which holds back
+        // `eprintln!` of passing tests), so the skip shows in every run.
+        use std::io::Write;
+        let _ = writeln!(
+            std::io::stderr().lock(),
+            "\n*** matches_pinocchio SKIPPED: Pinocchio is not importable by {}; the \
+             cross-check did not run. Run ./scripts/test.sh, or set \
+             ROBOT_MODEL_PINOCCHIO_PYTHON. ***\n",
             python()
         );
         return;

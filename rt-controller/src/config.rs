@@ -31,6 +31,14 @@ pub enum ConfigError {
     /// The end-effector frame is not in the model.
     #[error("controller config: `ee_frame` = {0:?} is not a frame of the robot model")]
     UnknownFrame(String),
+    /// The robot has more joints than the messages carry.
+    #[error("the robot has {joints} joints, messages carry at most {max}")]
+    TooManyJoints {
+        /// The robot's joint count.
+        joints: usize,
+        /// The messages' capacity.
+        max: usize,
+    },
 }
 
 /// Everything the control step needs besides the robot model.

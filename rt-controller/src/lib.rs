@@ -5,9 +5,11 @@
 //! end-effector) into a smooth Cartesian reference, the Cartesian impedance
 //! law, operational-space control (Λ = (J M⁻¹ Jᵀ)⁻¹), the QP torque-limit
 //! filter and the safety supervisor, as a pure step `(state, action) →
-//! torques`. Its binary (arriving with the real-time stack) is the daemon that
-//! wraps that step with shared-memory I/O, real-time set-up and a hardware
-//! backend (simulator or Franka).
+//! torques`, and [`cycle::ControlCycle`], that step over the wire messages
+//! (hardware state and action in, torque command and sensor frame out). The
+//! [`daemon`] module and the `rt-controller` binary wrap the cycle with
+//! shared-memory transport, a clock, real-time set-up and a hardware backend
+//! (the simulator; a Franka backend is planned).
 //!
 //! It must not allocate, lock or block in the 1 kHz path, and it must not do
 //! any learning. Kinematics and dynamics come from `robot-model`.
@@ -27,6 +29,7 @@
 //! ```
 
 pub mod config;
+pub mod cycle;
 pub mod daemon;
 pub mod impedance;
 pub mod linalg;
@@ -39,6 +42,7 @@ pub use config::{
     ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, SafetyConfig,
     TrajectoryConfig,
 };
+pub use cycle::ControlCycle;
 pub use qp::QpOutcome;
 pub use supervisor::{Counters, FaultReason, Mode, Rejection, Supervisor, Transition};
 

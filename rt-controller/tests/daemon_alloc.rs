@@ -31,7 +31,7 @@ use std::sync::atomic::Ordering;
 static GLOBAL: Counting = Counting;
 
 fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
-    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0], 0.0);
+    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
     a.header.schema_version = version;
     a
 }
@@ -70,7 +70,7 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
             };
             transport::send(&rig.actions, &a).unwrap();
         }
-        let skipped_before = rig.daemon.data.supervisor.counters.qp_skipped;
+        let skipped_before = rig.daemon.control.data.supervisor.counters.qp_skipped;
         let mut outcome = None;
         let n = count(|| {
             let now = mono_now_ns();
@@ -88,7 +88,7 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
         (commands, frames, statuses) = (commands + c, frames + f, statuses + s);
         // The first cycles connect the daemon's ports to the peer's
         // subscribers (start-up work); count from the tenth.
-        if k >= 10 && rig.daemon.data.supervisor.counters.qp_skipped > skipped_before {
+        if k >= 10 && rig.daemon.control.data.supervisor.counters.qp_skipped > skipped_before {
             counted += 1;
             let publications = (c + f + s) as i64;
             if n as i64 == publications {
@@ -112,8 +112,8 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
     );
     let growth = LIVE_BYTES.load(Ordering::Relaxed) - live_after_warmup.unwrap();
     assert!(growth <= 0, "the live heap grew by {growth} bytes");
-    let garbage =
-        rig.daemon.data.supervisor.counters.actions_rejected + rig.daemon.stats.actions_garbage;
+    let garbage = rig.daemon.control.data.supervisor.counters.actions_rejected
+        + rig.daemon.stats.actions_garbage;
     assert_eq!(
         garbage, 30,
         "NaN, huge and foreign-schema actions are counted"

@@ -29,7 +29,7 @@ fn the_control_loop_never_reaches_the_heap() {
             } else {
                 -0.01
             };
-            let a = PolicyAction::new(k + 1, mono_now_ns(), [s, s, 0.0], 0.05);
+            let a = PolicyAction::new(k + 1, mono_now_ns(), [s, s, 0.0, 0.05]);
             transport::send(&rig.actions, &a).unwrap();
         }
         rt_alloc::enter_realtime();
@@ -45,12 +45,12 @@ fn the_control_loop_never_reaches_the_heap() {
         run(&mut rig, k);
     }
     let before = rt_alloc::stats();
-    let solved_before = rig.daemon.data.supervisor.counters.qp_solved;
+    let solved_before = rig.daemon.control.data.supervisor.counters.qp_solved;
     for k in 200..5200 {
         run(&mut rig, k);
     }
     let after = rt_alloc::stats();
-    let solves = rig.daemon.data.supervisor.counters.qp_solved - solved_before;
+    let solves = rig.daemon.control.data.supervisor.counters.qp_solved - solved_before;
     assert!(
         solves > 100,
         "only {solves} QP solves: the test must exercise the solver"

@@ -10,8 +10,11 @@
 //! Service names and the schema version live here too. [`transport`] opens a
 //! service with the version as a service attribute, so two processes built
 //! from different schema versions refuse to talk, with an error that names
-//! both versions. That handshake is the only logic here (see the closing
-//! note of the real-time stack issue); the crate must not depend on any other
+//! both versions. Besides the handshake, the crate holds only what every
+//! node shares: the process plumbing ([`process`]: monotonic clock, absolute
+//! sleeps, termination signals), the hardware-time stamping, and the
+//! conversions of its own types (an action to and from the policy's vector,
+//! a [`Stage`] to and from its wire code). It must not depend on any other
 //! crate of this workspace.
 
 pub mod process;
@@ -21,7 +24,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the message layout. Bump it whenever any message's layout or
 /// meaning changes; peers built from different versions refuse to talk.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// Joint arrays hold this many entries; `n_joints` says how many are used.
 pub const MAX_JOINTS: usize = 8;
@@ -242,6 +245,11 @@ pub struct SensorFrame {
     pub n_joints: u32,
     /// Controller mode ([`ControllerMode`] as u32).
     pub mode: u32,
+    /// Fault code after this cycle, as [`ControllerStatus::fault_code`] (0:
+    /// none).
+    pub fault_code: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
     /// Joint positions, rad.
     pub q: [f64; MAX_JOINTS],
     /// Joint velocities, rad/s.
@@ -261,6 +269,76 @@ pub struct SensorFrame {
     pub wrench: [f64; 6],
 }
 
+/// The episode stages of the paper's evaluation (Sec. "Evaluation
+/// metrics"), ordered: a later stage implies the earlier ones were reached.
+/// On the wire as [`Stage::code`], in text (logs, events) as
+/// [`Stage::name`].
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    PartialOrd,
+    Ord,
+    Hash,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+#[repr(u32)]
+pub enum Stage {
+    /// The peg never touched the box.
+    #[default]
+    Failed = 0,
+    /// The peg touched the box.
+    Touched = 1,
+    /// The peg's tip went into the hole.
+    Inserted = 2,
+    /// The peg's tip reached the hole's bottom.
+    Completed = 3,
+}
+
+impl Stage {
+    /// All stages, in order.
+    pub const ALL: [Stage; 4] = [
+        Stage::Failed,
+        Stage::Touched,
+        Stage::Inserted,
+        Stage::Completed,
+    ];
+
+    /// The wire code.
+    pub fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// The stage of a wire code; an unknown code reads as failed.
+    pub fn from_code(code: u32) -> Self {
+        Self::ALL
+            .get(code as usize)
+            .copied()
+            .unwrap_or(Stage::Failed)
+    }
+
+    /// Lower-case name: failed, touched, inserted or completed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Failed => "failed",
+            Stage::Touched => "touched",
+            Stage::Inserted => "inserted",
+            Stage::Completed => "completed",
+        }
+    }
+}
+
+impl core::fmt::Display for Stage {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Learner → controller, 20 Hz: the paper's action, a displacement of the
 /// end-effector target.
 #[repr(C)]
@@ -278,14 +356,22 @@ pub struct PolicyAction {
 }
 
 impl PolicyAction {
-    /// An action to apply as soon as it arrives.
-    pub fn new(seq: u64, t_mono_ns: u64, delta_pos_m: [f64; 3], delta_roll_rad: f64) -> Self {
+    /// An action to apply as soon as it arrives, from the policy's vector
+    /// (Δx, Δy, Δz in m, Δroll in rad).
+    pub fn new(seq: u64, t_mono_ns: u64, delta: [f64; 4]) -> Self {
+        let [x, y, z, roll] = delta;
         Self {
             header: Header::new(seq, t_mono_ns, 0, 0),
             apply_at_step: 0,
-            delta_pos_m,
-            delta_roll_rad,
+            delta_pos_m: [x, y, z],
+            delta_roll_rad: roll,
         }
+    }
+
+    /// The policy's vector (Δx, Δy, Δz in m, Δroll in rad).
+    pub fn delta(&self) -> [f64; 4] {
+        let [x, y, z] = self.delta_pos_m;
+        [x, y, z, self.delta_roll_rad]
     }
 }
 
@@ -510,8 +596,8 @@ pub struct EpisodeReport {
     pub command_result: u32,
     /// Peg: 0 none, 1 square, 2 triangle, 3 semicircle, 4 hexagon.
     pub peg: u32,
-    /// Stage now: 0 failed (not touched), 1 touched, 2 inserted, 3 completed
-    /// (see [`EpisodeReport::stage_name`]).
+    /// Stage now, [`Stage::code`]: 0 failed (not touched), 1 touched, 2
+    /// inserted, 3 completed.
     pub stage_now: u32,
     /// Best stage reached this episode (same codes).
     pub stage_best: u32,
@@ -541,23 +627,14 @@ impl EpisodeReport {
     /// The command was refused; `message` says why.
     pub const REJECTED: u32 = 1;
 
-    /// Stage codes of `stage_now` and `stage_best`.
-    pub const STAGE_FAILED: u32 = 0;
-    /// Touched the box.
-    pub const STAGE_TOUCHED: u32 = 1;
-    /// The tip went into the hole.
-    pub const STAGE_INSERTED: u32 = 2;
-    /// The tip reached the hole's bottom.
-    pub const STAGE_COMPLETED: u32 = 3;
+    /// The stage reached at this step.
+    pub fn stage_now(&self) -> Stage {
+        Stage::from_code(self.stage_now)
+    }
 
-    /// Name of a stage code: completed, inserted, touched or failed.
-    pub fn stage_name(code: u32) -> &'static str {
-        match code {
-            Self::STAGE_COMPLETED => "completed",
-            Self::STAGE_INSERTED => "inserted",
-            Self::STAGE_TOUCHED => "touched",
-            _ => "failed",
-        }
+    /// The best stage reached this episode so far.
+    pub fn best_stage(&self) -> Stage {
+        Stage::from_code(self.stage_best)
     }
 
     /// The message text (lossy UTF-8).
@@ -598,7 +675,7 @@ const J: usize = 8 * MAX_JOINTS;
 const _: () = assert!(size_of::<Header>() == H);
 const _: () = assert!(size_of::<HardwareState>() == H + 16 + 8 + 3 * J + 48);
 const _: () = assert!(size_of::<TorqueCommand>() == H + 16 + 8 + J);
-const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 8 + 4 * J + 8 * 19);
+const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 16 + 4 * J + 8 * 19);
 const _: () = assert!(size_of::<PolicyAction>() == H + 8 + 32);
 const _: () = assert!(
     size_of::<CameraFrame>()

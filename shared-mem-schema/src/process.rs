@@ -64,21 +64,14 @@ pub fn install_termination_handler() {
     }
 }
 
-/// True once SIGINT or SIGTERM arrived (or [`request_termination`] was
-/// called).
+/// True once SIGINT or SIGTERM arrived.
 pub fn termination_requested() -> bool {
     TERMINATE.load(Ordering::Acquire)
 }
 
-/// The signal that requested termination (0: none or a programmatic
-/// request).
+/// The signal that requested termination (0: none).
 pub fn termination_signal() -> i32 {
     SIGNAL.load(Ordering::Relaxed)
-}
-
-/// Requests termination from within the process.
-pub fn request_termination() {
-    TERMINATE.store(true, Ordering::Release);
 }
 
 #[cfg(test)]

@@ -89,7 +89,7 @@ fn start_sim_and_controller(
 }
 
 fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
-    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0], 0.0);
+    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
     a.header.schema_version = version;
     a
 }

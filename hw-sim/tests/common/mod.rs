@@ -1,17 +1,30 @@
-//! The simulated arm driven by rt-controller's control core at 1 kHz with
-//! 20 Hz actions, as the deployed stack runs it (minus the processes).
+//! The simulated arm driven by rt-controller's control cycle at 1 kHz with
+//! 20 Hz actions, as the deployed stack runs it in lockstep (minus the
+//! processes): hw-sim's hardware state → `ControlCycle` → torque command →
+//! physics step, the same code as the daemon and the learner's fast path.
 #![allow(dead_code)]
 
-use hw_sim::{World, WorldConfig};
+use hw_sim::{SimHardware, World, WorldConfig};
 use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
-use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState};
+use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
+use shared_mem_schema::{HardwareState, Pod, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns};
+
+/// A policy action: Δx, Δy, Δz (m), Δroll (rad).
+pub type Action = [f64; 4];
+
+/// The zero action (keeps the controller running without moving).
+pub const ZERO: Action = [0.0; 4];
 
 pub struct Rig {
     pub world: World,
     pub model: Model,
-    pub ctrl: Controller,
-    pub data: ControllerData,
+    pub hardware: SimHardware,
+    pub control: ControlCycle,
+    pub state: HardwareState,
+    pub command: TorqueCommand,
+    pub frame: SensorFrame,
+    actions: u64,
     /// Lowest peg-tip height relative to the hole's top face seen while
     /// the tip was outside the hole's outline (a pass-through check).
     pub lowest_outside_hole_m: f64,
@@ -30,23 +43,37 @@ impl Rig {
     pub fn new(config: WorldConfig) -> Self {
         let world = World::new(config).expect("world builds");
         let model = world.model().clone();
-        let ctrl = Controller::new(&model, ControllerConfig::default()).expect("controller");
-        let data = ctrl.create_data(&model);
+        let control = ControlCycle::new(&model, ControllerConfig::default()).expect("controller");
+        let frame = *SensorFrame::boxed_zeroed();
         Self {
+            hardware: SimHardware::new(&world),
             world,
             model,
-            ctrl,
-            data,
+            control,
+            state: HardwareState::empty(0),
+            command: TorqueCommand {
+                header: frame.header,
+                state_step: 0,
+                action_seq: 0,
+                n_joints: 0,
+                reserved: 0,
+                tau: frame.tau_cmd,
+            },
+            frame,
+            actions: 0,
             lowest_outside_hole_m: f64::INFINITY,
         }
     }
 
-    /// One 1 kHz cycle: read the sensors, control step, physics step.
+    /// The control law's workspace.
+    pub fn data(&self) -> &ControllerData {
+        &self.control.data
+    }
+
+    /// One 1 kHz cycle: hardware state, control cycle, physics step.
     pub fn cycle(&mut self, action: Option<&Action>) {
         self.control(action);
-        self.world
-            .step(self.data.torques())
-            .expect("finite torques");
+        self.apply();
         if let (Some(task), Some(b)) = (self.world.task(), self.world.box_geometry()) {
             let s = task.s_m;
             // Outside the hole: farther from its centre than its outline
@@ -58,24 +85,30 @@ impl Rig {
         }
     }
 
-    /// The control step alone: rt-controller on the current readings, its
-    /// torques left in `self.data`.
+    /// The control cycle alone: the hardware state of the world now through
+    /// rt-controller's cycle, its command left in `self.command`.
     pub fn control(&mut self, action: Option<&Action>) {
-        let r = self.world.readings();
-        let state = RobotState {
-            q: &r.q,
-            v: &r.v,
-            tau_measured: None,
-            wrench: Some(&r.wrench),
-        };
-        rt_controller::step(
+        let t = hw_time_ns(self.world.time_s());
+        self.hardware.state(&self.world, 1, t, &mut self.state);
+        let action = action.map(|&a| {
+            self.actions += 1;
+            PolicyAction::new(self.actions, t, a)
+        });
+        self.control.cycle(
             &self.model,
-            &self.ctrl,
-            &mut self.data,
-            &state,
-            action,
-            r.t_s,
+            &self.state,
+            action.as_ref(),
+            t,
+            &mut self.command,
+            &mut self.frame,
         );
+    }
+
+    /// The physics step under the last command.
+    pub fn apply(&mut self) {
+        self.hardware
+            .apply(&mut self.world, Some(&self.command))
+            .expect("finite torques");
     }
 
     /// Runs `actions` at 20 Hz (one per 50 cycles), then `hold_s` more.
@@ -90,11 +123,7 @@ impl Rig {
         for k in 0..n {
             // Keep the policy "alive" with zero actions so the controller
             // keeps its running mode (it holds after 100 ms without one).
-            let zero = Action {
-                delta_pos_m: [0.0; 3],
-                delta_roll_rad: 0.0,
-            };
-            self.cycle(if k % 50 == 0 { Some(&zero) } else { None });
+            self.cycle(if k % 50 == 0 { Some(&ZERO) } else { None });
         }
     }
 
@@ -117,10 +146,7 @@ pub fn script(start: Vector3<f64>, waypoints: &[(Vector3<f64>, f64)]) -> Vec<Act
             }
             let s = if n > step_m { d * (step_m / n) } else { d };
             p += s;
-            out.push(Action {
-                delta_pos_m: [s.x, s.y, s.z],
-                delta_roll_rad: 0.0,
-            });
+            out.push([s.x, s.y, s.z, 0.0]);
         }
     }
     out

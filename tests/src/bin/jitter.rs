@@ -278,7 +278,7 @@ fn main() -> anyhow::Result<()> {
         } else {
             -0.0005
         };
-        let a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0], 0.0);
+        let a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
         transport::send(&actions, &a)?;
         // 20 Hz, each at another phase of the daemon's 1 ms cycle (both
         // clocks are absolute: a fixed phase would measure one point of

@@ -1,0 +1,78 @@
+//! What the daemon needs of a robot, and the simulator backend (hw-sim over
+//! shared memory). A Franka backend will implement the same trait.
+
+use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
+use shared_mem_schema::{HardwareState, TorqueCommand};
+
+/// A hardware interface failure.
+#[derive(Debug, thiserror::Error)]
+pub enum HardwareError {
+    /// A shared-memory service failed.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// No state arrived at start-up.
+    #[error(
+        "no hardware state from the {backend} backend within {timeout_s} s (is hw-sim running \
+         in namespace '{namespace}'?)"
+    )]
+    NoStartupState {
+        /// The backend's name.
+        backend: &'static str,
+        /// How long the daemon waited, s.
+        timeout_s: f64,
+        /// The service namespace.
+        namespace: String,
+    },
+}
+
+/// What the daemon needs of a robot. Implementations never block.
+pub trait Hardware {
+    /// Short name for logs.
+    fn name(&self) -> &'static str;
+    /// The newest state since the last call, or `None` when nothing new
+    /// arrived.
+    fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError>;
+    /// Sends a torque command.
+    fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError>;
+}
+
+/// hw-sim over shared memory.
+pub struct SimBackend {
+    states: Sub<HardwareState>,
+    commands: Pub<TorqueCommand>,
+    latest: HardwareState,
+}
+
+impl SimBackend {
+    /// Opens the hardware services of `namespace` on `node`.
+    pub fn open(node: &StackNode, namespace: &str) -> Result<Self, TransportError> {
+        Ok(Self {
+            states: transport::subscriber(node, namespace)?,
+            commands: transport::publisher(node, namespace)?,
+            latest: HardwareState::empty(0),
+        })
+    }
+}
+
+impl Hardware for SimBackend {
+    fn name(&self) -> &'static str {
+        "sim"
+    }
+
+    fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
+        let mut got = false;
+        let latest = &mut self.latest;
+        transport::drain(&self.states, |s| {
+            if !got || s.header.seq > latest.header.seq || s.header.episode != latest.header.episode
+            {
+                *latest = *s;
+            }
+            got = true;
+        })?;
+        Ok(got.then_some(&self.latest))
+    }
+
+    fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError> {
+        Ok(transport::send(&self.commands, cmd)?)
+    }
+}

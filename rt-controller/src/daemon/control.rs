@@ -1,0 +1,364 @@
+//! The daemon: the control cycle ([`crate::cycle`]) between a hardware
+//! backend and the learner-facing services, one cycle per call.
+
+use super::backend::{Hardware, HardwareError};
+use super::config::{Clock, DaemonConfig};
+use super::queue::ActionQueue;
+use super::shared::{FAULT_HARDWARE_SILENT, Shared};
+use super::stats::Stats;
+use crate::cycle::ControlCycle;
+use crate::{ActionStatus, ConfigError};
+use robot_model::Model;
+use shared_mem_schema::process::mono_now_ns;
+use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
+use shared_mem_schema::{
+    ControllerMode, ControllerStatus, HardwareState, PolicyAction, SCHEMA_VERSION, SensorFrame,
+    TorqueCommand,
+};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// Why the daemon could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// The controller configuration does not fit the robot.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// A learner-facing service could not be opened.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+}
+
+/// What a cycle did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CycleOutcome {
+    /// No hardware state yet.
+    WaitingForHardware,
+    /// No new state this cycle; nothing sent.
+    Missed,
+    /// Hardware silent past the timeout: Fault, no torques.
+    HardwareLost,
+    /// Torques sent.
+    Sent,
+}
+
+/// The daemon: control cycle, hardware, services and statistics.
+pub struct Daemon<H: Hardware> {
+    pub(super) cfg: DaemonConfig,
+    model: Model,
+    /// The control law with its message plumbing.
+    pub control: ControlCycle,
+    pub(super) hw: H,
+    actions: Sub<PolicyAction>,
+    sensor_pub: Pub<SensorFrame>,
+    status_pub: Pub<ControllerStatus>,
+    queue: ActionQueue,
+    state: HardwareState,
+    have_state: bool,
+    last_state_ns: u64,
+    hardware_lost: bool,
+    last_command: TorqueCommand,
+    sensor: SensorFrame,
+    status_seq: u64,
+    next_status_ns: u64,
+    realtime: bool,
+    /// Loop statistics.
+    pub stats: Box<Stats>,
+    /// Atomics for the monitor thread.
+    pub shared: Arc<Shared>,
+}
+
+impl<H: Hardware> Daemon<H> {
+    /// Builds the controller for `model` and opens the learner-facing
+    /// services on `node`. All buffers are allocated here.
+    pub fn new(
+        cfg: DaemonConfig,
+        model: Model,
+        hw: H,
+        node: &StackNode,
+    ) -> Result<Self, DaemonError> {
+        let control = ControlCycle::new(&model, cfg.controller.clone())?;
+        let ns = &cfg.backend.namespace;
+        let actions = transport::subscriber::<PolicyAction>(node, ns)?;
+        let sensor_pub = transport::publisher::<SensorFrame>(node, ns)?;
+        let status_pub = transport::publisher::<ControllerStatus>(node, ns)?;
+        let empty = HardwareState::empty(0);
+        Ok(Self {
+            cfg,
+            control,
+            hw,
+            actions,
+            sensor_pub,
+            status_pub,
+            queue: ActionQueue::new(),
+            state: empty,
+            have_state: false,
+            last_state_ns: 0,
+            hardware_lost: false,
+            last_command: TorqueCommand {
+                header: empty.header,
+                state_step: 0,
+                action_seq: 0,
+                n_joints: 0,
+                reserved: 0,
+                tau: empty.q,
+            },
+            sensor: SensorFrame {
+                header: empty.header,
+                step: 0,
+                action_seq: 0,
+                n_joints: 0,
+                mode: 0,
+                fault_code: 0,
+                reserved: 0,
+                q: empty.q,
+                v: empty.q,
+                tau_cmd: empty.q,
+                tau_measured: empty.q,
+                ee_pos_m: [0.0; 3],
+                ee_quat_xyzw: [0.0; 4],
+                ee_twist: [0.0; 6],
+                wrench: [0.0; 6],
+            },
+            status_seq: 0,
+            next_status_ns: 0,
+            realtime: false,
+            stats: Box::new(Stats::EMPTY),
+            shared: Arc::new(Shared::default()),
+            model,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DaemonConfig {
+        &self.cfg
+    }
+
+    /// The robot model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Records whether the real-time set-up succeeded (reported in status).
+    pub fn set_realtime(&mut self, ok: bool) {
+        self.realtime = ok;
+    }
+
+    /// The last hardware state received, if any.
+    pub fn hardware_state(&self) -> Option<&HardwareState> {
+        self.have_state.then_some(&self.state)
+    }
+
+    /// The mode as published.
+    pub fn mode(&self) -> ControllerMode {
+        if self.hardware_lost {
+            ControllerMode::HardwareLost
+        } else {
+            self.control.mode()
+        }
+    }
+
+    fn fault_code(&self) -> u32 {
+        if self.hardware_lost {
+            FAULT_HARDWARE_SILENT
+        } else {
+            self.control.fault_code()
+        }
+    }
+
+    /// Polls the hardware once; true when a new state arrived. A state of a
+    /// new episode (the robot was reset) restarts the control law.
+    pub fn poll_hardware(&mut self, now_ns: u64) -> Result<bool, HardwareError> {
+        let nv = self.model.nv();
+        let Some(s) = self.hw.poll()? else {
+            return Ok(false);
+        };
+        if s.header.schema_version != SCHEMA_VERSION || s.n_joints as usize != nv {
+            // Not usable: treat as silence (the timeout then faults).
+            return Ok(false);
+        }
+        if self.have_state
+            && Some(s.header.episode) == self.control.episode()
+            && s.step == self.state.step
+            && self.last_command.state_step == s.step
+            && self.last_command.header.seq > 0
+        {
+            // The same state again (a lockstep simulator re-publishes while
+            // it waits): answer with the same command, do not step again.
+            self.last_state_ns = now_ns;
+            let cmd = self.last_command;
+            self.hw.send(&cmd)?;
+            return Ok(false);
+        }
+        self.state = *s;
+        self.last_state_ns = now_ns;
+        if self.control.observe_episode(&self.state) {
+            self.queue.clear();
+            self.hardware_lost = false;
+        }
+        self.have_state = true;
+        Ok(true)
+    }
+
+    /// Takes every queued action message into the queue; garbage (another
+    /// schema) is counted and dropped. The control law validates the
+    /// values (NaN, out of range) itself.
+    fn take_actions(&mut self) -> Result<(), HardwareError> {
+        let (queue, stats) = (&mut self.queue, &mut self.stats);
+        transport::drain(&self.actions, |a| {
+            stats.actions_received += 1;
+            // Another schema's bytes, or the oldest of an overflowing queue.
+            if a.header.schema_version != SCHEMA_VERSION || queue.push(*a) {
+                stats.actions_garbage += 1;
+            }
+        })?;
+        Ok(())
+    }
+
+    /// Lockstep: waits (bounded) for the action addressed to `step`.
+    fn wait_for_addressed_action(&mut self, step: u64) -> Result<(), HardwareError> {
+        let limit = (self.cfg.timing.lockstep_action_timeout_s * 1e9) as u64;
+        let start = mono_now_ns();
+        let mut spins = 0u32;
+        loop {
+            self.take_actions()?;
+            self.queue.drop_before(step);
+            if self.queue.front().is_some_and(|a| a.apply_at_step == step)
+                || shared_mem_schema::process::termination_requested()
+                || mono_now_ns() - start > limit
+            {
+                return Ok(());
+            }
+            spins += 1;
+            if spins > 200 {
+                std::thread::yield_now();
+            }
+        }
+    }
+
+    /// One control cycle at `now_ns` (`CLOCK_MONOTONIC`), after the
+    /// hardware was polled (`fresh`: a new state arrived). Never allocates.
+    pub fn cycle(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
+        self.stats.cycles += 1;
+        self.shared
+            .heartbeat
+            .store(self.stats.cycles, Ordering::Relaxed);
+        if !fresh {
+            self.stats.hardware_misses += 1;
+        }
+        let outcome = self.control(now_ns, fresh)?;
+        if now_ns >= self.next_status_ns {
+            self.publish_status(now_ns)?;
+            let period = (self.cfg.timing.status_period_ms * 1e6) as u64;
+            self.next_status_ns = now_ns + period;
+        }
+        let mode = self.mode() as u32;
+        self.shared.mode.store(mode, Ordering::Relaxed);
+        self.shared
+            .fault_code
+            .store(self.fault_code(), Ordering::Relaxed);
+        self.shared
+            .garbage_actions
+            .store(self.garbage(), Ordering::Relaxed);
+        Ok(outcome)
+    }
+
+    fn garbage(&self) -> u64 {
+        self.stats.actions_garbage + self.control.data.supervisor.counters.actions_rejected
+    }
+
+    fn control(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
+        if !self.have_state {
+            self.take_actions()?;
+            self.queue.clear();
+            return Ok(CycleOutcome::WaitingForHardware);
+        }
+        let timeout_ns = (self.cfg.timing.hardware_timeout_ms * 1e6) as u64;
+        if now_ns.saturating_sub(self.last_state_ns) > timeout_ns {
+            self.hardware_lost = true;
+        }
+        if self.hardware_lost {
+            // Latched until the hardware comes back with a new episode.
+            self.take_actions()?;
+            self.queue.clear();
+            return Ok(CycleOutcome::HardwareLost);
+        }
+        if !fresh {
+            return Ok(CycleOutcome::Missed);
+        }
+        let step = self.state.step;
+        let t = &self.cfg.timing;
+        if t.clock == Clock::Hardware
+            && t.lockstep_actions
+            && step > 0
+            && step.is_multiple_of(t.action_period_steps)
+        {
+            self.wait_for_addressed_action(step)?;
+        } else {
+            self.take_actions()?;
+        }
+        let action = self.queue.next_for(step);
+        let info = self.control.cycle(
+            &self.model,
+            &self.state,
+            action.as_ref(),
+            now_ns,
+            &mut self.last_command,
+            &mut self.sensor,
+        );
+        // Stamped at sending: the action latency includes the step.
+        let sent = mono_now_ns();
+        self.last_command.header.t_mono_ns = sent;
+        self.hw.send(&self.last_command)?;
+        if matches!(info.action, ActionStatus::Applied | ActionStatus::Clamped)
+            && let Some(a) = &action
+        {
+            self.stats
+                .action_latency
+                .record(sent.saturating_sub(a.header.t_mono_ns));
+        }
+        self.sensor.header.t_mono_ns = mono_now_ns();
+        transport::send(&self.sensor_pub, &self.sensor)?;
+        Ok(CycleOutcome::Sent)
+    }
+
+    /// Publishes the status now (also called at ~10 Hz by [`Daemon::cycle`]).
+    pub fn publish_status(&mut self, now_ns: u64) -> Result<(), HardwareError> {
+        self.status_seq += 1;
+        let c = self.control.data.supervisor.counters;
+        let s = &self.stats;
+        let header = shared_mem_schema::Header::new(
+            self.status_seq,
+            now_ns,
+            self.state.header.t_hw_ns,
+            self.control.episode().unwrap_or(0),
+        );
+        let (mode, fault, garbage) = (self.mode() as u32, self.fault_code(), self.garbage());
+        let (last_action, realtime) = (self.control.last_action_seq(), self.realtime as u32);
+        transport::send_with(&self.status_pub, |m| {
+            m.header = header;
+            m.cycles = s.cycles;
+            m.overruns = s.overruns;
+            m.actions_received = s.actions_received;
+            m.actions_accepted = c.actions_accepted;
+            m.actions_rejected = garbage;
+            m.actions_ignored = c.actions_ignored;
+            m.action_timeouts = c.action_timeouts;
+            m.faults = c.faults;
+            m.hardware_misses = s.hardware_misses;
+            m.last_action_seq = last_action;
+            m.mode = mode;
+            m.fault_code = fault;
+            m.realtime = realtime;
+            m.wakeup_latency = s.wakeup;
+            m.compute = s.compute;
+            m.action_latency = s.action_latency;
+        })?;
+        Ok(())
+    }
+
+    /// Asks the control law to hold the current target (shutdown).
+    pub fn request_hold(&mut self) {
+        self.control.request_hold(&self.state);
+    }
+}

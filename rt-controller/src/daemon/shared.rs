@@ -1,0 +1,23 @@
+//! What the 1 kHz loop shares with its low-priority monitor thread.
+
+use std::sync::atomic::{AtomicU32, AtomicU64};
+
+/// Fault code of a silent hardware (the control law's codes are
+/// [`crate::cycle::fault_code`]'s).
+pub const FAULT_HARDWARE_SILENT: u32 = 100;
+
+/// State the loop shares with its low-priority monitor thread (logging,
+/// systemd watchdog) through atomics only.
+#[derive(Debug, Default)]
+pub struct Shared {
+    /// Cycles run (the watchdog is fed only while it advances).
+    pub heartbeat: AtomicU64,
+    /// [`shared_mem_schema::ControllerMode`] as u32.
+    pub mode: AtomicU32,
+    /// Fault code (see [`crate::cycle::fault_code`]).
+    pub fault_code: AtomicU32,
+    /// Garbage actions counted so far.
+    pub garbage_actions: AtomicU64,
+    /// Overruns so far.
+    pub overruns: AtomicU64,
+}

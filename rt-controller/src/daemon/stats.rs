@@ -1,0 +1,47 @@
+//! The loop's statistics.
+
+use shared_mem_schema::LatencyHistogram;
+
+/// Statistics of the loop (cumulative since start).
+pub struct Stats {
+    /// Cycles run.
+    pub cycles: u64,
+    /// Cycles that finished after their next deadline.
+    pub overruns: u64,
+    /// Cycles without a new hardware state.
+    pub hardware_misses: u64,
+    /// Actions received.
+    pub actions_received: u64,
+    /// Actions refused before the control law saw them (wrong schema
+    /// version, queue overflow).
+    pub actions_garbage: u64,
+    /// Wake-up latency past the deadline.
+    pub wakeup: LatencyHistogram,
+    /// Compute time per cycle.
+    pub compute: LatencyHistogram,
+    /// Action publication → first torque reflecting it.
+    pub action_latency: LatencyHistogram,
+}
+
+impl Stats {
+    /// Nothing counted yet.
+    pub const EMPTY: Self = Self {
+        cycles: 0,
+        overruns: 0,
+        hardware_misses: 0,
+        actions_received: 0,
+        actions_garbage: 0,
+        wakeup: LatencyHistogram::EMPTY,
+        compute: LatencyHistogram::EMPTY,
+        action_latency: LatencyHistogram::EMPTY,
+    };
+}
+
+/// Totals of a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RunSummary {
+    /// Cycles run.
+    pub cycles: u64,
+    /// Overruns.
+    pub overruns: u64,
+}
