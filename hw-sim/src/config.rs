@@ -74,7 +74,7 @@ impl Default for WorldConfig {
     fn default() -> Self {
         Self {
             robot: "iiwa14".into(),
-            dt_s: 0.001,
+            dt_s: shared_mem_schema::rates::CONTROL_PERIOD_S,
             initial_q: Vec::new(),
             joint_damping: Vec::new(),
             joint_friction: Vec::new(),
@@ -185,7 +185,7 @@ impl Default for CameraConfig {
             vertical_fov_deg: 45.0,
             eye_m: [1.45, -0.75, 0.85],
             target_m: [0.45, 0.0, 0.2],
-            period_steps: 50,
+            period_steps: shared_mem_schema::rates::ACTION_PERIOD_STEPS as u32,
             max_depth_m: 4.0,
         }
     }
@@ -501,4 +501,38 @@ impl WorldConfig {
     pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
         toml::from_str(text).map_err(|e| bad("(document)", e.to_string()))
     }
+
+    /// Reads and parses a configuration file (validated against the robot
+    /// when a world is built from it).
+    pub fn from_file(path: &std::path::Path) -> Result<Self, ConfigFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text).map_err(|source| ConfigFileError::Invalid {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}
+
+/// A world configuration file that could not be read or parsed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    /// The file could not be read.
+    #[error("reading the world configuration {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not a valid configuration.
+    #[error("in the world configuration {}: {source}", path.display())]
+    Invalid {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        source: ConfigError,
+    },
 }

@@ -30,7 +30,7 @@ pub mod shapes;
 pub mod world;
 
 pub use camera::{CameraFrame, Class};
-pub use config::{ConfigError, WorldConfig};
+pub use config::{ConfigError, ConfigFileError, WorldConfig};
 pub use hardware::SimHardware;
 pub use shapes::PegShape;
 pub use shared_mem_schema::Stage;

@@ -127,12 +127,7 @@ fn run(args: Args) -> Result<()> {
     install_termination_handler();
     transport::quiet_logs();
     let mut config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading the world configuration {}", path.display()))?;
-            WorldConfig::from_toml(&text)
-                .with_context(|| format!("in the world configuration {}", path.display()))?
-        }
+        Some(path) => WorldConfig::from_file(path)?,
         None => WorldConfig::default(),
     };
     config.seed = args.seed;

@@ -222,18 +222,6 @@ pub fn default_initial_q(model: &Model) -> Vec<f64> {
     }
 }
 
-/// Loads the robot a configuration names.
-pub fn load_robot(robot: &str) -> Result<Model, SimError> {
-    if robot_model::descriptions::BUILTIN_NAMES.contains(&robot) {
-        Ok(robot_model::descriptions::builtin(robot)?)
-    } else {
-        Ok(Model::from_urdf_file(
-            robot,
-            &robot_model::LoadOptions::default(),
-        )?)
-    }
-}
-
 /// The simulated world.
 pub struct World {
     config: WorldConfig,
@@ -274,7 +262,7 @@ pub struct World {
 impl World {
     /// Builds the world for `config` and resets it to its episode.
     pub fn new(config: WorldConfig) -> Result<Self, SimError> {
-        let model = load_robot(&config.robot)?;
+        let model = robot_model::descriptions::load(&config.robot)?;
         Self::with_model(model, config)
     }
 

@@ -304,7 +304,7 @@ impl Models {
         if let Some(m) = self.0.get(robot) {
             return Ok(m.clone());
         }
-        let m = hw_sim::world::load_robot(robot)?;
+        let m = robot_model::descriptions::load(robot)?;
         self.0.insert(robot.into(), m.clone());
         Ok(m)
     }

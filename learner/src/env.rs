@@ -17,7 +17,7 @@ use shared_mem_schema::{
 };
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
-pub const ACTION_PERIOD: u64 = 50;
+pub const ACTION_PERIOD: u64 = shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 
 /// One environment of the fast path.
 pub struct FastEnv {

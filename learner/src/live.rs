@@ -15,6 +15,7 @@ use anyhow::{Context, Result, bail};
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
+use shared_mem_schema::rates::ACTION_PERIOD_NS;
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
@@ -486,9 +487,9 @@ pub fn run(
                 p.update(total_actions, outcomes.len() as u64);
             }
             acted_for_step = frame.step;
-            next_tick += ACTION_PERIOD * 1_000_000;
+            next_tick += ACTION_PERIOD_NS;
             if next_tick < mono_now_ns() {
-                next_tick = mono_now_ns() + ACTION_PERIOD * 1_000_000;
+                next_tick = mono_now_ns() + ACTION_PERIOD_NS;
             }
         }
         let stage = best_stage;

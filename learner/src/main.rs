@@ -149,11 +149,7 @@ fn parse_pegs(list: &str) -> Result<Vec<PegShape>> {
 
 fn load_world(path: Option<&PathBuf>) -> Result<WorldConfig> {
     Ok(match path {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading the world configuration {}", p.display()))?;
-            WorldConfig::from_toml(&text).with_context(|| format!("in {}", p.display()))?
-        }
+        Some(p) => WorldConfig::from_file(p)?,
         None => WorldConfig::default(),
     })
 }

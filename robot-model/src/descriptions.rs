@@ -36,6 +36,16 @@ pub fn home_configuration(robot_name: &str) -> Option<[f64; 7]> {
 /// Names accepted by [`builtin`].
 pub const BUILTIN_NAMES: [&str; 2] = ["iiwa14", "panda"];
 
+/// Loads a robot named in a configuration: a built-in name
+/// ([`BUILTIN_NAMES`]) or else the path of a URDF file.
+pub fn load(name_or_path: &str) -> Result<Model, ModelError> {
+    if BUILTIN_NAMES.contains(&name_or_path) {
+        builtin(name_or_path)
+    } else {
+        Model::from_urdf_file(name_or_path, &LoadOptions::default())
+    }
+}
+
 /// Loads a built-in description by name (`"iiwa14"` or `"panda"`).
 pub fn builtin(name: &str) -> Result<Model, ModelError> {
     let text = match name {

@@ -66,7 +66,7 @@ impl Default for ControllerConfig {
     fn default() -> Self {
         Self {
             ee_frame: "peg_tip".into(),
-            period_s: 0.001,
+            period_s: shared_mem_schema::rates::CONTROL_PERIOD_S,
             trajectory: TrajectoryConfig::default(),
             impedance: ImpedanceConfig::default(),
             osc: OscConfig::default(),

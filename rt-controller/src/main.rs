@@ -3,7 +3,6 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
-use robot_model::{LoadOptions, Model};
 use rt_controller::daemon::config::{BackendKind, Clock, DaemonConfig};
 use rt_controller::daemon::rt::{self, Notifier};
 use rt_controller::daemon::rt_alloc::{self, RtAllocator};
@@ -89,15 +88,6 @@ fn load_config(args: &Args) -> Result<DaemonConfig> {
     Ok(cfg)
 }
 
-fn load_robot(name: &str) -> Result<Model> {
-    if robot_model::descriptions::BUILTIN_NAMES.contains(&name) {
-        Ok(robot_model::descriptions::builtin(name)?)
-    } else {
-        Model::from_urdf_file(name, &LoadOptions::default())
-            .with_context(|| format!("loading the robot `robot` = {name:?}"))
-    }
-}
-
 fn run(args: Args) -> Result<()> {
     let cfg = load_config(&args)?;
     if args.print_config {
@@ -107,7 +97,8 @@ fn run(args: Args) -> Result<()> {
     install_termination_handler();
     transport::quiet_logs();
     println!("# rt-controller effective configuration\n{}", cfg.to_toml());
-    let model = load_robot(&cfg.robot)?;
+    let model = robot_model::descriptions::load(&cfg.robot)
+        .with_context(|| format!("loading the robot `robot` = {:?}", cfg.robot))?;
     let node = transport::create_node("rt-controller")?;
     let hw = match cfg.backend.kind {
         BackendKind::Sim => SimBackend::open(&node, &cfg.backend.namespace)?,

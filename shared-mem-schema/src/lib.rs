@@ -39,6 +39,22 @@ pub const MAX_MESSAGE_BYTES: usize = 256;
 /// Bins of a [`LatencyHistogram`] (1 µs each).
 pub const HISTOGRAM_BINS: usize = 2000;
 
+/// The stack's two clocks, the one source of their periods: the hardware
+/// and the controller step at 1 kHz, the policy acts (and the camera shoots)
+/// at 20 Hz. Configuration defaults are derived from these.
+pub mod rates {
+    /// Control (and physics) period, ns.
+    pub const CONTROL_PERIOD_NS: u64 = 1_000_000;
+    /// Control (and physics) period, s.
+    pub const CONTROL_PERIOD_S: f64 = CONTROL_PERIOD_NS as f64 * 1e-9;
+    /// Control steps per policy action (and per camera frame).
+    pub const ACTION_PERIOD_STEPS: u64 = 50;
+    /// Policy period, ns.
+    pub const ACTION_PERIOD_NS: u64 = ACTION_PERIOD_STEPS * CONTROL_PERIOD_NS;
+    /// Policy period, s.
+    pub const ACTION_PERIOD_S: f64 = ACTION_PERIOD_NS as f64 * 1e-9;
+}
+
 /// Service topics, relative to a namespace (`<namespace>/<topic>`), so that
 /// several stacks (parallel tests) can share one machine.
 pub mod topics {

@@ -109,7 +109,7 @@ impl Default for TimingConfig {
             startup_timeout_s: 10.0,
             status_period_ms: 100.0,
             lockstep_actions: false,
-            action_period_steps: 50,
+            action_period_steps: shared_mem_schema::rates::ACTION_PERIOD_STEPS,
             lockstep_action_timeout_s: 5.0,
             shutdown_hold_s: 0.3,
         }

@@ -231,7 +231,7 @@ impl<H: Hardware> Daemon<H> {
             }
             spins += 1;
             if spins > 200 {
-                std::thread::yield_now();
+                super::run::pause_briefly();
             }
         }
     }

@@ -86,7 +86,7 @@ impl<H: Hardware> Daemon<H> {
                         }
                         spins += 1;
                         if spins > 200 {
-                            std::thread::yield_now();
+                            pause_briefly();
                         }
                     }
                     now
@@ -119,4 +119,12 @@ impl<H: Hardware> Daemon<H> {
             overruns: self.stats.overruns,
         })
     }
+}
+
+/// A short sleep in a hardware-clocked wait (lockstep). Not a yield: under
+/// `SCHED_FIFO` a yield lets only other real-time threads run, so the peers
+/// this loop waits for (the simulator, the policy node) would starve on a
+/// loaded machine and the wait would end in a hardware timeout.
+pub(super) fn pause_briefly() {
+    std::thread::sleep(std::time::Duration::from_micros(20));
 }
