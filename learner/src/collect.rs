@@ -10,6 +10,7 @@
 //! write the same log format, so the dataset builder reads either.
 
 use crate::env::{ACTION_PERIOD, FastEnv};
+use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter};
 use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
@@ -297,11 +298,17 @@ pub fn run_episode(
     let hole = task.hole_pose;
     log.event(
         0,
-        &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,
-            "peg": peg.name(), "policy": policy.kind().name(),
-            "hole_pos_m": hole.translation.vector.as_slice(),
-            "hole_quat_xyzw": hole.rotation.coords.as_slice(),
-            "hole_depth_m": task.depth_m}),
+        &Event::Reset(Reset {
+            episode,
+            seed,
+            peg,
+            policy: policy.kind().name().into(),
+            lockstep: None,
+            world: None,
+            hole_pos_m: hole.translation.vector.into(),
+            hole_quat_xyzw: hole.rotation.coords.into(),
+            hole_depth_m: task.depth_m,
+        }),
     )?;
     let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
     let mut states = 0u64;
@@ -311,7 +318,7 @@ pub fn run_episode(
         if s > best {
             best = s;
             let t = hw_time_ns(env.world().time_s());
-            log.event(t, &serde_json::json!({"event": "stage", "stage": s}))?;
+            log.event(t, &Event::Stage { stage: s })?;
         }
         Ok(())
     };
@@ -356,8 +363,13 @@ pub fn run_episode(
     let stage = best;
     log.event(
         t,
-        &serde_json::json!({"event": "outcome", "stage": &stage, "states": states,
-            "interrupted": stop}),
+        &Event::Outcome(Outcome {
+            stage,
+            duration_s: None,
+            actions: None,
+            states: Some(states),
+            interrupted: Some(stop),
+        }),
     )?;
     let file = log.finish()?;
     Ok(EpisodeShard {

@@ -9,6 +9,7 @@
 
 use crate::collect::{Mix, MixedPolicy, Progress};
 use crate::env::ACTION_PERIOD;
+use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use anyhow::{Context, Result, bail};
@@ -402,12 +403,17 @@ pub fn run(
         let hole = task.hole_pose;
         log.event(
             first.header.t_hw_ns,
-            &serde_json::json!({"event": "reset", "episode": episode, "seed": seed,
-                "peg": world.task.peg.name(), "policy": policy_name,
-                "lockstep": cfg.lockstep, "world": &world,
-                "hole_pos_m": hole.translation.vector.as_slice(),
-                "hole_quat_xyzw": hole.rotation.coords.as_slice(),
-                "hole_depth_m": task.depth_m}),
+            &Event::Reset(Reset {
+                episode,
+                seed,
+                peg: world.task.peg,
+                policy: policy_name.into(),
+                lockstep: Some(cfg.lockstep),
+                world: Some(world.clone()),
+                hole_pos_m: hole.translation.vector.into(),
+                hole_quat_xyzw: hole.rotation.coords.into(),
+                hole_depth_m: task.depth_m,
+            }),
         )?;
         let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
         let mut seen = Seen {
@@ -429,10 +435,7 @@ pub fn run(
                 && r.best_stage() > best_stage
             {
                 best_stage = r.best_stage();
-                log.event(
-                    r.header.t_hw_ns,
-                    &serde_json::json!({"event": "stage", "stage": best_stage}),
-                )?;
+                log.event(r.header.t_hw_ns, &Event::Stage { stage: best_stage })?;
                 if best_stage == Stage::Completed && completed_at.is_none() {
                     completed_at = Some(r.header.t_hw_ns);
                 }
@@ -496,8 +499,13 @@ pub fn run(
         let duration_s = hw_time_s(t_end.saturating_sub(first.header.t_hw_ns));
         log.event(
             t_end,
-            &serde_json::json!({"event": "outcome", "stage": stage, "duration_s": duration_s,
-                "actions": actions}),
+            &Event::Outcome(Outcome {
+                stage,
+                duration_s: Some(duration_s),
+                actions: Some(actions),
+                states: None,
+                interrupted: None,
+            }),
         )?;
         let path = log.finish()?;
         let outcome = EpisodeOutcome {

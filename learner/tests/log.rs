@@ -3,6 +3,7 @@
 //! anywhere): an error naming the offset, never a panic, and a recovered copy
 //! that holds every intact message.
 
+use learner::log::events::{Event, Outcome, Reset};
 use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, topics};
 use shared_mem_schema::{CameraFrame, Header, Pod, PolicyAction, SensorFrame};
 use std::path::{Path, PathBuf};
@@ -48,8 +49,21 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
     let mut w = LogWriter::create_with(path, opts).unwrap();
     w.config(0, &serde_json::json!({"world": {"peg": "square"}}))
         .unwrap();
-    w.event(0, &serde_json::json!({"event": "reset", "seed": 3}))
-        .unwrap();
+    w.event(
+        0,
+        &Event::Reset(Reset {
+            episode: 1,
+            seed: 3,
+            peg: hw_sim::PegShape::Square,
+            policy: "heuristic".into(),
+            lockstep: None,
+            world: None,
+            hole_pos_m: [0.6, 0.0, 0.1],
+            hole_quat_xyzw: [0.0, 0.0, 0.0, 1.0],
+            hole_depth_m: 0.04,
+        }),
+    )
+    .unwrap();
     let mut frames = Vec::new();
     for i in 0..3000 {
         let f = sensor(i);
@@ -63,8 +77,17 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
             w.action(&a).unwrap();
         }
     }
-    w.event(2_999_000_000, &serde_json::json!({"event": "outcome"}))
-        .unwrap();
+    w.event(
+        2_999_000_000,
+        &Event::Outcome(Outcome {
+            stage: hw_sim::Stage::Touched,
+            duration_s: Some(2.9),
+            actions: Some(59),
+            states: None,
+            interrupted: None,
+        }),
+    )
+    .unwrap();
     w.finish().unwrap();
     frames
 }
@@ -95,9 +118,10 @@ fn round_trip_with_views_and_time_ranges() {
     let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None).unwrap();
     assert_eq!(actions.len(), 60);
     assert_eq!(actions[3].delta_pos_m, [0.001, 0.0, -0.002]);
-    let events = r.read_json(topics::EVENTS, None).unwrap();
+    let events = r.read_events(None).unwrap();
     assert_eq!(events.len(), 2);
-    assert_eq!(events[1].1["event"], "outcome");
+    assert!(matches!(&events[0].1, Event::Reset(r) if r.seed == 3));
+    assert!(matches!(&events[1].1, Event::Outcome(o) if o.stage == hw_sim::Stage::Touched));
     assert_eq!(
         r.read_json(topics::CONFIG, None).unwrap()[0].1["world"]["peg"],
         "square"

@@ -16,9 +16,11 @@
 //! writer killed mid-run leaves every earlier chunk readable, and
 //! [`recover`] turns such a file into a valid one. See docs/data.md.
 
+pub mod events;
 pub mod foxglove;
 mod read;
 
+pub use events::Event;
 pub use read::{
     CameraImage, LogMessage, LogReader, ReadError, RecoverReport, ScanReport, TopicInfo, recover,
     scan,
@@ -465,8 +467,8 @@ impl LogWriter {
     }
 
     /// Logs an event (JSON object) at hardware time `t_hw_ns`.
-    pub fn event(&mut self, t_hw_ns: u64, json: &serde_json::Value) -> Result<(), LogError> {
-        let text = json.to_string();
+    pub fn event(&mut self, t_hw_ns: u64, event: &Event) -> Result<(), LogError> {
+        let text = serde_json::to_string(event).expect("events serialise");
         let now = shared_mem_schema::process::mono_now_ns();
         self.write(Stream::Events, t_hw_ns, now, text.as_bytes())
     }

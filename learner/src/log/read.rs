@@ -779,11 +779,28 @@ impl LogReader {
     }
 
     /// The JSON messages of `topic` (events, configuration, views).
+    pub fn read_events(
+        &self,
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<(u64, super::Event)>, ReadError> {
+        self.read_serde(super::topics::EVENTS, range)
+    }
+
+    /// The JSON messages of `topic` with their log times.
     pub fn read_json(
         &self,
         topic: &str,
         range: Option<(u64, u64)>,
     ) -> Result<Vec<(u64, serde_json::Value)>, ReadError> {
+        self.read_serde(topic, range)
+    }
+
+    /// The JSON messages of `topic` decoded as `T`, with their log times.
+    fn read_serde<T: serde::de::DeserializeOwned>(
+        &self,
+        topic: &str,
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<(u64, T)>, ReadError> {
         self.check_encoding(topic, "json")?;
         self.read(&[topic], range)?
             .iter()
