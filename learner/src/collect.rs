@@ -298,7 +298,7 @@ pub fn run_episode(
     let hole = task.hole_pose;
     log.event(
         0,
-        &Event::Reset(Reset {
+        &Event::Reset(Box::new(Reset {
             episode,
             seed,
             peg,
@@ -308,7 +308,7 @@ pub fn run_episode(
             hole_pos_m: hole.translation.vector.into(),
             hole_quat_xyzw: hole.rotation.coords.into(),
             hole_depth_m: task.depth_m,
-        }),
+        })),
     )?;
     let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
     let mut states = 0u64;

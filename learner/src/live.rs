@@ -403,7 +403,7 @@ pub fn run(
         let hole = task.hole_pose;
         log.event(
             first.header.t_hw_ns,
-            &Event::Reset(Reset {
+            &Event::Reset(Box::new(Reset {
                 episode,
                 seed,
                 peg: world.task.peg,
@@ -413,7 +413,7 @@ pub fn run(
                 hole_pos_m: hole.translation.vector.into(),
                 hole_quat_xyzw: hole.rotation.coords.into(),
                 hole_depth_m: task.depth_m,
-            }),
+            })),
         )?;
         let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
         let mut seen = Seen {

@@ -51,7 +51,7 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
         .unwrap();
     w.event(
         0,
-        &Event::Reset(Reset {
+        &Event::Reset(Box::new(Reset {
             episode: 1,
             seed: 3,
             peg: hw_sim::PegShape::Square,
@@ -61,7 +61,7 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
             hole_pos_m: [0.6, 0.0, 0.1],
             hole_quat_xyzw: [0.0, 0.0, 0.0, 1.0],
             hole_depth_m: 0.04,
-        }),
+        })),
     )
     .unwrap();
     let mut frames = Vec::new();

@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
-    /// The episode started.
-    Reset(Reset),
+    /// The episode started (boxed: it is by far the largest).
+    Reset(Box<Reset>),
     /// A better stage was reached.
     Stage {
         /// The stage.
