@@ -66,7 +66,7 @@ impl FlowLabeler {
         let mut prims: Vec<Primitive> = hw_sim::camera::robot_primitives(&model);
         if task.enabled {
             let peg = hw_sim::world::peg_info(&model, task)?;
-            prims.push(hw_sim::camera::peg_primitive(&peg));
+            prims.push(peg.primitive());
         }
         let config = CameraConfig {
             width: cal.width,

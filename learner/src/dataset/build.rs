@@ -1,0 +1,269 @@
+//! The dataset builder: shards, meta.json, stats.json and the pairing
+//! table, written from logs labelled in parallel.
+
+use super::*;
+use crate::policy::WRENCH_WINDOW;
+use anyhow::{Context, Result, bail, ensure};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Writes shards, meta.json, stats.json and the pairing table.
+pub(super) struct Builder {
+    dir: PathBuf,
+    cfg: BuildConfig,
+    meta: Meta,
+    stats: Stats,
+    wrench_table: std::io::BufWriter<std::fs::File>,
+    contacts: Vec<u8>,
+    shard: Option<(std::fs::File, u64, Vec<BlockIndex>, usize)>,
+    pending: Vec<u8>,
+    pending_n: u32,
+    contact_next: u64,
+    mask_px: u64,
+}
+
+impl Builder {
+    pub(super) fn add_episode(&mut self, source: &Path, ep: EpisodeSamples) -> Result<()> {
+        if ep.samples.is_empty() {
+            self.meta
+                .skipped
+                .push((source.display().to_string(), "no samples".into()));
+            return Ok(());
+        }
+        if self.meta.samples == 0 {
+            (self.meta.width, self.meta.height) = ep.size;
+        }
+        ensure!(
+            ep.size == (self.meta.width, self.meta.height),
+            "{}: images of {:?}, the dataset's are {}×{}",
+            source.display(),
+            ep.size,
+            self.meta.width,
+            self.meta.height
+        );
+        let episode = self.meta.episodes.len() as u32;
+        self.meta.episodes.push(EpisodeInfo {
+            episode,
+            source: source.display().to_string(),
+            peg: ep.peg,
+            policy: ep.policy,
+            first_id: self.meta.samples,
+            samples: ep.samples.len() as u64,
+        });
+        for mut s in ep.samples {
+            s.episode = episode;
+            for row in s.wrench.chunks_exact(6) {
+                self.stats.wrench.add(row);
+            }
+            self.stats.proprio.add(&s.proprio);
+            self.stats.action.add(&s.action);
+            for (k, d) in s.depth.iter().enumerate() {
+                if *d > 0.0 && k % 7 == 0 {
+                    self.stats.depth.add(&[*d]);
+                }
+            }
+            for px in s.rgb.chunks_exact(3).step_by(7) {
+                self.stats
+                    .rgb
+                    .add(&[px[0] as f32, px[1] as f32, px[2] as f32]);
+            }
+            let d: Vec<f32> = (0..3).map(|k| s.ee_next[k] - s.proprio[k]).collect();
+            self.stats.ee_delta.add(&d);
+            self.contact_next += s.contact_next as u64;
+            self.mask_px += s.mask.iter().map(|&m| m as u64).sum::<u64>();
+            for x in &s.wrench {
+                self.wrench_table.write_all(&x.to_le_bytes())?;
+            }
+            self.contacts.push(s.contact as u8);
+            s.encode(&mut self.pending);
+            self.pending_n += 1;
+            self.meta.samples += 1;
+            if self.pending_n as usize >= self.cfg.block_samples {
+                self.flush_block()?;
+            }
+        }
+        Ok(())
+    }
+
+    pub(super) fn flush_block(&mut self) -> Result<()> {
+        if self.pending_n == 0 {
+            return Ok(());
+        }
+        if self.shard.is_none() {
+            let name = format!("shard-{:05}.vtds", self.meta.shards.len());
+            let mut f = std::fs::File::create(self.dir.join(&name))
+                .with_context(|| format!("creating {name}"))?;
+            f.write_all(SHARD_MAGIC)?;
+            self.meta.shards.push((name, Vec::new()));
+            self.shard = Some((f, SHARD_MAGIC.len() as u64, Vec::new(), 0));
+        }
+        let (f, offset, blocks, count) = self.shard.as_mut().expect("opened");
+        let z = zstd::bulk::compress(&self.pending, self.cfg.zstd_level)?;
+        f.write_all(&z)?;
+        let first_id = self.meta.samples - self.pending_n as u64;
+        blocks.push(BlockIndex {
+            offset: *offset,
+            length: z.len() as u64,
+            samples: self.pending_n,
+            first_id,
+        });
+        *offset += z.len() as u64;
+        *count += self.pending_n as usize;
+        self.pending.clear();
+        self.pending_n = 0;
+        if *count >= self.cfg.shard_samples {
+            self.close_shard()?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn close_shard(&mut self) -> Result<()> {
+        if let Some((mut f, _, blocks, _)) = self.shard.take() {
+            f.write_all(SHARD_MAGIC)?;
+            f.sync_all()?;
+            self.meta.shards.last_mut().expect("opened").1 = blocks;
+        }
+        Ok(())
+    }
+
+    pub(super) fn finish(mut self) -> Result<Meta> {
+        self.flush_block()?;
+        self.close_shard()?;
+        self.wrench_table.flush()?;
+        std::fs::write(self.dir.join("contacts.bin"), &self.contacts)?;
+        let n = self.meta.samples.max(1) as f64;
+        self.stats.contact_next_ratio = self.contact_next as f64 / n;
+        self.stats.mask_ratio =
+            self.mask_px as f64 / (n * (self.meta.width * self.meta.height).max(1) as f64);
+        for m in [
+            &mut self.stats.wrench,
+            &mut self.stats.proprio,
+            &mut self.stats.action,
+            &mut self.stats.depth,
+            &mut self.stats.rgb,
+            &mut self.stats.ee_delta,
+        ] {
+            m.finish();
+        }
+        std::fs::write(
+            self.dir.join("stats.json"),
+            serde_json::to_string_pretty(&self.stats)?,
+        )?;
+        std::fs::write(
+            self.dir.join("meta.json"),
+            serde_json::to_string_pretty(&self.meta)?,
+        )?;
+        Ok(self.meta)
+    }
+}
+
+/// The `.mcap` files under `inputs` (files or directories), sorted.
+pub fn find_logs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            let mut v: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("reading {}", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+                .collect();
+            v.sort();
+            out.extend(v);
+        } else if p.exists() {
+            out.push(p.clone());
+        } else {
+            bail!("{}: no such file or directory", p.display());
+        }
+    }
+    Ok(out)
+}
+
+/// Builds a dataset in `out` from logs; `workers` threads label episodes.
+/// Logs that cannot be read are skipped and listed in meta.json (and
+/// reported through `on_log`); nothing is written into the inputs.
+pub fn build(
+    logs: &[PathBuf],
+    out: &Path,
+    cfg: &BuildConfig,
+    workers: usize,
+    mut on_log: impl FnMut(&Path, Result<usize, String>),
+) -> Result<Meta> {
+    ensure!(
+        cfg.block_samples > 0 && cfg.shard_samples > 0,
+        "block and shard sizes must be > 0"
+    );
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut b = Builder {
+        dir: out.to_path_buf(),
+        cfg: cfg.clone(),
+        meta: Meta {
+            format_version: FORMAT_VERSION,
+            width: 0,
+            height: 0,
+            wrench_window: WRENCH_WINDOW,
+            samples: 0,
+            shards: Vec::new(),
+            episodes: Vec::new(),
+            skipped: Vec::new(),
+            build: cfg.clone(),
+        },
+        stats: stats_new(),
+        wrench_table: std::io::BufWriter::new(std::fs::File::create(out.join("wrench.bin"))?),
+        contacts: Vec::new(),
+        shard: None,
+        pending: Vec::new(),
+        pending_n: 0,
+        contact_next: 0,
+        mask_px: 0,
+    };
+    // Workers label logs in parallel; results are added in log order so a
+    // build is reproducible.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, Result<EpisodeSamples>)>(workers * 2);
+    std::thread::scope(|s| -> Result<()> {
+        for _ in 0..workers.max(1) {
+            let tx = tx.clone();
+            let next = &next;
+            s.spawn(move || {
+                let mut models = Models::default();
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if i >= logs.len() {
+                        return;
+                    }
+                    let r = episode_samples(&logs[i], cfg, &mut models);
+                    if tx.send((i, r)).is_err() {
+                        return;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        let mut held: std::collections::BTreeMap<usize, Result<EpisodeSamples>> =
+            Default::default();
+        let mut want = 0;
+        for (i, r) in rx {
+            held.insert(i, r);
+            while let Some(r) = held.remove(&want) {
+                let path = &logs[want];
+                match r {
+                    Ok(ep) => {
+                        let n = ep.samples.len();
+                        b.add_episode(path, ep)?;
+                        on_log(path, Ok(n));
+                    }
+                    Err(e) => {
+                        let text = format!("{e:#}");
+                        b.meta
+                            .skipped
+                            .push((path.display().to_string(), text.clone()));
+                        on_log(path, Err(text));
+                    }
+                }
+                want += 1;
+            }
+        }
+        Ok(())
+    })?;
+    b.finish()
+}

@@ -1,0 +1,203 @@
+//! Log → samples: one log's frames, actions and camera images turned into
+//! labelled samples.
+
+use super::*;
+use crate::labels::{Calibration, FlowLabeler, in_contact};
+use crate::log::{CameraImage, LogReader, topics};
+use crate::policy::WRENCH_WINDOW;
+use anyhow::{Context, Result, ensure};
+use serde::{Deserialize, Serialize};
+use shared_mem_schema::{PolicyAction, SensorFrame};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// How labels are made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BuildConfig {
+    /// Contact: mean force change against free space above this, N.
+    pub contact_threshold_n: f64,
+    /// Readings averaged for the contact test.
+    pub contact_window: usize,
+    /// Flow mask: rendered robot depth within this of the recorded depth, m.
+    pub flow_depth_tol_m: f64,
+    /// Samples per compressed block (the loader's unit of reading).
+    pub block_samples: usize,
+    /// Samples per shard file.
+    pub shard_samples: usize,
+    /// zstd level.
+    pub zstd_level: i32,
+}
+
+impl Default for BuildConfig {
+    fn default() -> Self {
+        Self {
+            contact_threshold_n: 3.0,
+            contact_window: 4,
+            flow_depth_tol_m: 0.01,
+            block_samples: 32,
+            shard_samples: 4096,
+            zstd_level: 3,
+        }
+    }
+}
+
+/// The samples of one log.
+pub struct EpisodeSamples {
+    /// Peg.
+    pub peg: String,
+    /// Policy.
+    pub policy: String,
+    /// Samples in order.
+    pub samples: Vec<Sample>,
+    /// Image size.
+    pub size: (usize, usize),
+}
+
+/// Models by robot name, loaded once.
+#[derive(Default)]
+pub struct Models(HashMap<String, robot_model::Model>);
+
+impl Models {
+    pub(super) fn get(&mut self, robot: &str) -> Result<robot_model::Model> {
+        if let Some(m) = self.0.get(robot) {
+            return Ok(m.clone());
+        }
+        let m = robot_model::descriptions::load(robot)?;
+        self.0.insert(robot.into(), m.clone());
+        Ok(m)
+    }
+}
+
+/// Turns one log into samples with labels.
+pub fn episode_samples(
+    path: &Path,
+    cfg: &BuildConfig,
+    models: &mut Models,
+) -> Result<EpisodeSamples> {
+    let r = LogReader::open(path)?;
+    let config = r
+        .read_json(topics::CONFIG, None)?
+        .into_iter()
+        .next()
+        .with_context(|| format!("{}: no configuration message on /config", path.display()))?
+        .1;
+    let world: hw_sim::WorldConfig = serde_json::from_value(config["world"].clone())
+        .with_context(|| format!("{}: the /config world does not parse", path.display()))?;
+    let model = models.get(&world.robot)?;
+    let frames: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None)?;
+    let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None)?;
+    let cams: Vec<CameraImage> = r.read_camera(None)?;
+    ensure!(!frames.is_empty(), "{}: no sensor frames", path.display());
+    let by_time: HashMap<u64, usize> = frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| (f.header.t_hw_ns, i))
+        .collect();
+    let by_seq: HashMap<u64, &PolicyAction> = actions.iter().map(|a| (a.header.seq, a)).collect();
+    let force = |i: usize| {
+        let w = &frames[i].wrench;
+        [w[0], w[1], w[2]]
+    };
+    // Free space: the episode starts away from the box.
+    let first: Vec<[f64; 3]> = (0..frames.len().min(WRENCH_WINDOW)).map(force).collect();
+    let mut free = [0.0; 3];
+    for f in &first {
+        for k in 0..3 {
+            free[k] += f[k] / first.len() as f64;
+        }
+    }
+    let contact_at = |i: usize| {
+        let lo = (i + 1).saturating_sub(cfg.contact_window);
+        let fs: Vec<[f64; 3]> = (lo..=i).map(force).collect();
+        in_contact(&fs, &free, cfg.contact_threshold_n)
+    };
+    let mut labeler: Option<FlowLabeler> = None;
+    let mut out = Vec::new();
+    let nq = frames[0].n_joints as usize;
+    let mut size = (0, 0);
+    for pair in cams.windows(2) {
+        let (c0, c1) = (&pair[0], &pair[1]);
+        let (Some(&i0), Some(&i1)) = (
+            by_time.get(&c0.header.t_hw_ns),
+            by_time.get(&c1.header.t_hw_ns),
+        ) else {
+            continue; // a frame without its sensor frame (a lost message)
+        };
+        if i1 <= i0 || i0 == 0 {
+            continue;
+        }
+        // The action taken in this interval: newest applied by its end, if
+        // it was not already in force at its start.
+        let (a_prev, a_new) = (frames[i0 - 1].action_seq, frames[i1 - 1].action_seq);
+        if a_new == a_prev {
+            continue;
+        }
+        let Some(a) = by_seq.get(&a_new) else {
+            continue;
+        };
+        if labeler.is_none() {
+            let cal = Calibration {
+                width: c0.width,
+                height: c0.height,
+                focal_px: c0.focal_px,
+                principal_px: c0.principal_px,
+                pos_m: c0.pose_pos_m,
+                quat_xyzw: c0.pose_quat_xyzw,
+            };
+            labeler = Some(FlowLabeler::new(model.clone(), &world.task, &cal)?);
+            size = (c0.width as usize, c0.height as usize);
+        }
+        ensure!(
+            (c0.width as usize, c0.height as usize) == size,
+            "{}: the image size changes within the episode",
+            path.display()
+        );
+        let l = labeler.as_mut().expect("made");
+        l.label(
+            &frames[i0].q[..nq],
+            &frames[i1].q[..nq],
+            &c0.depth_m,
+            cfg.flow_depth_tol_m,
+        );
+        let f0 = &frames[i0];
+        let mut wrench = Vec::with_capacity(WRENCH_WINDOW * 6);
+        for k in 0..WRENCH_WINDOW {
+            let i = (i0 + k + 1).saturating_sub(WRENCH_WINDOW);
+            wrench.extend(frames[i].wrench.iter().map(|&x| x as f32));
+        }
+        let mut proprio = [0f32; PROPRIO];
+        for (k, x) in f0
+            .ee_pos_m
+            .iter()
+            .chain(&f0.ee_quat_xyzw)
+            .chain(&f0.ee_twist)
+            .enumerate()
+        {
+            proprio[k] = *x as f32;
+        }
+        let ee1 = frames[i1].ee_pos_m;
+        out.push(Sample {
+            episode: 0,
+            index: out.len() as u32,
+            step: f0.step,
+            contact: contact_at(i0),
+            contact_next: contact_at(i1),
+            rgb: c0.rgb.clone(),
+            depth: c0.depth_m.clone(),
+            wrench,
+            proprio,
+            action: a.delta().map(|x| x as f32),
+            flow: l.flow_px.iter().flat_map(|f| [f[0], f[1]]).collect(),
+            mask: l.mask.clone(),
+            ee_next: [ee1[0] as f32, ee1[1] as f32, ee1[2] as f32],
+        });
+    }
+    let str_of = |v: &serde_json::Value| v.as_str().unwrap_or("unknown").to_string();
+    Ok(EpisodeSamples {
+        peg: world.task.peg.name().into(),
+        policy: str_of(&config["policy"]),
+        samples: out,
+        size,
+    })
+}

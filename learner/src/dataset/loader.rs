@@ -1,0 +1,139 @@
+//! The shuffling, streaming loader with pairing negatives.
+
+use super::*;
+use anyhow::Result;
+
+/// A batch, flattened row-major, sample-major.
+#[derive(Debug, Clone, Default)]
+pub struct Batch {
+    /// Samples in it.
+    pub len: usize,
+    /// Their dataset ids.
+    pub ids: Vec<u64>,
+    /// The samples (with the haptics of negatives swapped in).
+    pub samples: Vec<Sample>,
+    /// Pairing label: 1 aligned, 0 time-shifted haptics.
+    pub paired: Vec<u8>,
+}
+
+/// Loader settings.
+#[derive(Debug, Clone)]
+pub struct LoaderConfig {
+    /// Samples per batch.
+    pub batch: usize,
+    /// Shuffle seed.
+    pub seed: u64,
+    /// Blocks held for shuffling samples across blocks and shards.
+    pub shuffle_blocks: usize,
+    /// Share of samples given time-shifted haptics.
+    pub negative_fraction: f64,
+    /// Drop a last, short batch.
+    pub drop_last: bool,
+}
+
+impl Default for LoaderConfig {
+    fn default() -> Self {
+        Self {
+            batch: 64,
+            seed: 0,
+            shuffle_blocks: 16,
+            negative_fraction: 0.5,
+            drop_last: false,
+        }
+    }
+}
+
+/// One epoch of shuffled batches, read ahead on a thread; holds at most
+/// `shuffle_blocks` + a few blocks in memory.
+pub struct Loader<'a> {
+    ds: &'a Dataset,
+    cfg: LoaderConfig,
+    rx: std::sync::mpsc::Receiver<Result<Vec<(u64, Sample)>>>,
+    buffer: Vec<(u64, Sample)>,
+    rng: hw_sim::rng::SimRng,
+    _reader: std::thread::JoinHandle<()>,
+    done: bool,
+}
+
+impl<'a> Loader<'a> {
+    /// Starts an epoch.
+    pub fn new(ds: &'a Dataset, cfg: LoaderConfig) -> Self {
+        let mut rng = hw_sim::rng::SimRng::new(cfg.seed, 31);
+        let mut blocks = ds.blocks();
+        for i in (1..blocks.len()).rev() {
+            let j = (rng.unit() * (i + 1) as f64) as usize;
+            blocks.swap(i, j.min(i));
+        }
+        let (tx, rx) = std::sync::mpsc::sync_channel(4);
+        let dir = ds.dir.clone();
+        let meta = ds.meta.clone();
+        // Only the block index travels to the reader: reopening the
+        // dataset there would load its pairing table a second time.
+        let reader = std::thread::spawn(move || {
+            for (s, k) in blocks {
+                let first = meta.shards[s].1[k].first_id;
+                let r = read_block(&dir, &meta, s, k).map(|v| {
+                    v.into_iter()
+                        .enumerate()
+                        .map(|(i, x)| (first + i as u64, x))
+                        .collect()
+                });
+                let stop = r.is_err();
+                if tx.send(r).is_err() || stop {
+                    return;
+                }
+            }
+        });
+        Self {
+            ds,
+            cfg,
+            rx,
+            buffer: Vec::new(),
+            rng,
+            _reader: reader,
+            done: false,
+        }
+    }
+}
+
+impl Iterator for Loader<'_> {
+    type Item = Result<Batch>;
+
+    fn next(&mut self) -> Option<Result<Batch>> {
+        let want = self.cfg.shuffle_blocks.max(1) * self.ds.meta.build.block_samples;
+        let mut batch = Batch::default();
+        while batch.len < self.cfg.batch {
+            while !self.done && self.buffer.len() < want {
+                match self.rx.recv() {
+                    Ok(Ok(v)) => self.buffer.extend(v),
+                    Ok(Err(e)) => {
+                        self.done = true;
+                        return Some(Err(e));
+                    }
+                    Err(_) => self.done = true,
+                }
+            }
+            if self.buffer.is_empty() {
+                break;
+            }
+            let i =
+                ((self.rng.unit() * self.buffer.len() as f64) as usize).min(self.buffer.len() - 1);
+            let (id, mut s) = self.buffer.swap_remove(i);
+            let mut paired = 1;
+            if self.rng.unit() < self.cfg.negative_fraction
+                && let Some(j) = self.ds.negative_for(id, self.rng.unit())
+            {
+                s.wrench.copy_from_slice(self.ds.wrench_of(j));
+                paired = 0;
+            }
+            batch.ids.push(id);
+            batch.samples.push(s);
+            batch.paired.push(paired);
+            batch.len += 1;
+        }
+        if batch.len == 0 || (self.cfg.drop_last && batch.len < self.cfg.batch) {
+            return None;
+        }
+        Some(Ok(batch))
+    }
+}

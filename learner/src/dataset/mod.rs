@@ -1,0 +1,42 @@
+//! The self-supervised dataset: built from MCAP logs, stored as chunked
+//! shards, read back by a shuffling, streaming loader. Format: docs/data.md.
+//!
+//! One sample per 20 Hz step that has an action: the camera frame, the last
+//! 32 wrench readings, proprioception and the next action; labels: the flow
+//! that action causes and its mask, contact at the next step, the next
+//! end-effector position. Pairing negatives (the paper's time-shifted
+//! haptics with the opposite contact state) are drawn by the loader from a
+//! table of every sample's wrench window kept beside the shards.
+//!
+//! Files: `sample` (the sample and its encoding), `label` (log → samples),
+//! `meta` (meta.json, stats.json), `build` (the writer and the parallel
+//! build), `reader` (an opened dataset), `loader` (shuffled batches with
+//! pairing negatives), `sheet` (the contact sheet).
+
+mod build;
+mod label;
+mod loader;
+mod meta;
+mod reader;
+mod sample;
+mod sheet;
+
+pub use build::{build, find_logs};
+pub use label::{BuildConfig, EpisodeSamples, Models, episode_samples};
+pub use loader::{Batch, Loader, LoaderConfig};
+pub use meta::{BlockIndex, EpisodeInfo, Meta, Moments, Stats};
+pub use reader::Dataset;
+pub use sample::Sample;
+pub use sheet::contact_sheet;
+
+use meta::stats_new;
+use reader::read_block;
+use sample::sample_bytes;
+
+/// Shard file magic (start and end).
+pub const SHARD_MAGIC: &[u8; 8] = b"VTDSHRD1";
+/// Dataset format version (meta.json).
+pub const FORMAT_VERSION: u32 = 1;
+/// Proprioception: position (3), orientation quaternion x, y, z, w (4),
+/// linear and angular velocity (6).
+pub const PROPRIO: usize = 13;
