@@ -118,9 +118,9 @@ pub struct TaskConfig {
     pub box_height_m: f64,
     /// Coulomb friction between the peg and the box.
     pub friction: f64,
-    /// Centre of the box placement region in the base x-y plane, m; empty:
+    /// Centre of the box placement region in the base x-y plane, m; absent:
     /// under the peg tip at the initial pose.
-    pub box_center_xy_m: Vec<f64>,
+    pub box_center_xy_m: Option<[f64; 2]>,
     /// Half-widths of the placement region around the centre, m.
     pub box_xy_range_m: [f64; 2],
     /// Half-range of the box yaw, rad, about the yaw at which the hole fits
@@ -147,7 +147,7 @@ impl Default for TaskConfig {
             box_side_m: 0.16,
             box_height_m: 0.10,
             friction: 0.3,
-            box_center_xy_m: Vec::new(),
+            box_center_xy_m: None,
             box_xy_range_m: [0.04, 0.04],
             box_yaw_range_rad: 0.26,
             inserted_depth_m: 0.003,
@@ -265,8 +265,8 @@ pub struct Occlusion {
     pub start_s: f64,
     /// End, s.
     pub end_s: f64,
-    /// Patch `[x, y, width, height]` in pixels; empty: the whole image.
-    pub rect: Vec<u32>,
+    /// Patch `[x, y, width, height]` in pixels; absent: the whole image.
+    pub rect: Option<[u32; 4]>,
 }
 
 impl Default for Occlusion {
@@ -274,7 +274,7 @@ impl Default for Occlusion {
         Self {
             start_s: 0.0,
             end_s: f64::INFINITY,
-            rect: Vec::new(),
+            rect: None,
         }
     }
 }
@@ -397,13 +397,13 @@ impl WorldConfig {
                 "must be at least twice the peg width",
             ));
         }
-        if !(t.box_center_xy_m.is_empty() || t.box_center_xy_m.len() == 2) {
-            return Err(bad("task.box_center_xy_m", "must hold 0 or 2 values"));
+        if !t.box_xy_range_m.iter().all(|v| v.is_finite()) {
+            return Err(bad("task.box_xy_range_m", "must be finite"));
         }
-        for v in t.box_xy_range_m.iter().chain(&t.box_center_xy_m) {
-            if !v.is_finite() {
-                return Err(bad("task.box_xy_range_m", "must be finite"));
-            }
+        if t.box_center_xy_m
+            .is_some_and(|c| !c.iter().all(|v| v.is_finite()))
+        {
+            return Err(bad("task.box_center_xy_m", "must be finite"));
         }
         non_negative("task.box_yaw_range_rad", t.box_yaw_range_rad)?;
         non_negative("task.inserted_depth_m", t.inserted_depth_m)?;
@@ -464,9 +464,6 @@ impl WorldConfig {
         }
         for (i, o) in p.occlusions.iter().enumerate() {
             let f = format!("perturbations.occlusions[{i}]");
-            if !(o.rect.is_empty() || o.rect.len() == 4) {
-                return Err(bad(&format!("{f}.rect"), "must hold 0 or 4 values"));
-            }
             if o.start_s.is_nan() || o.end_s.is_nan() || o.end_s < o.start_s {
                 return Err(bad(&format!("{f}.end_s"), "must not be before start_s"));
             }

@@ -15,6 +15,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use hw_sim::camera::{Camera, CameraShot};
 use hw_sim::{SimHardware, World, WorldConfig};
+use shared_mem_schema::SCHEMA_VERSION;
 use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
 };
@@ -101,6 +102,27 @@ fn peg_code(world: &World) -> u32 {
     }
 }
 
+/// Why a simulator command was refused (sent back in the episode report).
+#[derive(Debug, thiserror::Error)]
+enum Refusal {
+    /// The command was built from another schema.
+    #[error("command of schema version {0}, this simulator speaks {SCHEMA_VERSION}")]
+    SchemaVersion(u32),
+    /// The reset's configuration is unusable (the running world is kept).
+    #[error("{0}")]
+    Reset(String),
+    /// No such command.
+    #[error("unknown command {0}")]
+    UnknownCommand(u32),
+}
+
+/// The answer to a simulator command.
+struct Answer {
+    /// The command's sequence number (0: none yet).
+    seq: u64,
+    outcome: Result<(), Refusal>,
+}
+
 struct Server {
     args: Args,
     world: World,
@@ -118,7 +140,8 @@ struct Server {
     command: Option<TorqueCommand>,
     /// The robot's side of the messages (state out, command in, brakes).
     hardware: SimHardware,
-    last_result: (u64, u32, String),
+    /// The answer to the newest command.
+    last_result: Answer,
     rejected_commands: u64,
     shutdown: bool,
 }
@@ -173,7 +196,10 @@ fn run(args: Args) -> Result<()> {
         camera_seq: 0,
         command: None,
         hardware,
-        last_result: (0, EpisodeReport::OK, String::new()),
+        last_result: Answer {
+            seq: 0,
+            outcome: Ok(()),
+        },
         rejected_commands: 0,
         shutdown: false,
     };
@@ -352,44 +378,41 @@ impl Server {
     }
 
     fn handle_command(&mut self, c: &SimCommand) -> Result<()> {
-        if c.header.seq != 0 && c.header.seq == self.last_result.0 {
+        if c.header.seq != 0 && c.header.seq == self.last_result.seq {
             // A repeated request (sent again before our answer arrived).
             return self.publish_report();
         }
         if c.header.schema_version != shared_mem_schema::SCHEMA_VERSION {
-            self.last_result = (
-                c.header.seq,
-                EpisodeReport::REJECTED,
-                format!(
-                    "command of schema version {}, this simulator speaks {}",
-                    c.header.schema_version,
-                    shared_mem_schema::SCHEMA_VERSION
-                ),
-            );
+            self.last_result = Answer {
+                seq: c.header.seq,
+                outcome: Err(Refusal::SchemaVersion(c.header.schema_version)),
+            };
             return self.publish_report();
         }
         match c.command {
             SimCommand::SHUTDOWN => {
                 info!("hw-sim: shutdown requested");
                 self.shutdown = true;
-                self.last_result = (c.header.seq, EpisodeReport::OK, String::new());
+                self.last_result = Answer {
+                    seq: c.header.seq,
+                    outcome: Ok(()),
+                };
             }
             SimCommand::RESET => {
-                let outcome = self.reset(c);
-                self.last_result = match outcome {
-                    Ok(()) => (c.header.seq, EpisodeReport::OK, String::new()),
-                    Err(e) => {
-                        warn!("hw-sim: reset refused: {e:#}");
-                        (c.header.seq, EpisodeReport::REJECTED, format!("{e:#}"))
-                    }
+                let outcome = self.reset(c).map_err(|e| {
+                    warn!("hw-sim: reset refused: {e:#}");
+                    Refusal::Reset(format!("{e:#}"))
+                });
+                self.last_result = Answer {
+                    seq: c.header.seq,
+                    outcome,
                 };
             }
             other => {
-                self.last_result = (
-                    c.header.seq,
-                    EpisodeReport::REJECTED,
-                    format!("unknown command {other}"),
-                );
+                self.last_result = Answer {
+                    seq: c.header.seq,
+                    outcome: Err(Refusal::UnknownCommand(other)),
+                };
             }
         }
         self.publish_report()
@@ -444,13 +467,17 @@ impl Server {
     fn publish_report(&mut self) -> Result<()> {
         self.report_seq += 1;
         let header = self.header(self.report_seq);
-        let (world, (cmd_seq, result, message), seed) = (&self.world, &self.last_result, self.seed);
+        let (world, answer, seed) = (&self.world, &self.last_result, self.seed);
+        let (result, message) = match &answer.outcome {
+            Ok(()) => (EpisodeReport::OK, String::new()),
+            Err(why) => (EpisodeReport::REJECTED, why.to_string()),
+        };
         transport::send_with(&self.report_pub, |m| {
             m.header = header;
-            m.command_seq = *cmd_seq;
+            m.command_seq = answer.seq;
             m.seed = seed;
             m.step = world.step_index();
-            m.command_result = *result;
+            m.command_result = result;
             m.peg = peg_code(world);
             if let Some(t) = world.task() {
                 m.stage_now = t.stage_now.code();
@@ -466,7 +493,7 @@ impl Server {
             let task = &world.config().task;
             m.peg_width_m = task.peg_width_m;
             m.hole_depth_m = task.hole_depth_m;
-            m.message_len = write_text(&mut m.message, message);
+            m.message_len = write_text(&mut m.message, &message);
         })?;
         Ok(())
     }

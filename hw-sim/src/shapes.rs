@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 /// The four pegs of the paper (Fig. "peg types").
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum PegShape {
     /// Square cross-section; `width` is the side.

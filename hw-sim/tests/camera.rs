@@ -157,7 +157,7 @@ fn occlusion_blanks_the_view_and_frames_are_deterministic() {
     cfg.perturbations.occlusions.push(Occlusion {
         start_s: 0.04,
         end_s: 0.06,
-        rect: Vec::new(),
+        rect: None,
     });
     let run = || {
         let mut world = World::new(cfg.clone()).unwrap();

@@ -1,6 +1,6 @@
 //! `learner`: the policy node and the stack's command-line interface.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Parser, Subcommand};
 use hw_sim::{PegShape, Stage, WorldConfig};
 use learner::live::{self, LiveConfig};
@@ -21,9 +21,9 @@ struct EpisodeArgs {
     /// Episodes to run.
     #[arg(long, default_value_t = 3)]
     episodes: u32,
-    /// Peg: square, triangle, semicircle or hexagon.
-    #[arg(long, default_value = "square")]
-    peg: String,
+    /// Peg.
+    #[arg(long, value_enum, default_value_t = PegShape::Square)]
+    peg: PegShape,
     /// Seed of the first episode.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -78,9 +78,9 @@ enum Cmd {
 /// `learner run` as a collector (what `learner collect --live` passes).
 #[derive(Debug, clap::Args)]
 struct RunCollectArgs {
-    /// Pegs taken in turn per episode, comma-separated (or all).
-    #[arg(long)]
-    pegs: Option<String>,
+    /// Pegs taken in turn per episode, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pegs: Vec<PegShape>,
     /// Collect with the random/heuristic mix, this share heuristic.
     #[arg(long)]
     mix_heuristic_fraction: Option<f64>,
@@ -109,10 +109,9 @@ struct CollectArgs {
     /// Actions per episode (20 per second).
     #[arg(long, default_value_t = 100)]
     episode_actions: u32,
-    /// Pegs, comma-separated, taken in turn: square, triangle, semicircle,
-    /// hexagon, or all.
-    #[arg(long, default_value = "all")]
-    pegs: String,
+    /// Pegs, comma-separated, taken in turn (default: all four).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pegs: Vec<PegShape>,
     /// Seed of the first episode.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -140,13 +139,6 @@ struct CollectArgs {
     live: bool,
 }
 
-fn parse_pegs(list: &str) -> Result<Vec<PegShape>> {
-    if list == "all" {
-        return Ok(PegShape::ALL.to_vec());
-    }
-    list.split(',').map(|p| parse_peg(p.trim())).collect()
-}
-
 fn load_world(path: Option<&PathBuf>) -> Result<WorldConfig> {
     Ok(match path {
         Some(p) => WorldConfig::from_file(p)?,
@@ -161,7 +153,11 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         "--heuristic-fraction {} must be within 0..1",
         a.heuristic_fraction
     );
-    let pegs = parse_pegs(&a.pegs)?;
+    let pegs = if a.pegs.is_empty() {
+        PegShape::ALL.to_vec()
+    } else {
+        a.pegs.clone()
+    };
     let world = load_world(a.world.as_ref())?;
     let log = learner::log::LogOptions {
         foxglove: !a.no_foxglove,
@@ -370,19 +366,10 @@ enum LogCmd {
     },
 }
 
-fn parse_peg(name: &str) -> Result<PegShape> {
-    PegShape::ALL
-        .into_iter()
-        .find(|p| p.name() == name)
-        .with_context(|| {
-            format!("--peg {name:?}: expected one of square, triangle, semicircle, hexagon")
-        })
-}
-
 fn world_config(a: &EpisodeArgs) -> Result<WorldConfig> {
     let mut w = load_world(a.world.as_ref())?;
     w.task.enabled = true;
-    w.task.peg = parse_peg(&a.peg)?;
+    w.task.peg = a.peg;
     Ok(w)
 }
 
@@ -478,10 +465,7 @@ fn run(cli: Cli) -> Result<()> {
             cfg.seed = a.seed;
             cfg.episode_timeout_s = a.episode_timeout_s;
             cfg.lockstep = a.lockstep;
-            cfg.pegs = match &c.pegs {
-                Some(p) => parse_pegs(p)?,
-                None => Vec::new(),
-            };
+            cfg.pegs = c.pegs.clone();
             cfg.mix = c.mix_heuristic_fraction.map(|f| learner::collect::Mix {
                 heuristic_fraction: f,
                 ..Default::default()
@@ -521,7 +505,7 @@ fn run(cli: Cli) -> Result<()> {
                 "--episodes".to_string(),
                 a.episodes.to_string(),
                 "--peg".into(),
-                a.peg.clone(),
+                a.peg.name().into(),
                 "--seed".into(),
                 a.seed.to_string(),
                 "--episode-timeout-s".into(),

@@ -236,8 +236,8 @@ impl World {
     pub(super) fn draw_box(&mut self, rng: &mut SimRng) {
         let t = self.config.task.clone();
         let t = &t;
-        let center = if t.box_center_xy_m.len() == 2 {
-            [t.box_center_xy_m[0], t.box_center_xy_m[1]]
+        let center = if let Some(c) = t.box_center_xy_m {
+            c
         } else {
             let tip = self.peg_tip_pose().translation.vector;
             [tip.x, tip.y]

@@ -57,7 +57,7 @@ impl World {
             .map(|o| ScheduledOcclusion {
                 start_s: o.start_s,
                 end_s: o.end_s,
-                rect: (o.rect.len() == 4).then(|| [o.rect[0], o.rect[1], o.rect[2], o.rect[3]]),
+                rect: o.rect,
             })
             .collect();
         for _ in 0..p.random_occlusions {

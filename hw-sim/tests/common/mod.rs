@@ -33,7 +33,7 @@ pub struct Rig {
 /// A task with the box exactly where the caller says (no randomisation).
 pub fn fixed_box_config(center: [f64; 2]) -> WorldConfig {
     let mut c = WorldConfig::default();
-    c.task.box_center_xy_m = center.to_vec();
+    c.task.box_center_xy_m = Some(center);
     c.task.box_xy_range_m = [0.0, 0.0];
     c.task.box_yaw_range_rad = 0.0;
     c

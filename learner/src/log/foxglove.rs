@@ -10,7 +10,8 @@
 //! These channels are for people; the lossless raw channels beside them are
 //! what training reads.
 
-use std::fmt::Write;
+use base64::Engine;
+use serde::Serialize;
 
 /// `foxglove.RawImage`.
 pub const RAW_IMAGE: &str = r#"{"title":"foxglove.RawImage","type":"object","properties":{
@@ -61,76 +62,65 @@ pub const CAMERA_FRAME: &str = "camera";
 /// F/T sensor frame name.
 pub const SENSOR_FRAME: &str = "ft_sensor";
 
-fn time(out: &mut String, t_ns: u64) {
-    let _ = write!(
-        out,
-        r#"{{"sec":{},"nsec":{}}}"#,
-        t_ns / 1_000_000_000,
-        t_ns % 1_000_000_000
-    );
+/// A time as Foxglove's JSON encoding wants it.
+#[derive(Serialize)]
+struct Time {
+    sec: u64,
+    nsec: u64,
 }
 
-/// Writes a finite number (JSON has no NaN or infinity: those become null).
-fn num(out: &mut String, x: f64) {
-    if x.is_finite() {
-        let _ = write!(out, "{x}");
-    } else {
-        out.push_str("null");
-    }
-}
-
-fn xyz(out: &mut String, v: &[f64]) {
-    out.push_str(r#"{"x":"#);
-    num(out, v[0]);
-    out.push_str(r#","y":"#);
-    num(out, v[1]);
-    out.push_str(r#","z":"#);
-    num(out, v[2]);
-    out.push('}');
-}
-
-fn quat(out: &mut String, q: &[f64; 4]) {
-    out.push_str(r#"{"x":"#);
-    num(out, q[0]);
-    out.push_str(r#","y":"#);
-    num(out, q[1]);
-    out.push_str(r#","z":"#);
-    num(out, q[2]);
-    out.push_str(r#","w":"#);
-    num(out, q[3]);
-    out.push('}');
-}
-
-const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-
-/// Standard base64 (RFC 4648, padded).
-pub fn base64_into(out: &mut String, bytes: &[u8]) {
-    out.reserve(bytes.len().div_ceil(3) * 4);
-    let mut chunks = bytes.chunks_exact(3);
-    for c in &mut chunks {
-        let n = (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32;
-        for shift in [18, 12, 6, 0] {
-            out.push(B64[(n >> shift & 63) as usize] as char);
+impl Time {
+    fn of(t_ns: u64) -> Self {
+        Self {
+            sec: t_ns / 1_000_000_000,
+            nsec: t_ns % 1_000_000_000,
         }
     }
-    let rest = chunks.remainder();
-    if !rest.is_empty() {
-        let n = (rest[0] as u32) << 16 | rest.get(1).map_or(0, |&b| (b as u32) << 8);
-        out.push(B64[(n >> 18 & 63) as usize] as char);
-        out.push(B64[(n >> 12 & 63) as usize] as char);
-        out.push(if rest.len() == 2 {
-            B64[(n >> 6 & 63) as usize] as char
-        } else {
-            '='
-        });
-        out.push('=');
+}
+
+#[derive(Serialize)]
+struct Xyz {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+impl Xyz {
+    fn of(v: &[f64]) -> Self {
+        Self {
+            x: v[0],
+            y: v[1],
+            z: v[2],
+        }
     }
+}
+
+#[derive(Serialize)]
+struct Quat {
+    x: f64,
+    y: f64,
+    z: f64,
+    w: f64,
+}
+
+impl Quat {
+    fn of(q: &[f64; 4]) -> Self {
+        let [x, y, z, w] = *q;
+        Self { x, y, z, w }
+    }
+}
+
+/// Serialises `msg` into `out` (cleared first). Non-finite numbers become
+/// `null`, as JSON has no NaN.
+fn to_json(out: &mut Vec<u8>, msg: &impl Serialize) {
+    out.clear();
+    serde_json::to_writer(&mut *out, msg).expect("view messages serialise");
 }
 
 /// A `foxglove.RawImage`: `encoding` is `rgb8` or `32FC1`, `step` the bytes
-/// per row.
+/// per row; `data` is sent base64-encoded.
 pub fn raw_image(
-    out: &mut String,
+    out: &mut Vec<u8>,
     t_ns: u64,
     width: u32,
     height: u32,
@@ -138,34 +128,63 @@ pub fn raw_image(
     step: u32,
     data: &[u8],
 ) {
-    out.clear();
-    out.push_str(r#"{"timestamp":"#);
-    time(out, t_ns);
-    let _ = write!(
-        out,
-        r#","frame_id":"{CAMERA_FRAME}","width":{width},"height":{height},"encoding":"{encoding}","step":{step},"data":""#
-    );
-    base64_into(out, data);
-    out.push_str("\"}");
+    #[derive(Serialize)]
+    struct RawImage<'a> {
+        timestamp: Time,
+        frame_id: &'a str,
+        width: u32,
+        height: u32,
+        encoding: &'a str,
+        step: u32,
+        data: String,
+    }
+    let msg = RawImage {
+        timestamp: Time::of(t_ns),
+        frame_id: CAMERA_FRAME,
+        width,
+        height,
+        encoding,
+        step,
+        data: base64::engine::general_purpose::STANDARD.encode(data),
+    };
+    to_json(out, &msg);
 }
 
 /// A `foxglove.CameraCalibration` of an undistorted pinhole camera.
 pub fn camera_calibration(
-    out: &mut String,
+    out: &mut Vec<u8>,
     t_ns: u64,
     width: u32,
     height: u32,
     focal_px: f64,
     principal_px: [f64; 2],
 ) {
+    #[derive(Serialize)]
+    #[allow(non_snake_case)] // the schema's field names
+    struct CameraCalibration<'a> {
+        timestamp: Time,
+        frame_id: &'a str,
+        width: u32,
+        height: u32,
+        distortion_model: &'a str,
+        D: [f64; 5],
+        K: [f64; 9],
+        R: [f64; 9],
+        P: [f64; 12],
+    }
     let (f, cx, cy) = (focal_px, principal_px[0], principal_px[1]);
-    out.clear();
-    out.push_str(r#"{"timestamp":"#);
-    time(out, t_ns);
-    let _ = write!(
-        out,
-        r#","frame_id":"{CAMERA_FRAME}","width":{width},"height":{height},"distortion_model":"plumb_bob","D":[0,0,0,0,0],"K":[{f},0,{cx},0,{f},{cy},0,0,1],"R":[1,0,0,0,1,0,0,0,1],"P":[{f},0,{cx},0,0,{f},{cy},0,0,0,1,0]}}"#
-    );
+    let msg = CameraCalibration {
+        timestamp: Time::of(t_ns),
+        frame_id: CAMERA_FRAME,
+        width,
+        height,
+        distortion_model: "plumb_bob",
+        D: [0.0; 5],
+        K: [f, 0.0, cx, 0.0, f, cy, 0.0, 0.0, 1.0],
+        R: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        P: [f, 0.0, cx, 0.0, 0.0, f, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+    };
+    to_json(out, &msg);
 }
 
 /// One transform of a `foxglove.FrameTransforms`.
@@ -181,52 +200,76 @@ pub struct Transform<'a> {
 }
 
 /// A `foxglove.FrameTransforms`.
-pub fn frame_transforms(out: &mut String, t_ns: u64, transforms: &[Transform]) {
-    out.clear();
-    out.push_str(r#"{"transforms":["#);
-    for (i, tf) in transforms.iter().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        out.push_str(r#"{"timestamp":"#);
-        time(out, t_ns);
-        let _ = write!(
-            out,
-            r#","parent_frame_id":"{}","child_frame_id":"{}","translation":"#,
-            tf.parent, tf.child
-        );
-        xyz(out, &tf.translation);
-        out.push_str(r#","rotation":"#);
-        quat(out, &tf.rotation_xyzw);
-        out.push('}');
+pub fn frame_transforms(out: &mut Vec<u8>, t_ns: u64, transforms: &[Transform]) {
+    #[derive(Serialize)]
+    struct FrameTransform<'a> {
+        timestamp: Time,
+        parent_frame_id: &'a str,
+        child_frame_id: &'a str,
+        translation: Xyz,
+        rotation: Quat,
     }
-    out.push_str("]}");
+    #[derive(Serialize)]
+    struct FrameTransforms<'a> {
+        transforms: Vec<FrameTransform<'a>>,
+    }
+    let msg = FrameTransforms {
+        transforms: transforms
+            .iter()
+            .map(|tf| FrameTransform {
+                timestamp: Time::of(t_ns),
+                parent_frame_id: tf.parent,
+                child_frame_id: tf.child,
+                translation: Xyz::of(&tf.translation),
+                rotation: Quat::of(&tf.rotation_xyzw),
+            })
+            .collect(),
+    };
+    to_json(out, &msg);
 }
 
 /// A `foxglove.PoseInFrame`.
-pub fn pose_in_frame(out: &mut String, t_ns: u64, frame: &str, pos: &[f64; 3], q: &[f64; 4]) {
-    out.clear();
-    out.push_str(r#"{"timestamp":"#);
-    time(out, t_ns);
-    let _ = write!(out, r#","frame_id":"{frame}","pose":{{"position":"#);
-    xyz(out, pos);
-    out.push_str(r#","orientation":"#);
-    quat(out, q);
-    out.push_str("}}");
+pub fn pose_in_frame(out: &mut Vec<u8>, t_ns: u64, frame: &str, pos: &[f64; 3], q: &[f64; 4]) {
+    #[derive(Serialize)]
+    struct Pose {
+        position: Xyz,
+        orientation: Quat,
+    }
+    #[derive(Serialize)]
+    struct PoseInFrame<'a> {
+        timestamp: Time,
+        frame_id: &'a str,
+        pose: Pose,
+    }
+    let msg = PoseInFrame {
+        timestamp: Time::of(t_ns),
+        frame_id: frame,
+        pose: Pose {
+            position: Xyz::of(pos),
+            orientation: Quat::of(q),
+        },
+    };
+    to_json(out, &msg);
 }
 
 /// A `vision_touch.Wrench` (force N, torque N m).
-pub fn wrench(out: &mut String, t_ns: u64, w: &[f64; 6]) {
-    out.clear();
-    out.push_str(r#"{"timestamp":"#);
-    time(out, t_ns);
-    let _ = write!(out, r#","frame_id":"{SENSOR_FRAME}","force":"#);
-    xyz(out, &w[..3]);
-    out.push_str(r#","torque":"#);
-    xyz(out, &w[3..]);
-    out.push_str(r#","force_norm":"#);
-    num(out, (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt());
-    out.push('}');
+pub fn wrench(out: &mut Vec<u8>, t_ns: u64, w: &[f64; 6]) {
+    #[derive(Serialize)]
+    struct Wrench<'a> {
+        timestamp: Time,
+        frame_id: &'a str,
+        force: Xyz,
+        torque: Xyz,
+        force_norm: f64,
+    }
+    let msg = Wrench {
+        timestamp: Time::of(t_ns),
+        frame_id: SENSOR_FRAME,
+        force: Xyz::of(&w[..3]),
+        torque: Xyz::of(&w[3..]),
+        force_norm: (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt(),
+    };
+    to_json(out, &msg);
 }
 
 #[cfg(test)]
@@ -234,34 +277,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn base64_matches_the_rfc_vectors() {
-        // RFC 4648, section 10.
-        for (plain, enc) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            let mut s = String::new();
-            base64_into(&mut s, plain.as_bytes());
-            assert_eq!(s, enc);
-        }
-    }
-
-    #[test]
     fn messages_are_valid_json_with_the_schema_fields() {
-        let mut s = String::new();
+        let mut s = Vec::new();
         raw_image(&mut s, 1_500_000_000, 2, 1, "rgb8", 6, &[1, 2, 3, 4, 5, 6]);
-        let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&s).unwrap();
         assert_eq!(v["timestamp"]["sec"], 1);
         assert_eq!(v["timestamp"]["nsec"], 500_000_000);
         assert_eq!(v["data"], "AQIDBAUG");
         assert_eq!(v["step"], 6);
         camera_calibration(&mut s, 0, 128, 128, 154.5, [64.0, 64.0]);
-        let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&s).unwrap();
         assert_eq!(v["K"].as_array().unwrap().len(), 9);
         assert_eq!(v["P"].as_array().unwrap().len(), 12);
         frame_transforms(
@@ -274,7 +299,7 @@ mod tests {
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
             }],
         );
-        let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&s).unwrap();
         assert_eq!(v["transforms"][0]["child_frame_id"], "ee");
         assert!(v["transforms"][0]["translation"]["z"].is_null());
         pose_in_frame(
@@ -284,10 +309,10 @@ mod tests {
             &[1.0, 2.0, 3.0],
             &[0.0, 0.0, 0.0, 1.0],
         );
-        let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&s).unwrap();
         assert_eq!(v["pose"]["position"]["y"], 2.0);
         wrench(&mut s, 7, &[3.0, 4.0, 0.0, 0.1, 0.2, 0.3]);
-        let v: serde_json::Value = serde_json::from_str(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&s).unwrap();
         assert_eq!(v["force_norm"], 5.0);
         for schema in [
             RAW_IMAGE,

@@ -138,7 +138,7 @@ pub struct LogWriter {
     seqs: [u32; STREAMS],
     last_flush_ns: u64,
     last_view_ns: Option<u64>,
-    json: String,
+    json: Vec<u8>,
     buf: Vec<u8>,
 }
 
@@ -294,7 +294,7 @@ impl LogWriter {
             seqs: [0; STREAMS],
             last_flush_ns: 0,
             last_view_ns: None,
-            json: String::new(),
+            json: Vec::new(),
             buf: Vec::new(),
         })
     }
@@ -337,7 +337,7 @@ impl LogWriter {
     /// The JSON view message held in `self.json`.
     fn write_json(&mut self, s: Stream, log_ns: u64, pub_ns: u64) -> Result<(), LogError> {
         let json = std::mem::take(&mut self.json);
-        let r = self.write(s, log_ns, pub_ns, json.as_bytes());
+        let r = self.write(s, log_ns, pub_ns, &json);
         self.json = json;
         r
     }
