@@ -379,11 +379,54 @@ pub fn run(
             break;
         }
         let seed = cfg.seed + i as u64;
-        let mut world = cfg.world.clone();
-        if !cfg.pegs.is_empty() {
-            world.task.enabled = true;
-            world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
-        }
+        let ep = LiveEpisode::start(&mut node, cfg, episode_world(cfg, i), seed)?;
+        let done = outcomes.len() as u64;
+        let outcome = ep.run(&mut node, cfg, &mut total_actions, |total| {
+            if let Some(p) = &progress {
+                p.update(total, done);
+            }
+        })?;
+        on_outcome(&outcome);
+        outcomes.push(outcome);
+    }
+    if let Some(p) = &progress {
+        p.finish(total_actions, outcomes.len() as u64);
+    }
+    Ok(outcomes)
+}
+
+/// The world of episode `i`: the configured one, with the peg of its turn
+/// when collecting over several.
+fn episode_world(cfg: &LiveConfig, i: u32) -> WorldConfig {
+    let mut world = cfg.world.clone();
+    if !cfg.pegs.is_empty() {
+        world.task.enabled = true;
+        world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
+    }
+    world
+}
+
+/// One live episode: its log, task, policy and what the node has seen.
+struct LiveEpisode {
+    seed: u64,
+    episode: u64,
+    first: EpisodeReport,
+    log: LogWriter,
+    task: TaskGeometry,
+    mixed: Option<MixedPolicy>,
+    heuristic: HeuristicPolicy,
+    seen: Seen,
+}
+
+impl LiveEpisode {
+    /// Resets the simulator with `world` and `seed`, opens the episode's
+    /// log and records the configuration and the reset.
+    fn start(
+        node: &mut PolicyNode,
+        cfg: &LiveConfig,
+        world: WorldConfig,
+        seed: u64,
+    ) -> Result<Self> {
         let world_toml = toml::to_string(&world).context("printing the world configuration")?;
         let first = node.reset(seed, &world_toml, cfg.lockstep)?;
         let episode = first.header.episode;
@@ -392,7 +435,7 @@ pub fn run(
             .join(format!("episode-{episode:04}-seed-{seed}.mcap"));
         let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
         let task = task_geometry(&first, &world);
-        let mut mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
+        let mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
         let policy_name = mixed.as_ref().map_or("heuristic", |m| m.kind().name());
         log.config(
             first.header.t_hw_ns,
@@ -415,14 +458,36 @@ pub fn run(
                 hole_depth_m: task.depth_m,
             })),
         )?;
-        let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
-        let mut seen = Seen {
-            frame: None,
-            report: Some(first),
-            wrench: WrenchHistory::default(),
-            frames: 0,
-            last_frame_wall_ns: mono_now_ns(),
-        };
+        Ok(Self {
+            seed,
+            episode,
+            first,
+            log,
+            task,
+            mixed,
+            heuristic: HeuristicPolicy::new(HeuristicConfig::default()),
+            seen: Seen {
+                frame: None,
+                report: Some(first),
+                wrench: WrenchHistory::default(),
+                frames: 0,
+                last_frame_wall_ns: mono_now_ns(),
+            },
+        })
+    }
+
+    /// Acts until the episode ends (settled after completion, enough
+    /// actions, its time-out, or a termination request), then records the
+    /// outcome and closes the log. `total_actions` counts across episodes;
+    /// `on_action` sees it after every action.
+    fn run(
+        mut self,
+        node: &mut PolicyNode,
+        cfg: &LiveConfig,
+        total_actions: &mut u64,
+        mut on_action: impl FnMut(u64),
+    ) -> Result<EpisodeOutcome> {
+        let (episode, first) = (self.episode, self.first);
         let mut actions = 0u64;
         let mut next_tick = mono_now_ns();
         let mut acted_for_step = u64::MAX;
@@ -430,18 +495,19 @@ pub fn run(
         let mut completed_at: Option<u64> = None;
         let mut t_end;
         loop {
-            node.pump(episode, &mut seen, Some(&mut log))?;
-            if let Some(r) = &seen.report
+            node.pump(episode, &mut self.seen, Some(&mut self.log))?;
+            if let Some(r) = &self.seen.report
                 && r.best_stage() > best_stage
             {
                 best_stage = r.best_stage();
-                log.event(r.header.t_hw_ns, &Event::Stage { stage: best_stage })?;
+                self.log
+                    .event(r.header.t_hw_ns, &Event::Stage { stage: best_stage })?;
                 if best_stage == Stage::Completed && completed_at.is_none() {
                     completed_at = Some(r.header.t_hw_ns);
                 }
             }
-            let Some(frame) = seen.frame else {
-                if mono_now_ns() - seen.last_frame_wall_ns > 10_000_000_000 {
+            let Some(frame) = self.seen.frame else {
+                if mono_now_ns() - self.seen.last_frame_wall_ns > 10_000_000_000 {
                     bail!("no sensor frames from rt-controller for 10 s (is it running?)");
                 }
                 std::thread::sleep(Duration::from_micros(200));
@@ -456,11 +522,11 @@ pub fn run(
                     hw_time_s(frame.header.t_hw_ns.saturating_sub(t)) >= cfg.settle_s
                 });
             let enough = cfg.max_actions.is_some_and(|n| actions >= n as u64)
-                || cfg.target_states.is_some_and(|t| total_actions >= t);
+                || cfg.target_states.is_some_and(|t| *total_actions >= t);
             if settled || enough || t_ep >= cfg.episode_timeout_s || termination_requested() {
                 break;
             }
-            if mono_now_ns() - seen.last_frame_wall_ns > 2_000_000_000 {
+            if mono_now_ns() - self.seen.last_frame_wall_ns > 2_000_000_000 {
                 bail!("sensor frames stopped for 2 s in episode {episode}");
             }
             let due = if cfg.lockstep {
@@ -477,51 +543,42 @@ pub fn run(
                 continue;
             }
             let obs = Observation::from_frame(&frame);
-            let a = match mixed.as_mut() {
-                Some(m) => m.act(&obs, &seen.wrench, &task),
-                None => policy.act(&obs, &seen.wrench, &task),
+            let a = match self.mixed.as_mut() {
+                Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
+                None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),
             };
             let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
             let m = node.send_action(episode, frame.header.t_hw_ns, apply_at, a)?;
-            log.action(&m)?;
+            self.log.action(&m)?;
             actions += 1;
-            total_actions += 1;
-            if let Some(p) = &progress {
-                p.update(total_actions, outcomes.len() as u64);
-            }
+            *total_actions += 1;
+            on_action(*total_actions);
             acted_for_step = frame.step;
             next_tick += ACTION_PERIOD_NS;
             if next_tick < mono_now_ns() {
                 next_tick = mono_now_ns() + ACTION_PERIOD_NS;
             }
         }
-        let stage = best_stage;
         let duration_s = hw_time_s(t_end.saturating_sub(first.header.t_hw_ns));
-        log.event(
+        self.log.event(
             t_end,
             &Event::Outcome(Outcome {
-                stage,
+                stage: best_stage,
                 duration_s: Some(duration_s),
                 actions: Some(actions),
                 states: None,
                 interrupted: None,
             }),
         )?;
-        let path = log.finish()?;
-        let outcome = EpisodeOutcome {
+        let path = self.log.finish()?;
+        Ok(EpisodeOutcome {
             episode,
-            seed,
-            stage,
+            seed: self.seed,
+            stage: best_stage,
             interrupted: termination_requested() && completed_at.is_none(),
             duration_s,
             actions,
             log: path,
-        };
-        on_outcome(&outcome);
-        outcomes.push(outcome);
+        })
     }
-    if let Some(p) = &progress {
-        p.finish(total_actions, outcomes.len() as u64);
-    }
-    Ok(outcomes)
 }

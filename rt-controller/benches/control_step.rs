@@ -2,14 +2,20 @@
 //! Panda, unsaturated (the filter passes the OSC torques through) and
 //! saturated (the QP solves every cycle). Criterion gives the medians; a
 //! second pass times 20 000 single steps for the tail percentiles, which
-//! criterion's batched samples cannot show.
+//! criterion's batched samples cannot show. `control_cycle/unsaturated` is
+//! the same step through `ControlCycle::cycle`, as the daemon and the fast
+//! path run it: the hardware-state message unpacked, the torque command and
+//! the sensor frame packed.
 //!
 //! `cargo bench -p rt-controller --bench control_step`
 
 use criterion::Criterion;
 use nalgebra::Vector3;
 use robot_model::{LoadOptions, Model};
-use rt_controller::{Controller, ControllerConfig, ControllerData, QpOutcome, RobotState, step};
+use rt_controller::{
+    ControlCycle, Controller, ControllerConfig, ControllerData, QpOutcome, RobotState, step,
+};
+use shared_mem_schema::{HardwareState, Pod, SensorFrame, TorqueCommand};
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -98,6 +104,30 @@ fn main() {
     ] {
         let mut c = Case::new(saturated);
         crit.bench_function(name, |b| b.iter(|| black_box(c.cycle())));
+    }
+    {
+        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/panda.urdf");
+        let model = Model::from_urdf_file(&path, &LoadOptions::default()).unwrap();
+        let mut cycle = ControlCycle::new(&model, ControllerConfig::default()).unwrap();
+        let mut state = HardwareState::empty(7);
+        state.q[..7].copy_from_slice(&READY);
+        state.v[..7].copy_from_slice(&[0.005, -0.01, 0.008, 0.01, -0.02, 0.015, 0.03]);
+        let mut cmd = TorqueCommand {
+            header: state.header,
+            state_step: 0,
+            action_seq: 0,
+            n_joints: 0,
+            reserved: 0,
+            tau: state.q,
+        };
+        let mut frame = *SensorFrame::boxed_zeroed();
+        crit.bench_function("control_cycle/unsaturated", |b| {
+            b.iter(|| {
+                state.step += 1;
+                state.header.t_hw_ns += 1_000_000;
+                black_box(cycle.cycle(&model, &state, None, 0, &mut cmd, &mut frame))
+            })
+        });
     }
     crit.final_summary();
     // Criterion's --list / --test runs must not do the timing pass.

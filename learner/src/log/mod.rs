@@ -151,13 +151,133 @@ fn schema_text<T: Message>() -> String {
     )
 }
 
+/// One channel of a log: its stream, schema and encodings.
+struct ChannelSpec {
+    stream: Stream,
+    schema_name: &'static str,
+    schema_encoding: &'static str,
+    schema: String,
+    topic: &'static str,
+    message_encoding: &'static str,
+}
+
+/// The channels a log with `opts` has: the raw streams (struct bytes), the
+/// compact camera frames, the JSON events and configuration, and (unless
+/// turned off) the Foxglove views.
+fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
+    let raw = |stream, schema_name, schema, topic| ChannelSpec {
+        stream,
+        schema_name,
+        schema_encoding: RAW_ENCODING,
+        schema,
+        topic,
+        message_encoding: RAW_ENCODING,
+    };
+    let json = |stream, schema_name, schema: &str, topic| ChannelSpec {
+        stream,
+        schema_name,
+        schema_encoding: "jsonschema",
+        schema: schema.to_string(),
+        topic,
+        message_encoding: "json",
+    };
+    let object = r#"{"type":"object"}"#;
+    let mut specs = vec![
+        raw(
+            Stream::Sensor,
+            "SensorFrame",
+            schema_text::<SensorFrame>(),
+            topics::SENSOR,
+        ),
+        raw(
+            Stream::Action,
+            "PolicyAction",
+            schema_text::<PolicyAction>(),
+            topics::ACTION,
+        ),
+        raw(
+            Stream::Status,
+            "ControllerStatus",
+            schema_text::<ControllerStatus>(),
+            topics::STATUS,
+        ),
+        raw(
+            Stream::Episode,
+            "EpisodeReport",
+            schema_text::<EpisodeReport>(),
+            topics::EPISODE,
+        ),
+        ChannelSpec {
+            stream: Stream::Camera,
+            schema_name: "CameraFrameCompact",
+            schema_encoding: CAMERA_ENCODING,
+            schema: format!(
+                "shared_mem_schema::CameraFrame (schema version {SCHEMA_VERSION}): its first {} \
+                 bytes, then width*height*3 RGB bytes, then width*height f32 depths",
+                std::mem::offset_of!(CameraFrame, rgb)
+            ),
+            topic: topics::CAMERA,
+            message_encoding: CAMERA_ENCODING,
+        },
+        json(Stream::Events, "vision_touch.Event", object, topics::EVENTS),
+        json(
+            Stream::Config,
+            "vision_touch.Config",
+            object,
+            topics::CONFIG,
+        ),
+    ];
+    if opts.foxglove {
+        specs.extend([
+            json(
+                Stream::Rgb,
+                "foxglove.RawImage",
+                foxglove::RAW_IMAGE,
+                topics::VIEW_RGB,
+            ),
+            json(
+                Stream::Depth,
+                "foxglove.RawImage",
+                foxglove::RAW_IMAGE,
+                topics::VIEW_DEPTH,
+            ),
+            json(
+                Stream::Calibration,
+                "foxglove.CameraCalibration",
+                foxglove::CAMERA_CALIBRATION,
+                topics::VIEW_CALIBRATION,
+            ),
+            json(
+                Stream::Tf,
+                "foxglove.FrameTransforms",
+                foxglove::FRAME_TRANSFORMS,
+                topics::VIEW_TF,
+            ),
+            json(
+                Stream::EePose,
+                "foxglove.PoseInFrame",
+                foxglove::POSE_IN_FRAME,
+                topics::VIEW_EE_POSE,
+            ),
+            json(
+                Stream::Wrench,
+                "vision_touch.Wrench",
+                foxglove::WRENCH,
+                topics::VIEW_WRENCH,
+            ),
+        ]);
+    }
+    specs
+}
+
 impl LogWriter {
     /// Creates `path` with the default options.
     pub fn create(path: &Path) -> Result<Self, LogError> {
         Self::create_with(path, LogOptions::default())
     }
 
-    /// Creates `path` (zstd-compressed, chunked, indexed).
+    /// Creates `path` (zstd-compressed, chunked, indexed): opens the file,
+    /// registers every channel of [`channel_specs`] and flushes them.
     pub fn create_with(path: &Path, opts: LogOptions) -> Result<Self, LogError> {
         let err = |source| LogError {
             path: path.to_path_buf(),
@@ -174,114 +294,14 @@ impl LogWriter {
             .create(BufWriter::new(file))
             .map_err(err)?;
         let meta = BTreeMap::new();
-        let mut add = |name: &str, enc: &str, schema: &[u8], topic: &str, msg_enc: &str| {
-            let sid = w.add_schema(name, enc, schema)?;
-            w.add_channel(sid, topic, msg_enc, &meta)
-        };
         let mut ids = [0u16; STREAMS];
-        let raw = [
-            (
-                Stream::Sensor,
-                "SensorFrame",
-                schema_text::<SensorFrame>(),
-                topics::SENSOR,
-            ),
-            (
-                Stream::Action,
-                "PolicyAction",
-                schema_text::<PolicyAction>(),
-                topics::ACTION,
-            ),
-            (
-                Stream::Status,
-                "ControllerStatus",
-                schema_text::<ControllerStatus>(),
-                topics::STATUS,
-            ),
-            (
-                Stream::Episode,
-                "EpisodeReport",
-                schema_text::<EpisodeReport>(),
-                topics::EPISODE,
-            ),
-        ];
-        for (s, name, text, topic) in raw {
-            ids[s as usize] =
-                add(name, RAW_ENCODING, text.as_bytes(), topic, RAW_ENCODING).map_err(err)?;
-        }
-        let cam_text = format!(
-            "shared_mem_schema::CameraFrame (schema version {SCHEMA_VERSION}): its first {} \
-             bytes, then width*height*3 RGB bytes, then width*height f32 depths",
-            std::mem::offset_of!(CameraFrame, rgb)
-        );
-        ids[Stream::Camera as usize] = add(
-            "CameraFrameCompact",
-            CAMERA_ENCODING,
-            cam_text.as_bytes(),
-            topics::CAMERA,
-            CAMERA_ENCODING,
-        )
-        .map_err(err)?;
-        let object = br#"{"type":"object"}"#;
-        ids[Stream::Events as usize] = add(
-            "vision_touch.Event",
-            "jsonschema",
-            object,
-            topics::EVENTS,
-            "json",
-        )
-        .map_err(err)?;
-        ids[Stream::Config as usize] = add(
-            "vision_touch.Config",
-            "jsonschema",
-            object,
-            topics::CONFIG,
-            "json",
-        )
-        .map_err(err)?;
-        if opts.foxglove {
-            let views = [
-                (
-                    Stream::Rgb,
-                    "foxglove.RawImage",
-                    foxglove::RAW_IMAGE,
-                    topics::VIEW_RGB,
-                ),
-                (
-                    Stream::Depth,
-                    "foxglove.RawImage",
-                    foxglove::RAW_IMAGE,
-                    topics::VIEW_DEPTH,
-                ),
-                (
-                    Stream::Calibration,
-                    "foxglove.CameraCalibration",
-                    foxglove::CAMERA_CALIBRATION,
-                    topics::VIEW_CALIBRATION,
-                ),
-                (
-                    Stream::Tf,
-                    "foxglove.FrameTransforms",
-                    foxglove::FRAME_TRANSFORMS,
-                    topics::VIEW_TF,
-                ),
-                (
-                    Stream::EePose,
-                    "foxglove.PoseInFrame",
-                    foxglove::POSE_IN_FRAME,
-                    topics::VIEW_EE_POSE,
-                ),
-                (
-                    Stream::Wrench,
-                    "vision_touch.Wrench",
-                    foxglove::WRENCH,
-                    topics::VIEW_WRENCH,
-                ),
-            ];
-            for (s, name, schema, topic) in views {
-                ids[s as usize] =
-                    add(name, "jsonschema", schema.as_bytes(), topic, "json").map_err(err)?;
-            }
+        for c in channel_specs(&opts) {
+            let sid = w
+                .add_schema(c.schema_name, c.schema_encoding, c.schema.as_bytes())
+                .map_err(err)?;
+            ids[c.stream as usize] = w
+                .add_channel(sid, c.topic, c.message_encoding, &meta)
+                .map_err(err)?;
         }
         // The schemas and channels go to disk at once, in a chunk of their
         // own: a file killed before its first full chunk still names them.
