@@ -112,14 +112,7 @@ fn main() {
         let mut state = HardwareState::empty(7);
         state.q[..7].copy_from_slice(&READY);
         state.v[..7].copy_from_slice(&[0.005, -0.01, 0.008, 0.01, -0.02, 0.015, 0.03]);
-        let mut cmd = TorqueCommand {
-            header: state.header,
-            state_step: 0,
-            action_seq: 0,
-            n_joints: 0,
-            reserved: 0,
-            tau: state.q,
-        };
+        let mut cmd = TorqueCommand::empty(7);
         let mut frame = *SensorFrame::boxed_zeroed();
         crit.bench_function("control_cycle/unsaturated", |b| {
             b.iter(|| {

@@ -247,6 +247,20 @@ pub struct TorqueCommand {
     pub tau: [f64; MAX_JOINTS],
 }
 
+impl TorqueCommand {
+    /// All zeros but the joint count and the schema version.
+    pub fn empty(n_joints: usize) -> Self {
+        Self {
+            header: Header::new(0, 0, 0, 0),
+            state_step: 0,
+            action_seq: 0,
+            n_joints: n_joints as u32,
+            reserved: 0,
+            tau: [0.0; MAX_JOINTS],
+        }
+    }
+}
+
 /// Controller → learner, every control cycle (1 kHz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]

@@ -12,8 +12,8 @@ use robot_model::Model;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{
-    ControllerMode, ControllerStatus, HardwareState, PolicyAction, SCHEMA_VERSION, SensorFrame,
-    TorqueCommand,
+    ControllerMode, ControllerStatus, HardwareState, Pod, PolicyAction, SCHEMA_VERSION,
+    SensorFrame, TorqueCommand,
 };
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -95,31 +95,8 @@ impl<H: Hardware> Daemon<H> {
             have_state: false,
             last_state_ns: 0,
             hardware_lost: false,
-            last_command: TorqueCommand {
-                header: empty.header,
-                state_step: 0,
-                action_seq: 0,
-                n_joints: 0,
-                reserved: 0,
-                tau: empty.q,
-            },
-            sensor: SensorFrame {
-                header: empty.header,
-                step: 0,
-                action_seq: 0,
-                n_joints: 0,
-                mode: 0,
-                fault_code: 0,
-                reserved: 0,
-                q: empty.q,
-                v: empty.q,
-                tau_cmd: empty.q,
-                tau_measured: empty.q,
-                ee_pos_m: [0.0; 3],
-                ee_quat_xyzw: [0.0; 4],
-                ee_twist: [0.0; 6],
-                wrench: [0.0; 6],
-            },
+            last_command: TorqueCommand::empty(0),
+            sensor: *SensorFrame::boxed_zeroed(),
             status_seq: 0,
             next_status_ns: 0,
             realtime: false,
