@@ -1,4 +1,5 @@
-//! The one place where nalgebra (our API) meets glam (rapier's API).
+//! The one place where nalgebra (our API) meets glam (rapier's API), and
+//! where rotations sent as quaternion arrays become nalgebra rotations.
 
 use nalgebra::{Isometry3, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use rapier3d_f64::math::{Matrix, Pose, Rotation, Vector};
@@ -50,6 +51,20 @@ pub fn mat_to_glam(m: &Matrix3<f64>) -> Matrix {
         Vector::new(m[(0, 1)], m[(1, 1)], m[(2, 1)]),
         Vector::new(m[(0, 2)], m[(1, 2)], m[(2, 2)]),
     )
+}
+
+/// A rotation sent as a unit quaternion `[x, y, z, w]` (messages, logs,
+/// calibrations), taken as is when it is unit to within 1e-12:
+/// renormalising it would move it by an ulp, and lockstep runs would no
+/// longer match the fast path bit for bit.
+pub fn unit_quaternion(xyzw: [f64; 4]) -> UnitQuaternion<f64> {
+    let [x, y, z, w] = xyzw;
+    let q = Quaternion::new(w, x, y, z);
+    if (q.norm() - 1.0).abs() < 1e-12 {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::from_quaternion(q)
+    }
 }
 
 #[cfg(test)]

@@ -10,9 +10,10 @@
 //! - contact, from the wrist wrench against the free-space reading.
 
 use hw_sim::camera::{BodyPoses, Camera, CameraFrame, Primitive};
-use hw_sim::config::{CameraConfig, TaskConfig};
-use nalgebra::{Isometry3, Translation3, Vector3};
+use hw_sim::config::TaskConfig;
+use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
+use shared_mem_schema::CameraCalibration;
 
 /// Flow labels from kinematics and geometry.
 pub struct FlowLabeler {
@@ -28,37 +29,10 @@ pub struct FlowLabeler {
     pub mask: Vec<u8>,
 }
 
-/// A camera calibration as logged.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Calibration {
-    /// Image width, px.
-    pub width: u32,
-    /// Image height, px.
-    pub height: u32,
-    /// Focal length, px.
-    pub focal_px: f64,
-    /// Principal point, px.
-    pub principal_px: [f64; 2],
-    /// Camera position in the base frame, m.
-    pub pos_m: [f64; 3],
-    /// Camera orientation in the base frame (x, y, z, w).
-    pub quat_xyzw: [f64; 4],
-}
-
-impl Calibration {
-    /// The camera frame in the base frame.
-    pub fn pose(&self) -> Isometry3<f64> {
-        Isometry3::from_parts(
-            Translation3::from(Vector3::from(self.pos_m)),
-            crate::policy::unit_quaternion(self.quat_xyzw),
-        )
-    }
-}
-
 impl FlowLabeler {
     /// A labeler for `model` carrying the peg of `task` (none when the task
     /// is disabled), seen by a camera of calibration `cal`.
-    pub fn new(model: Model, task: &TaskConfig, cal: &Calibration) -> anyhow::Result<Self> {
+    pub fn new(model: Model, task: &TaskConfig, cal: &CameraCalibration) -> anyhow::Result<Self> {
         anyhow::ensure!(
             cal.width > 0 && cal.height > 0 && cal.focal_px.is_finite() && cal.focal_px > 0.0,
             "camera calibration {cal:?} is not usable"
@@ -68,20 +42,7 @@ impl FlowLabeler {
             let peg = hw_sim::world::peg_info(&model, task)?;
             prims.push(peg.primitive());
         }
-        let config = CameraConfig {
-            width: cal.width,
-            height: cal.height,
-            max_depth_m: 100.0,
-            ..CameraConfig::default()
-        };
-        let camera = Camera::calibrated(
-            &config,
-            cal.pose(),
-            cal.focal_px,
-            cal.principal_px,
-            prims,
-            0,
-        );
+        let camera = Camera::calibrated(cal, 100.0, prims, 0);
         let n = (cal.width * cal.height) as usize;
         Ok(Self {
             data: model.create_data(),
@@ -179,14 +140,7 @@ mod tests {
         let model = robot_model::descriptions::builtin("iiwa14").unwrap();
         let world = hw_sim::WorldConfig::default();
         let cam = Camera::new(&world.camera, vec![], 0);
-        let cal = Calibration {
-            width: world.camera.width,
-            height: world.camera.height,
-            focal_px: cam.focal_px,
-            principal_px: cam.principal_px,
-            pos_m: cam.pose.translation.vector.into(),
-            quat_xyzw: cam.pose.rotation.coords.into(),
-        };
+        let cal = cam.calibration();
         let mut l = FlowLabeler::new(model.clone(), &world.task, &cal).unwrap();
         let q = hw_sim::world::default_initial_q(&model);
         // Depth of the robot itself: everything it covers is visible.
@@ -211,7 +165,7 @@ mod tests {
         l.label(&q, &q1, &depth, 0.01);
         let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.02);
         let (cx, cy, f) = (cal.principal_px[0], cal.principal_px[1], cal.focal_px);
-        let pose = cal.pose();
+        let pose = cam.pose;
         let mut checked = 0;
         for i in 0..l.mask.len() {
             if l.mask[i] == 0 {

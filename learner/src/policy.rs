@@ -104,18 +104,7 @@ impl Observation {
     }
 }
 
-/// A rotation sent as a unit quaternion `[x, y, z, w]`, taken as is when it
-/// is unit to within 1e-12: renormalising it would move it by an ulp, and
-/// lockstep runs would no longer match the fast path bit for bit.
-pub fn unit_quaternion(xyzw: [f64; 4]) -> UnitQuaternion<f64> {
-    let [x, y, z, w] = xyzw;
-    let q = nalgebra::Quaternion::new(w, x, y, z);
-    if (q.norm() - 1.0).abs() < 1e-12 {
-        UnitQuaternion::new_unchecked(q)
-    } else {
-        UnitQuaternion::from_quaternion(q)
-    }
-}
+pub use hw_sim::convert::unit_quaternion;
 
 /// Where the task is (calibration; the simulator reports it).
 #[derive(Debug, Clone, PartialEq)]

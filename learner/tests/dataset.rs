@@ -5,7 +5,7 @@
 use learner::collect::{CollectConfig, Mix, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
 use learner::env::{ACTION_PERIOD, FastEnv};
-use learner::labels::{Calibration, FlowLabeler};
+use learner::labels::FlowLabeler;
 use learner::log::LogOptions;
 use learner::policy::{HeuristicConfig, HeuristicPolicy};
 use std::path::PathBuf;
@@ -33,14 +33,7 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
     let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Pod>::boxed_zeroed();
     env.render_camera(&mut msg);
     let cam = env.world().camera().clone();
-    let cal = Calibration {
-        width: msg.width,
-        height: msg.height,
-        focal_px: msg.focal_px,
-        principal_px: msg.principal_px,
-        pos_m: msg.pose_pos_m,
-        quat_xyzw: msg.pose_quat_xyzw,
-    };
+    let cal = msg.calibration;
     assert_eq!(cal.focal_px, cam.focal_px);
     let model = env.world().model().clone();
     let mut labeler = FlowLabeler::new(model, &env.world().config().task, &cal).unwrap();

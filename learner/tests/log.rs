@@ -30,12 +30,12 @@ fn camera(i: u64, w: u32, h: u32) -> Box<CameraFrame> {
     let mut c = CameraFrame::boxed_zeroed();
     c.header = Header::new(i, 5, i * 50_000_000, 1);
     c.index = i;
-    c.width = w;
-    c.height = h;
-    c.focal_px = 154.5;
-    c.principal_px = [w as f64 / 2.0, h as f64 / 2.0];
-    c.pose_pos_m = [1.45, -0.75, 0.85];
-    c.pose_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
+    c.calibration.width = w;
+    c.calibration.height = h;
+    c.calibration.focal_px = 154.5;
+    c.calibration.principal_px = [w as f64 / 2.0, h as f64 / 2.0];
+    c.calibration.pose_pos_m = [1.45, -0.75, 0.85];
+    c.calibration.pose_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
     for k in 0..(w * h) as usize {
         c.rgb[3 * k] = (k % 251) as u8;
         c.rgb[3 * k + 1] = i as u8;
@@ -109,11 +109,10 @@ fn round_trip_with_views_and_time_ranges() {
     assert_eq!(cams.len(), 60);
     let want = camera(17, 32, 24);
     let c = &cams[17];
-    assert_eq!((c.width, c.height, c.index), (32, 24, 17));
+    assert_eq!(c.index, 17);
+    assert_eq!(c.calibration, want.calibration);
     assert_eq!(c.rgb, want.rgb[..32 * 24 * 3]);
     assert_eq!(c.depth_m, want.depth_m[..32 * 24]);
-    assert_eq!(c.pose_pos_m, want.pose_pos_m);
-    assert_eq!(c.principal_px, want.principal_px);
 
     let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None).unwrap();
     assert_eq!(actions.len(), 60);

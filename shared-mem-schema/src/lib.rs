@@ -405,6 +405,28 @@ impl PolicyAction {
     }
 }
 
+/// A calibrated pinhole camera (square pixels, no distortion): the one
+/// calibration type of the stack, carried in every [`CameraFrame`], logged
+/// with it, and what the flow labeler and the simulator's camera are built
+/// from.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+pub struct CameraCalibration {
+    /// Image width, pixels (≤ [`MAX_IMAGE_WIDTH`] in a message).
+    pub width: u32,
+    /// Image height, pixels (≤ [`MAX_IMAGE_HEIGHT`] in a message).
+    pub height: u32,
+    /// Focal length, pixels.
+    pub focal_px: f64,
+    /// Principal point (x, y), pixels.
+    pub principal_px: [f64; 2],
+    /// Camera position in the base frame, m. Camera axes: x right, y down,
+    /// z forward (optical).
+    pub pose_pos_m: [f64; 3],
+    /// Camera orientation in the base frame, quaternion (x, y, z, w).
+    pub pose_quat_xyzw: [f64; 4],
+}
+
 /// Robot (camera driver) → learner, 20 Hz: an RGB-D image with its
 /// calibration. Only the first `width × height` pixels of each buffer are
 /// meaningful.
@@ -415,19 +437,8 @@ pub struct CameraFrame {
     pub header: Header,
     /// Frame counter since start.
     pub index: u64,
-    /// Image width, pixels (≤ [`MAX_IMAGE_WIDTH`]).
-    pub width: u32,
-    /// Image height, pixels (≤ [`MAX_IMAGE_HEIGHT`]).
-    pub height: u32,
-    /// Focal length, pixels (square pixels).
-    pub focal_px: f64,
-    /// Principal point (x, y), pixels.
-    pub principal_px: [f64; 2],
-    /// Camera position in the base frame, m. Camera axes: x right, y down,
-    /// z forward (optical).
-    pub pose_pos_m: [f64; 3],
-    /// Camera orientation in the base frame, quaternion (x, y, z, w).
-    pub pose_quat_xyzw: [f64; 4],
+    /// The image size and the camera's intrinsics and pose.
+    pub calibration: CameraCalibration,
     /// RGB, row-major, 3 bytes per pixel.
     pub rgb: [u8; MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT * 3],
     /// Depth along the optical axis, m, row-major (0: no return).

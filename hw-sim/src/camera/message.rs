@@ -13,12 +13,9 @@ pub fn fill_message(
     let w = (frame.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH);
     let h = (frame.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT);
     msg.index = frame.index;
-    msg.width = w as u32;
-    msg.height = h as u32;
-    msg.focal_px = camera.focal_px;
-    msg.principal_px = camera.principal_px;
-    msg.pose_pos_m = camera.pose.translation.vector.into();
-    msg.pose_quat_xyzw = camera.pose.rotation.coords.into();
+    msg.calibration = camera.calibration();
+    msg.calibration.width = w as u32;
+    msg.calibration.height = h as u32;
     let stride = frame.width as usize;
     for v in 0..h {
         let (src, dst) = (v * stride, v * w);

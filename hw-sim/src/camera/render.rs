@@ -5,6 +5,7 @@ use super::*;
 use crate::config::CameraConfig;
 use crate::rng::SimRng;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Vector3};
+use shared_mem_schema::CameraCalibration;
 
 /// One rendered frame: RGB, depth, segmentation and the ground-truth flow
 /// from the previous frame to this one.
@@ -196,13 +197,43 @@ impl Camera {
         let focal_px =
             0.5 * config.height as f64 / (0.5 * config.vertical_fov_deg.to_radians()).tan();
         let principal = [0.5 * config.width as f64, 0.5 * config.height as f64];
-        Self::calibrated(config, pose, focal_px, principal, prims, seed)
+        Self::with_intrinsics(config, pose, focal_px, principal, prims, seed)
     }
 
-    /// A camera of known calibration (as a log records it): `pose` is the
-    /// camera frame (x right, y down, z forward) in the base frame; of
-    /// `config`, only the image size and the depth range are used.
+    /// A camera of known calibration (as a log records it), seeing up to
+    /// `max_depth_m`; the rest of its configuration is the default one.
     pub fn calibrated(
+        cal: &CameraCalibration,
+        max_depth_m: f64,
+        prims: Vec<Primitive>,
+        seed: u64,
+    ) -> Self {
+        let config = CameraConfig {
+            width: cal.width,
+            height: cal.height,
+            max_depth_m,
+            ..CameraConfig::default()
+        };
+        let rotation = crate::convert::unit_quaternion(cal.pose_quat_xyzw);
+        let pose = Isometry3::from_parts(Vector3::from(cal.pose_pos_m).into(), rotation);
+        Self::with_intrinsics(&config, pose, cal.focal_px, cal.principal_px, prims, seed)
+    }
+
+    /// The camera's calibration (image size, intrinsics, pose).
+    pub fn calibration(&self) -> CameraCalibration {
+        CameraCalibration {
+            width: self.config.width,
+            height: self.config.height,
+            focal_px: self.focal_px,
+            principal_px: self.principal_px,
+            pose_pos_m: self.pose.translation.vector.into(),
+            pose_quat_xyzw: self.pose.rotation.coords.into(),
+        }
+    }
+
+    /// `pose` is the camera frame (x right, y down, z forward) in the base
+    /// frame.
+    fn with_intrinsics(
         config: &CameraConfig,
         pose: Isometry3<f64>,
         focal_px: f64,

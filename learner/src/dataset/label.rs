@@ -2,7 +2,7 @@
 //! labelled samples.
 
 use super::*;
-use crate::labels::{Calibration, FlowLabeler, in_contact};
+use crate::labels::{FlowLabeler, in_contact};
 use crate::log::{CameraImage, LogReader, topics};
 use crate::policy::WRENCH_WINDOW;
 use anyhow::{Context, Result, ensure};
@@ -137,19 +137,15 @@ pub fn episode_samples(
             continue;
         };
         if labeler.is_none() {
-            let cal = Calibration {
-                width: c0.width,
-                height: c0.height,
-                focal_px: c0.focal_px,
-                principal_px: c0.principal_px,
-                pos_m: c0.pose_pos_m,
-                quat_xyzw: c0.pose_quat_xyzw,
-            };
+            let cal = c0.calibration;
             labeler = Some(FlowLabeler::new(model.clone(), &world.task, &cal)?);
-            size = (c0.width as usize, c0.height as usize);
+            size = (cal.width as usize, cal.height as usize);
         }
         ensure!(
-            (c0.width as usize, c0.height as usize) == size,
+            (
+                c0.calibration.width as usize,
+                c0.calibration.height as usize
+            ) == size,
             "{}: the image size changes within the episode",
             path.display()
         );

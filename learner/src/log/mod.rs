@@ -424,8 +424,8 @@ impl LogWriter {
     /// Logs a camera frame: compact raw, and the view images and calibration.
     pub fn camera(&mut self, m: &CameraFrame) -> Result<(), LogError> {
         let (w, h) = (
-            (m.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH),
-            (m.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT),
+            (m.calibration.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH),
+            (m.calibration.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT),
         );
         let n = w * h;
         let head = &m.as_bytes()[..std::mem::offset_of!(CameraFrame, rgb)];
@@ -466,8 +466,8 @@ impl LogWriter {
                 t,
                 w as u32,
                 h as u32,
-                m.focal_px,
-                m.principal_px,
+                m.calibration.focal_px,
+                m.calibration.principal_px,
             );
             self.write_json(Stream::Calibration, t, p)?;
             foxglove::frame_transforms(
@@ -476,8 +476,8 @@ impl LogWriter {
                 &[foxglove::Transform {
                     parent: foxglove::BASE_FRAME,
                     child: foxglove::CAMERA_FRAME,
-                    translation: m.pose_pos_m,
-                    rotation_xyzw: m.pose_quat_xyzw,
+                    translation: m.calibration.pose_pos_m,
+                    rotation_xyzw: m.calibration.pose_quat_xyzw,
                 }],
             );
             self.write_json(Stream::Tf, t, p)?;

@@ -7,7 +7,7 @@
 
 use super::{CAMERA_ENCODING, RAW_ENCODING, topics};
 use mcap::records::{self, Record};
-use shared_mem_schema::{CameraFrame, Header, Message, Pod, SCHEMA_VERSION};
+use shared_mem_schema::{CameraCalibration, CameraFrame, Header, Message, Pod, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -111,18 +111,8 @@ pub struct CameraImage {
     pub header: Header,
     /// Frame counter.
     pub index: u64,
-    /// Width, px.
-    pub width: u32,
-    /// Height, px.
-    pub height: u32,
-    /// Focal length, px.
-    pub focal_px: f64,
-    /// Principal point, px.
-    pub principal_px: [f64; 2],
-    /// Camera position in the base frame, m.
-    pub pose_pos_m: [f64; 3],
-    /// Camera orientation in the base frame (x, y, z, w).
-    pub pose_quat_xyzw: [f64; 4],
+    /// Image size, intrinsics and pose.
+    pub calibration: CameraCalibration,
     /// RGB, row-major.
     pub rgb: Vec<u8>,
     /// Depth, m, row-major (0: no return).
@@ -155,10 +145,26 @@ impl CameraImage {
             }
         };
         use std::mem::offset_of;
-        let (width, height) = (
-            u32_at(offset_of!(CameraFrame, width)),
-            u32_at(offset_of!(CameraFrame, height)),
+        let at = |field: usize| offset_of!(CameraFrame, calibration) + field;
+        let mut calibration = CameraCalibration {
+            width: u32_at(at(offset_of!(CameraCalibration, width))),
+            height: u32_at(at(offset_of!(CameraCalibration, height))),
+            focal_px: f64_at(at(offset_of!(CameraCalibration, focal_px))),
+            ..CameraCalibration::default()
+        };
+        f64s(
+            at(offset_of!(CameraCalibration, principal_px)),
+            &mut calibration.principal_px,
         );
+        f64s(
+            at(offset_of!(CameraCalibration, pose_pos_m)),
+            &mut calibration.pose_pos_m,
+        );
+        f64s(
+            at(offset_of!(CameraCalibration, pose_quat_xyzw)),
+            &mut calibration.pose_quat_xyzw,
+        );
+        let (width, height) = (calibration.width, calibration.height);
         let n = width as usize * height as usize;
         if width as usize > shared_mem_schema::MAX_IMAGE_WIDTH
             || height as usize > shared_mem_schema::MAX_IMAGE_HEIGHT
@@ -170,28 +176,16 @@ impl CameraImage {
                 head_len + 7 * n
             ));
         }
-        let mut img = Self {
+        Ok(Self {
             header,
             index: u64_at(offset_of!(CameraFrame, index)),
-            width,
-            height,
-            focal_px: f64_at(offset_of!(CameraFrame, focal_px)),
-            principal_px: [0.0; 2],
-            pose_pos_m: [0.0; 3],
-            pose_quat_xyzw: [0.0; 4],
+            calibration,
             rgb: data[head_len..head_len + 3 * n].to_vec(),
             depth_m: data[head_len + 3 * n..]
                 .chunks_exact(4)
                 .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
                 .collect(),
-        };
-        f64s(offset_of!(CameraFrame, principal_px), &mut img.principal_px);
-        f64s(offset_of!(CameraFrame, pose_pos_m), &mut img.pose_pos_m);
-        f64s(
-            offset_of!(CameraFrame, pose_quat_xyzw),
-            &mut img.pose_quat_xyzw,
-        );
-        Ok(img)
+        })
     }
 }
 
