@@ -382,7 +382,7 @@ impl Server {
             // A repeated request (sent again before our answer arrived).
             return self.publish_report();
         }
-        if c.header.schema_version != shared_mem_schema::SCHEMA_VERSION {
+        if c.header.schema_version != SCHEMA_VERSION {
             self.last_result = Answer {
                 seq: c.header.seq,
                 outcome: Err(Refusal::SchemaVersion(c.header.schema_version)),

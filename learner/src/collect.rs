@@ -360,11 +360,10 @@ pub fn run_episode(
         log.sensor(env.sensor_frame())?;
     }
     let t = hw_time_ns(env.world().time_s());
-    let stage = best;
     log.event(
         t,
         &Event::Outcome(Outcome {
-            stage,
+            stage: best,
             duration_s: None,
             actions: None,
             states: Some(states),
@@ -378,7 +377,7 @@ pub fn run_episode(
         peg: peg.name().into(),
         policy: policy.kind().name().into(),
         states,
-        stage,
+        stage: best,
         file,
     })
 }

@@ -123,8 +123,9 @@ impl ControlCycle {
 
     /// Notes the episode of `state`: a state of another episode than the
     /// last (the robot was reset) restarts the control law at it, with no
-    /// action of the new episode applied yet. Returns true then. [`ControlCycle::cycle`] calls it; transports call it when
-    /// a state arrives, to drop what they queued for the old episode.
+    /// action of the new episode applied yet. Returns true then.
+    /// [`ControlCycle::cycle`] calls it; transports call it when a state
+    /// arrives, to drop what they queued for the old episode.
     pub fn observe_episode(&mut self, state: &HardwareState) -> bool {
         let e = state.header.episode;
         if self.episode == Some(e) {

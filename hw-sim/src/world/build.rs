@@ -233,9 +233,8 @@ impl World {
 
     /// Places the box from the seed: about the configured centre (or under
     /// the peg), its yaw about the one that fits the peg at the start.
-    pub(super) fn draw_box(&mut self, rng: &mut SimRng) {
-        let t = self.config.task.clone();
-        let t = &t;
+    pub(super) fn draw_box(&mut self, cfg: &WorldConfig, rng: &mut SimRng) {
+        let t = &cfg.task;
         let center = if let Some(c) = t.box_center_xy_m {
             c
         } else {

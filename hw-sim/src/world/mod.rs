@@ -22,7 +22,6 @@ mod perturb;
 mod sensors;
 mod task;
 
-pub use perturb::ScheduledOcclusion;
 pub use sensors::SensorReadings;
 pub use task::{PegInfo, TaskState, peg_info, peg_link};
 
@@ -96,7 +95,7 @@ pub struct World {
     peg: Option<Peg>,
     box_state: Option<BoxState>,
     pushes: Vec<ScheduledPush>,
-    occlusions: Vec<ScheduledOcclusion>,
+    occlusions: Vec<crate::config::Occlusion>,
     /// Noise streams: joint positions, velocities, force, moment.
     noise_rngs: [SimRng; 4],
     /// The F/T low-pass filter's gain per step.
@@ -212,9 +211,9 @@ impl World {
         self.set_joint_state(&q0, &vec![0.0; nv])?;
         self.box_state = None;
         if cfg.task.enabled {
-            self.draw_box(&mut box_rng);
+            self.draw_box(&cfg, &mut box_rng);
         }
-        self.schedule_perturbations(&mut perturb_rng);
+        self.schedule_perturbations(&cfg, &mut perturb_rng);
         self.camera = Some(Camera::new(&cfg.camera, self.primitives(), seed));
         self.step_index = 0;
         self.tau_applied.iter_mut().for_each(|t| *t = 0.0);

@@ -2,6 +2,7 @@
 //! occlusions, drawn per episode from the seed.
 
 use super::*;
+use crate::config::Occlusion;
 
 #[derive(Clone, Copy, Debug)]
 pub(super) struct ScheduledPush {
@@ -11,23 +12,9 @@ pub(super) struct ScheduledPush {
     force: Vector3<f64>,
 }
 
-/// A camera occlusion scheduled for the episode (a rectangle in pixels,
-/// or the whole image).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ScheduledOcclusion {
-    /// Start, s.
-    pub start_s: f64,
-    /// End, s.
-    pub end_s: f64,
-    /// `[x, y, w, h]`, or `None` for the whole image.
-    pub rect: Option<[u32; 4]>,
-}
-
 impl World {
-    /// Draws the episode's pushes and occlusions from the configuration
-    /// and `rng`.
-    pub(super) fn schedule_perturbations(&mut self, rng: &mut SimRng) {
-        let cfg = self.config.clone();
+    /// Draws the episode's pushes and occlusions from `cfg` and `rng`.
+    pub(super) fn schedule_perturbations(&mut self, cfg: &WorldConfig, rng: &mut SimRng) {
         let nv = self.model.nv();
         let p = &cfg.perturbations;
         self.pushes = p
@@ -51,21 +38,13 @@ impl World {
                 force: Vector3::new(mag * dir.cos(), mag * dir.sin(), 0.0),
             });
         }
-        self.occlusions = p
-            .occlusions
-            .iter()
-            .map(|o| ScheduledOcclusion {
-                start_s: o.start_s,
-                end_s: o.end_s,
-                rect: o.rect,
-            })
-            .collect();
+        self.occlusions = p.occlusions.clone();
         for _ in 0..p.random_occlusions {
             let start = rng.uniform(p.random_window_s[0], p.random_window_s[1]);
             let side = p.random_occlusion_side_px;
             let x = (rng.unit() * cfg.camera.width.saturating_sub(side) as f64) as u32;
             let y = (rng.unit() * cfg.camera.height.saturating_sub(side) as f64) as u32;
-            self.occlusions.push(ScheduledOcclusion {
+            self.occlusions.push(Occlusion {
                 start_s: start,
                 end_s: start + p.random_occlusion_duration_s,
                 rect: Some([x, y, side, side]),
@@ -91,7 +70,7 @@ impl World {
     }
 
     /// The occlusions active at simulated time `t_s`.
-    pub fn occlusions_at(&self, t_s: f64) -> impl Iterator<Item = &ScheduledOcclusion> {
+    pub fn occlusions_at(&self, t_s: f64) -> impl Iterator<Item = &Occlusion> {
         self.occlusions
             .iter()
             .filter(move |o| o.start_s <= t_s && t_s < o.end_s)

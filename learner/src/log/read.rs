@@ -772,7 +772,7 @@ impl LogReader {
             .collect()
     }
 
-    /// The JSON messages of `topic` (events, configuration, views).
+    /// The episode events of `/events`, typed.
     pub fn read_events(
         &self,
         range: Option<(u64, u64)>,
@@ -780,7 +780,8 @@ impl LogReader {
         self.read_serde(super::topics::EVENTS, range)
     }
 
-    /// The JSON messages of `topic` with their log times.
+    /// The JSON messages of `topic` (events, configuration, views) with
+    /// their log times.
     pub fn read_json(
         &self,
         topic: &str,
