@@ -3,7 +3,7 @@
 
 use super::backend::{Hardware, HardwareError};
 use super::config::{Clock, DaemonConfig};
-use super::queue::ActionQueue;
+use super::queue::{ActionQueue, for_episode};
 use super::shared::{FAULT_HARDWARE_SILENT, Shared};
 use super::stats::Stats;
 use crate::cycle::ControlCycle;
@@ -182,10 +182,17 @@ impl<H: Hardware> Daemon<H> {
     /// values (NaN, out of range) itself.
     fn take_actions(&mut self) -> Result<(), HardwareError> {
         let (queue, stats) = (&mut self.queue, &mut self.stats);
+        let episode = self.control.episode();
         transport::drain(&self.actions, |a| {
             stats.actions_received += 1;
-            // Another schema's bytes, or the oldest of an overflowing queue.
-            if a.header.schema_version != SCHEMA_VERSION || queue.push(*a) {
+            if !for_episode(a, episode) {
+                // Sent for the episode before a reset, arriving after it: in
+                // lockstep it would sit at the queue's front, addressed to a
+                // step of the old episode, and hold back the new one's.
+                stats.actions_stale += 1;
+            } else if a.header.schema_version != SCHEMA_VERSION || queue.push(*a) {
+                // Another schema's bytes, or the oldest of an overflowing
+                // queue.
                 stats.actions_garbage += 1;
             }
         })?;

@@ -2,6 +2,14 @@
 
 use shared_mem_schema::PolicyAction;
 
+/// Whether `a` may be queued while the hardware is in `episode`: an action
+/// names the episode of the observation it answers, and one of another
+/// episode is stale. Episode 0 (a sender that does not track episodes) and
+/// no episode yet accept anything.
+pub(crate) fn for_episode(a: &PolicyAction, episode: Option<u64>) -> bool {
+    a.header.episode == 0 || episode.is_none_or(|e| e == a.header.episode)
+}
+
 /// Fixed-capacity FIFO of actions (no allocation after construction).
 pub(crate) struct ActionQueue {
     items: [Option<PolicyAction>; 16],
@@ -95,5 +103,15 @@ mod tests {
         assert_eq!(q.next_for(50).map(|a| a.header.seq), Some(1));
         q.drop_before(101);
         assert!(q.front().is_none());
+    }
+
+    #[test]
+    fn actions_of_another_episode_are_stale() {
+        let mut a = action(1, 50);
+        assert!(for_episode(&a, Some(2)), "episode 0: any");
+        a.header.episode = 1;
+        assert!(for_episode(&a, None));
+        assert!(for_episode(&a, Some(1)));
+        assert!(!for_episode(&a, Some(2)));
     }
 }

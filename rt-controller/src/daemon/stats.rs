@@ -15,6 +15,8 @@ pub struct Stats {
     /// Actions refused before the control law saw them (wrong schema
     /// version, queue overflow).
     pub actions_garbage: u64,
+    /// Actions dropped as answers to an earlier episode.
+    pub actions_stale: u64,
     /// Wake-up latency past the deadline.
     pub wakeup: LatencyHistogram,
     /// Compute time per cycle.
@@ -31,6 +33,7 @@ impl Stats {
         hardware_misses: 0,
         actions_received: 0,
         actions_garbage: 0,
+        actions_stale: 0,
         wakeup: LatencyHistogram::EMPTY,
         compute: LatencyHistogram::EMPTY,
         action_latency: LatencyHistogram::EMPTY,
