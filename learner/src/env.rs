@@ -1,7 +1,8 @@
 //! The fast path: simulator and control core in one process, in lockstep,
 //! with no IPC. It runs exactly what the deployed stack runs in lockstep
 //! mode (same order, same time stamps), so both give the same trajectory
-//! for the same seed (tests/lockstep.rs in the `tests` crate checks it).
+//! for the same seed (`lockstep_stack_and_fast_path_give_the_same_trajectory`
+//! in the `tests` crate's tests/stack.rs checks it).
 //!
 //! One cycle k: the hardware state after k physics steps → the control step
 //! (with the action addressed to step k, if any) → the physics step. The

@@ -1,11 +1,14 @@
 //! # learner
 //!
-//! Owns everything at the policy's rate and slower: MCAP logging and reading,
-//! data collection, the self-supervised dataset and its labels, the
-//! multimodal representation (product-of-experts variational model, its
-//! baselines and ablations), the policy and its TRPO training, the
-//! environments of the fast path, the evaluation of the paper's experiments,
-//! the live 20 Hz inference node and the command-line interface.
+//! Owns everything at the policy's rate and slower. Today: MCAP logging and
+//! reading ([`log`]), data collection ([`collect`]), the self-supervised
+//! dataset and its labels ([`dataset`], [`labels`]), the scripted and random
+//! policies ([`policy`]), the fast-path environment ([`env`]), the live
+//! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]) and
+//! the command-line interface. Not written yet, each to get its own folder:
+//! the multimodal representation with its baselines and ablations
+//! (`models/`), its training loops (`train/`), the RL environment with TRPO
+//! (`rl/`) and the paper's experiments (`eval/`); see docs/architecture.md.
 //!
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.
