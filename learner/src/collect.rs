@@ -9,13 +9,12 @@
 //! is `learner run` with the same mix through the real-time stack. Both
 //! write the same log format, so the dataset builder reads either.
 
-use crate::env::{ACTION_PERIOD, FastEnv};
+use crate::env::{ACTION_PERIOD, EnvError, FastEnv};
 use crate::log::events::{Event, Outcome, Reset};
-use crate::log::{LogOptions, LogWriter};
+use crate::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
 };
-use anyhow::{Context, Result};
 use hw_sim::{PegShape, WorldConfig};
 use rt_controller::ControllerConfig;
 use shared_mem_schema::{Pod, Stage, hw_time_ns};
@@ -46,8 +45,9 @@ impl Default for Mix {
     }
 }
 
-/// Which policy an episode runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Which policy an episode runs (serde: its [`EpisodePolicy::name`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum EpisodePolicy {
     /// The scripted insertion.
     Heuristic,
@@ -150,9 +150,9 @@ pub struct EpisodeShard {
     /// Its seed.
     pub seed: u64,
     /// Peg.
-    pub peg: String,
+    pub peg: PegShape,
     /// Policy.
-    pub policy: String,
+    pub policy: EpisodePolicy,
     /// 20 Hz states (camera frames) written.
     pub states: u64,
     /// Best stage reached.
@@ -261,11 +261,11 @@ pub fn fmt_duration(s: f64) -> String {
 }
 
 /// The task geometry the policies need, from the simulated world.
-pub fn task_of(world: &hw_sim::World) -> Result<TaskGeometry> {
+pub fn task_of(world: &hw_sim::World) -> Result<TaskGeometry, CollectError> {
     Ok(TaskGeometry {
-        hole_pose: world.hole_pose().context("the world has no task")?,
+        hole_pose: world.hole_pose().ok_or(CollectError::NoTask)?,
         symmetry: world.config().task.peg.symmetry_order(),
-        depth_m: world.box_geometry().context("the world has no box")?.depth,
+        depth_m: world.box_geometry().ok_or(CollectError::NoBox)?.depth,
     })
 }
 
@@ -283,18 +283,21 @@ pub fn run_episode(
     path: &Path,
     log_opts: &LogOptions,
     mut on_state: impl FnMut() -> bool,
-) -> Result<EpisodeShard> {
+) -> Result<EpisodeShard, CollectError> {
     let peg = world.task.peg;
-    env.reset_with(world.clone(), seed)?;
+    env.reset_with(world, seed)?;
     let task = task_of(env.world())?;
     let mut policy = MixedPolicy::new(mix, seed);
     let mut log = LogWriter::create_with(path, log_opts.clone())?;
-    log.config(
-        0,
-        &serde_json::json!({"world": env.world().config(), "controller": controller,
-            "robot": &world.robot, "policy": policy.kind().name(), "mode": "fast",
-            "episode": episode, "seed": seed}),
-    )?;
+    let mut config = RunConfig::new(
+        RunMode::Fast,
+        env.world().config().clone(),
+        policy.kind(),
+        episode,
+        seed,
+    );
+    config.controller = Some(controller.clone());
+    log.config(0, &config)?;
     let hole = task.hole_pose;
     log.event(
         0,
@@ -302,7 +305,7 @@ pub fn run_episode(
             episode,
             seed,
             peg,
-            policy: policy.kind().name().into(),
+            policy: policy.kind(),
             lockstep: None,
             world: None,
             hole_pos_m: hole.translation.vector.into(),
@@ -313,7 +316,7 @@ pub fn run_episode(
     let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
     let mut states = 0u64;
     let mut best = Stage::Failed;
-    let mut stage_of = |env: &FastEnv, log: &mut LogWriter| -> Result<()> {
+    let mut stage_of = |env: &FastEnv, log: &mut LogWriter| -> Result<(), LogError> {
         let s = env.world().task().map_or(Stage::Failed, |t| t.best_stage);
         if s > best {
             best = s;
@@ -337,7 +340,7 @@ pub fn run_episode(
             }
             log.sensor(env.sensor_frame())?;
         }
-        obs = Some(env.last_observation().context("cycles ran")?);
+        obs = Some(env.last_observation().expect("cycles ran"));
         stage_of(env, &mut log)?;
         if env.world().camera_due() {
             env.render_camera(&mut cam);
@@ -374,8 +377,8 @@ pub fn run_episode(
     Ok(EpisodeShard {
         episode,
         seed,
-        peg: peg.name().into(),
-        policy: policy.kind().name().into(),
+        peg,
+        policy: policy.kind(),
         states,
         stage: best,
         file,
@@ -384,28 +387,42 @@ pub fn run_episode(
 
 /// Fast-mode collection on `cfg.workers` threads. `stop` ends it early
 /// (each worker finishes its episode's file cleanly).
-pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSummary> {
-    anyhow::ensure!(!cfg.pegs.is_empty(), "no pegs to collect with");
-    anyhow::ensure!(cfg.episode_actions > 0, "episodes need at least one action");
-    std::fs::create_dir_all(&cfg.out_dir)
-        .with_context(|| format!("creating {}", cfg.out_dir.display()))?;
+pub fn collect_fast(
+    cfg: &CollectConfig,
+    stop: &AtomicBool,
+) -> Result<CollectSummary, CollectError> {
+    if cfg.pegs.is_empty() {
+        return Err(CollectError::NoPegs);
+    }
+    if cfg.episode_actions == 0 {
+        return Err(CollectError::NoActions);
+    }
+    std::fs::create_dir_all(&cfg.out_dir).map_err(|source| CollectError::Io {
+        path: cfg.out_dir.clone(),
+        source,
+    })?;
     let start = Instant::now();
     let next_episode = AtomicU64::new(0);
     let done = AtomicU64::new(0);
     let episodes_done = AtomicU64::new(0);
     let progress = Progress::new(cfg.states);
     let shards = Mutex::new(Vec::new());
+    let manifest_path = cfg.out_dir.join("manifest.jsonl");
+    let manifest_err = |source: std::io::Error| CollectError::Io {
+        path: manifest_path.clone(),
+        source,
+    };
     let manifest = Mutex::new(
         std::fs::OpenOptions::new()
             .create(true)
             .append(true)
-            .open(cfg.out_dir.join("manifest.jsonl"))
-            .context("opening manifest.jsonl")?,
+            .open(&manifest_path)
+            .map_err(manifest_err)?,
     );
-    std::thread::scope(|s| -> Result<()> {
+    std::thread::scope(|s| -> Result<(), CollectError> {
         let mut handles = Vec::new();
         for _ in 0..cfg.workers.max(1) {
-            handles.push(s.spawn(|| -> Result<()> {
+            handles.push(s.spawn(|| -> Result<(), CollectError> {
                 let mut env: Option<FastEnv> = None;
                 loop {
                     if stop.load(Ordering::Relaxed) || done.load(Ordering::Relaxed) >= cfg.states {
@@ -436,10 +453,17 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
                             !stop.load(Ordering::Relaxed)
                         },
                     )
-                    .with_context(|| format!("episode {i} ({})", path.display()))?;
+                    .map_err(|e| CollectError::Episode {
+                        episode: i,
+                        path: path.clone(),
+                        source: Box::new(e),
+                    })?;
                     episodes_done.fetch_add(1, Ordering::Relaxed);
-                    let line = serde_json::to_string(&shard)?;
-                    writeln!(manifest.lock().expect("not poisoned"), "{line}")?;
+                    // Fails only on a path that is not UTF-8.
+                    let line = serde_json::to_string(&shard)
+                        .map_err(|e| manifest_err(std::io::Error::other(e)))?;
+                    writeln!(manifest.lock().expect("not poisoned"), "{line}")
+                        .map_err(manifest_err)?;
                     shards.lock().expect("not poisoned").push(shard);
                 }
             }));
@@ -458,4 +482,48 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
         shards,
         wall_s: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Why a collection (or one of its episodes) failed; names the file or
+/// episode at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum CollectError {
+    /// No pegs were given.
+    #[error("no pegs to collect with")]
+    NoPegs,
+    /// Episodes of zero actions were asked for.
+    #[error("episodes need at least one action")]
+    NoActions,
+    /// The world has no task (its hole pose is unknown).
+    #[error("the world has no task")]
+    NoTask,
+    /// The world has no box.
+    #[error("the world has no box")]
+    NoBox,
+    /// A file or directory of the collection could not be written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The environment failed.
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    /// The episode's log could not be written.
+    #[error(transparent)]
+    Log(#[from] LogError),
+    /// One episode failed.
+    #[error("episode {episode} ({}): {source}", path.display())]
+    Episode {
+        /// Episode number.
+        episode: u64,
+        /// Its log.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<CollectError>,
+    },
 }

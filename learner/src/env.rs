@@ -10,12 +10,23 @@
 //! cycle before the one its action is applied in.
 
 use crate::policy::{Action4, Observation, WrenchHistory};
-use hw_sim::{SimHardware, World, WorldConfig};
+use hw_sim::{SimError, SimHardware, World, WorldConfig};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
 use shared_mem_schema::{
     HardwareState, Header, Pod, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
 };
+
+/// Why the fast path could not be built or stepped.
+#[derive(Debug, thiserror::Error)]
+pub enum EnvError {
+    /// The world could not be built, or refused a physics step.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// The controller configuration does not fit the robot.
+    #[error(transparent)]
+    Controller(#[from] rt_controller::ConfigError),
+}
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
 pub const ACTION_PERIOD: u64 = shared_mem_schema::rates::ACTION_PERIOD_STEPS;
@@ -41,7 +52,7 @@ pub struct FastEnv {
 impl FastEnv {
     /// Builds the world and the controller; call [`FastEnv::reset`] before
     /// stepping.
-    pub fn new(world: WorldConfig, controller: ControllerConfig) -> anyhow::Result<Self> {
+    pub fn new(world: WorldConfig, controller: ControllerConfig) -> Result<Self, EnvError> {
         let world = World::new(world)?;
         let model = world.model().clone();
         let control = ControlCycle::new(&model, controller)?;
@@ -104,13 +115,13 @@ impl FastEnv {
     /// Starts an episode: as hw-sim's reset with a configuration (a world
     /// built afresh with `seed`); the controller restarts when it sees the
     /// new episode, as the daemon does.
-    pub fn reset(&mut self, seed: u64) -> anyhow::Result<()> {
+    pub fn reset(&mut self, seed: u64) -> Result<(), EnvError> {
         let cfg = self.world.config().clone();
         self.reset_with(cfg, seed)
     }
 
     /// Starts an episode in another world configuration (same robot).
-    pub fn reset_with(&mut self, mut cfg: WorldConfig, seed: u64) -> anyhow::Result<()> {
+    pub fn reset_with(&mut self, mut cfg: WorldConfig, seed: u64) -> Result<(), EnvError> {
         cfg.seed = seed;
         self.world = World::with_model(self.model.clone(), cfg)?;
         self.hardware.reset();
@@ -129,7 +140,7 @@ impl FastEnv {
     /// message the controller got, as a policy node would have sent it
     /// (numbered from 1 per episode, stamped with the observation it
     /// answers, addressed to this step).
-    pub fn cycle(&mut self, action: Option<&Action4>) -> anyhow::Result<Option<PolicyAction>> {
+    pub fn cycle(&mut self, action: Option<&Action4>) -> Result<Option<PolicyAction>, EnvError> {
         let t = hw_time_ns(self.world.time_s());
         self.hardware
             .state(&self.world, self.episodes, t, &mut self.state);
@@ -162,7 +173,7 @@ impl FastEnv {
 
     /// Runs cycles up to the one before the next action step and returns
     /// its observation; `action` (if any) is applied in the first cycle.
-    pub fn step(&mut self, action: Option<&Action4>) -> anyhow::Result<Observation> {
+    pub fn step(&mut self, action: Option<&Action4>) -> Result<Observation, EnvError> {
         self.cycle(action)?;
         while !self.world.step_index().is_multiple_of(ACTION_PERIOD) {
             self.cycle(None)?;

@@ -9,11 +9,26 @@
 //!   hide it);
 //! - contact, from the wrist wrench against the free-space reading.
 
+use hw_sim::SimError;
 use hw_sim::camera::{BodyPoses, Camera, CameraFrame, Primitive};
 use hw_sim::config::TaskConfig;
 use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
 use shared_mem_schema::CameraCalibration;
+
+/// Why a labeler could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum LabelError {
+    /// The recorded camera calibration has no usable size or focal length.
+    #[error("camera calibration {calibration:?} is not usable")]
+    Calibration {
+        /// The calibration at fault.
+        calibration: CameraCalibration,
+    },
+    /// The task's peg cannot be attached to the robot.
+    #[error(transparent)]
+    Peg(#[from] SimError),
+}
 
 /// Flow labels from kinematics and geometry.
 pub struct FlowLabeler {
@@ -32,11 +47,16 @@ pub struct FlowLabeler {
 impl FlowLabeler {
     /// A labeler for `model` carrying the peg of `task` (none when the task
     /// is disabled), seen by a camera of calibration `cal`.
-    pub fn new(model: Model, task: &TaskConfig, cal: &CameraCalibration) -> anyhow::Result<Self> {
-        anyhow::ensure!(
-            cal.width > 0 && cal.height > 0 && cal.focal_px.is_finite() && cal.focal_px > 0.0,
-            "camera calibration {cal:?} is not usable"
-        );
+    pub fn new(
+        model: Model,
+        task: &TaskConfig,
+        cal: &CameraCalibration,
+    ) -> Result<Self, LabelError> {
+        let usable =
+            cal.width > 0 && cal.height > 0 && cal.focal_px.is_finite() && cal.focal_px > 0.0;
+        if !usable {
+            return Err(LabelError::Calibration { calibration: *cal });
+        }
         let mut prims: Vec<Primitive> = hw_sim::camera::robot_primitives(&model);
         if task.enabled {
             let peg = hw_sim::world::peg_info(&model, task)?;

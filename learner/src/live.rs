@@ -7,12 +7,12 @@
 //! lockstep simulator: on the frame of step 50m−1 it publishes the action
 //! addressed to step 50m, so runs are deterministic.
 
-use crate::collect::{Mix, MixedPolicy, Progress};
+use crate::collect::{EpisodePolicy, Mix, MixedPolicy, Progress};
 use crate::env::ACTION_PERIOD;
 use crate::log::events::{Event, Outcome, Reset};
-use crate::log::{LogOptions, LogWriter};
+use crate::log::{LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
-use anyhow::{Context, Result, bail};
+use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
@@ -104,15 +104,16 @@ pub struct LiveCollect {
 
 /// Collects through the real-time stack: starts hw-sim and rt-controller
 /// and runs `learner run` with the collection mix.
-pub fn collect_live(c: &LiveCollect) -> Result<()> {
-    std::fs::create_dir_all(&c.out_dir)
-        .with_context(|| format!("creating {}", c.out_dir.display()))?;
+pub fn collect_live(c: &LiveCollect) -> Result<(), StackError> {
+    std::fs::create_dir_all(&c.out_dir).map_err(|source| StackError::Io {
+        path: c.out_dir.clone(),
+        source,
+    })?;
     let world_path = c.out_dir.join("world.toml");
-    std::fs::write(
-        &world_path,
-        toml::to_string(&c.world).context("printing the world configuration")?,
-    )
-    .with_context(|| format!("writing {}", world_path.display()))?;
+    std::fs::write(&world_path, toml::to_string(&c.world)?).map_err(|source| StackError::Io {
+        path: world_path.clone(),
+        source,
+    })?;
     let pegs: Vec<&str> = c.pegs.iter().map(|p| p.name()).collect();
     let mut run_args = vec![
         "--episodes".to_string(),
@@ -143,7 +144,7 @@ pub fn collect_live(c: &LiveCollect) -> Result<()> {
         controller_config: c.controller_config.clone(),
     })?;
     if !status.success() {
-        bail!("the policy node failed ({status})");
+        return Err(StackError::PolicyNodeFailed(status));
     }
     Ok(())
 }
@@ -195,7 +196,7 @@ struct Seen {
 
 impl PolicyNode {
     /// Opens the services of namespace `ns`.
-    pub fn open(ns: &str) -> Result<Self> {
+    pub fn open(ns: &str) -> Result<Self, StackError> {
         let node = transport::create_node("learner")?;
         Ok(Self {
             sensor: transport::subscriber(&node, ns)?,
@@ -216,7 +217,7 @@ impl PolicyNode {
         episode: u64,
         seen: &mut Seen,
         mut log: Option<&mut LogWriter>,
-    ) -> Result<()> {
+    ) -> Result<(), StackError> {
         let now = mono_now_ns();
         let mut err = None;
         transport::drain(&self.sensor, |f| {
@@ -271,7 +272,7 @@ impl PolicyNode {
         t_hw_ns: u64,
         apply_at_step: u64,
         a: [f64; 4],
-    ) -> Result<PolicyAction> {
+    ) -> Result<PolicyAction, StackError> {
         self.action_seq += 1;
         let mut m = PolicyAction::new(self.action_seq, mono_now_ns(), a);
         m.header.t_hw_ns = t_hw_ns;
@@ -284,18 +285,22 @@ impl PolicyNode {
     /// Resets the simulator with `world` (TOML) and `seed` and waits for
     /// its answer; returns the report of the new episode. In lockstep it
     /// answers pending action requests with zero actions meanwhile.
-    pub fn reset(&mut self, seed: u64, world: &str, lockstep: bool) -> Result<EpisodeReport> {
+    pub fn reset(
+        &mut self,
+        seed: u64,
+        world: &str,
+        lockstep: bool,
+    ) -> Result<EpisodeReport, StackError> {
         // Request ids are unique across learner processes (pid, counter):
         // the simulator ignores a repeated id, so the request can be sent
         // again until answered (a simulator still starting misses it).
         self.command_seq += 1;
         let seq = (u64::from(std::process::id()) << 32) | self.command_seq;
         if world.len() > shared_mem_schema::MAX_CONFIG_BYTES {
-            bail!(
-                "the world configuration is {} bytes, a command carries at most {}",
-                world.len(),
-                shared_mem_schema::MAX_CONFIG_BYTES
-            );
+            return Err(StackError::WorldTooLarge {
+                bytes: world.len(),
+                max: shared_mem_schema::MAX_CONFIG_BYTES,
+            });
         }
         let send = |publisher: &Pub<SimCommand>| {
             transport::send_with(publisher, |c| {
@@ -322,7 +327,7 @@ impl PolicyNode {
             })?;
             if let Some(r) = answer {
                 if r.command_result != EpisodeReport::OK {
-                    bail!("the simulator refused the reset: {}", r.message_text());
+                    return Err(StackError::ResetRefused(r.message_text()));
                 }
                 return Ok(r);
             }
@@ -341,10 +346,10 @@ impl PolicyNode {
                 }
             }
             if termination_requested() {
-                bail!("interrupted while waiting for the simulator");
+                return Err(StackError::Interrupted);
             }
             if mono_now_ns() - start > 15_000_000_000 {
-                bail!("no answer from the simulator to a reset within 15 s (is hw-sim running?)");
+                return Err(StackError::NoResetAnswer);
             }
             std::thread::sleep(Duration::from_micros(200));
         }
@@ -368,7 +373,7 @@ pub fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
 pub fn run(
     cfg: &LiveConfig,
     mut on_outcome: impl FnMut(&EpisodeOutcome),
-) -> Result<Vec<EpisodeOutcome>> {
+) -> Result<Vec<EpisodeOutcome>, StackError> {
     transport::quiet_logs();
     let mut node = PolicyNode::open(&cfg.namespace)?;
     let mut outcomes = Vec::new();
@@ -426,8 +431,8 @@ impl LiveEpisode {
         cfg: &LiveConfig,
         world: WorldConfig,
         seed: u64,
-    ) -> Result<Self> {
-        let world_toml = toml::to_string(&world).context("printing the world configuration")?;
+    ) -> Result<Self, StackError> {
+        let world_toml = toml::to_string(&world)?;
         let first = node.reset(seed, &world_toml, cfg.lockstep)?;
         let episode = first.header.episode;
         let path = cfg
@@ -436,13 +441,13 @@ impl LiveEpisode {
         let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
         let task = task_geometry(&first, &world);
         let mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
-        let policy_name = mixed.as_ref().map_or("heuristic", |m| m.kind().name());
-        log.config(
-            first.header.t_hw_ns,
-            &serde_json::json!({"world": &world, "robot": &world.robot, "lockstep": cfg.lockstep,
-                "policy": policy_name, "mode": "live", "namespace": &cfg.namespace,
-                "episode": episode, "seed": seed}),
-        )?;
+        let policy = mixed
+            .as_ref()
+            .map_or(EpisodePolicy::Heuristic, |m| m.kind());
+        let mut config = RunConfig::new(RunMode::Live, world.clone(), policy, episode, seed);
+        config.lockstep = Some(cfg.lockstep);
+        config.namespace = Some(cfg.namespace.clone());
+        log.config(first.header.t_hw_ns, &config)?;
         let hole = task.hole_pose;
         log.event(
             first.header.t_hw_ns,
@@ -450,7 +455,7 @@ impl LiveEpisode {
                 episode,
                 seed,
                 peg: world.task.peg,
-                policy: policy_name.into(),
+                policy,
                 lockstep: Some(cfg.lockstep),
                 world: Some(world.clone()),
                 hole_pos_m: hole.translation.vector.into(),
@@ -486,7 +491,7 @@ impl LiveEpisode {
         cfg: &LiveConfig,
         total_actions: &mut u64,
         mut on_action: impl FnMut(u64),
-    ) -> Result<EpisodeOutcome> {
+    ) -> Result<EpisodeOutcome, StackError> {
         let (episode, first) = (self.episode, self.first);
         let mut actions = 0u64;
         let mut next_tick = mono_now_ns();
@@ -508,7 +513,7 @@ impl LiveEpisode {
             }
             let Some(frame) = self.seen.frame else {
                 if mono_now_ns() - self.seen.last_frame_wall_ns > 10_000_000_000 {
-                    bail!("no sensor frames from rt-controller for 10 s (is it running?)");
+                    return Err(StackError::NoSensorFrames);
                 }
                 std::thread::sleep(Duration::from_micros(200));
                 continue;
@@ -527,7 +532,7 @@ impl LiveEpisode {
                 break;
             }
             if mono_now_ns() - self.seen.last_frame_wall_ns > 2_000_000_000 {
-                bail!("sensor frames stopped for 2 s in episode {episode}");
+                return Err(StackError::FramesStopped(episode));
             }
             let due = if cfg.lockstep {
                 (frame.step + 1).is_multiple_of(ACTION_PERIOD) && acted_for_step != frame.step

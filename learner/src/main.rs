@@ -169,7 +169,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         ..Mix::default()
     };
     if a.live {
-        return live::collect_live(&live::LiveCollect {
+        return Ok(live::collect_live(&live::LiveCollect {
             out_dir: a.out.clone(),
             states: a.states,
             episode_actions: a.episode_actions,
@@ -179,7 +179,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
             mix,
             log,
             controller_config: a.controller_config.clone(),
-        });
+        })?);
     }
     let controller = match &a.controller_config {
         Some(p) => rt_controller::daemon::config::DaemonConfig::from_file(p)?.controller,
@@ -315,9 +315,9 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
                 m.width,
                 m.height
             );
-            let mut by: std::collections::BTreeMap<(String, String), u64> = Default::default();
+            let mut by: std::collections::BTreeMap<(&str, &str), u64> = Default::default();
             for e in &m.episodes {
-                *by.entry((e.peg.clone(), e.policy.clone())).or_default() += e.samples;
+                *by.entry((e.peg.name(), e.policy.name())).or_default() += e.samples;
             }
             for ((peg, policy), n) in by {
                 println!("  {peg:<11} {policy:<10} {n:>8} samples");

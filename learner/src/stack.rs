@@ -2,16 +2,103 @@
 //! rt-controller and the live policy node (`learner run`), found next to
 //! the running executable (all three are built into one target directory).
 
-use anyhow::{Context, Result, bail};
+use crate::log::LogError;
 use shared_mem_schema::process::termination_requested;
+use shared_mem_schema::transport::TransportError;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+/// Why the stack, or the live policy node in it, failed; names the process,
+/// file or episode at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum StackError {
+    /// The running executable could not be located.
+    #[error("locating the learner executable: {0}")]
+    CurrentExe(#[source] std::io::Error),
+    /// The running executable's path has no directory.
+    #[error("the executable {} has no directory", .0.display())]
+    NoExeDir(PathBuf),
+    /// A stack executable is missing.
+    #[error(
+        "{} not found: build the stack first (cargo build --release -p hw-sim -p rt-controller \
+         -p learner)",
+        .0.display()
+    )]
+    NotBuilt(PathBuf),
+    /// A file or directory could not be created or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A process could not be started.
+    #[error("starting {name} ({}): {source}", program.display())]
+    Spawn {
+        /// Its name for messages.
+        name: String,
+        /// The executable.
+        program: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// hw-sim or rt-controller ended while the policy node ran.
+    #[error("{name} exited early ({status}); see {}", log.display())]
+    ExitedEarly {
+        /// The process.
+        name: String,
+        /// How it ended.
+        status: ExitStatus,
+        /// Its output.
+        log: PathBuf,
+    },
+    /// The policy node (`learner run`) failed.
+    #[error("the policy node failed ({0})")]
+    PolicyNodeFailed(ExitStatus),
+    /// The world configuration could not be printed as TOML.
+    #[error("printing the world configuration: {0}")]
+    WorldToml(#[from] toml::ser::Error),
+    /// The world configuration does not fit in a reset command.
+    #[error("the world configuration is {bytes} bytes, a command carries at most {max}")]
+    WorldTooLarge {
+        /// Its size.
+        bytes: usize,
+        /// [`shared_mem_schema::MAX_CONFIG_BYTES`].
+        max: usize,
+    },
+    /// The simulator refused a reset.
+    #[error("the simulator refused the reset: {0}")]
+    ResetRefused(String),
+    /// No answer to a reset within 15 s.
+    #[error("no answer from the simulator to a reset within 15 s (is hw-sim running?)")]
+    NoResetAnswer,
+    /// A termination request came while waiting for the simulator.
+    #[error("interrupted while waiting for the simulator")]
+    Interrupted,
+    /// No sensor frames arrived for 10 s at the start of an episode.
+    #[error("no sensor frames from rt-controller for 10 s (is it running?)")]
+    NoSensorFrames,
+    /// The sensor frames stopped for 2 s during an episode.
+    #[error("sensor frames stopped for 2 s in episode {0}")]
+    FramesStopped(u64),
+    /// A shared-memory service failed.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// An episode's log could not be written.
+    #[error(transparent)]
+    Log(#[from] LogError),
+}
+
 /// Where the stack's executables are: next to the current one.
-pub fn bin_dir() -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("locating the learner executable")?;
-    let dir = exe.parent().context("the executable has no directory")?;
+pub fn bin_dir() -> Result<PathBuf, StackError> {
+    let exe = std::env::current_exe().map_err(StackError::CurrentExe)?;
+    let dir = exe
+        .parent()
+        .ok_or_else(|| StackError::NoExeDir(exe.clone()))?;
     // Test binaries run from target/<profile>/deps.
     Ok(if dir.ends_with("deps") {
         dir.parent().unwrap_or(dir).to_path_buf()
@@ -21,14 +108,10 @@ pub fn bin_dir() -> Result<PathBuf> {
 }
 
 /// Path of a stack executable, with a clear error when it is not built.
-pub fn executable(dir: &Path, name: &str) -> Result<PathBuf> {
+pub fn executable(dir: &Path, name: &str) -> Result<PathBuf, StackError> {
     let p = dir.join(name);
     if !p.is_file() {
-        bail!(
-            "{} not found: build the stack first (cargo build --release -p hw-sim -p \
-             rt-controller -p learner)",
-            p.display()
-        );
+        return Err(StackError::NotBuilt(p));
     }
     Ok(p)
 }
@@ -42,16 +125,21 @@ pub struct Managed {
 
 impl Managed {
     /// Starts `cmd`; its output goes to `log` when given.
-    pub fn spawn(name: &str, mut cmd: Command, log: Option<&Path>) -> Result<Self> {
+    pub fn spawn(name: &str, mut cmd: Command, log: Option<&Path>) -> Result<Self, StackError> {
         if let Some(log) = log {
-            let f = std::fs::File::create(log)
-                .with_context(|| format!("creating {}", log.display()))?;
-            cmd.stdout(f.try_clone()?).stderr(f);
+            let err = |source: std::io::Error| StackError::Io {
+                path: log.to_path_buf(),
+                source,
+            };
+            let f = std::fs::File::create(log).map_err(err)?;
+            cmd.stdout(f.try_clone().map_err(err)?).stderr(f);
         }
         cmd.stdin(Stdio::null());
-        let child = cmd
-            .spawn()
-            .with_context(|| format!("starting {name} ({:?})", cmd.get_program()))?;
+        let child = cmd.spawn().map_err(|source| StackError::Spawn {
+            name: name.into(),
+            program: cmd.get_program().into(),
+            source,
+        })?;
         Ok(Self {
             name: name.into(),
             child: Some(child),
@@ -134,13 +222,15 @@ pub struct StackConfig {
 /// Starts hw-sim and rt-controller, runs `learner run` to completion in the
 /// foreground (its output is ours), and stops everything. Returns the
 /// policy node's exit status.
-pub fn run(cfg: &StackConfig) -> Result<std::process::ExitStatus> {
+pub fn run(cfg: &StackConfig) -> Result<ExitStatus, StackError> {
     let dir = bin_dir()?;
     let sim_bin = executable(&dir, "hw-sim")?;
     let ctl_bin = executable(&dir, "rt-controller")?;
     let learner_bin = executable(&dir, "learner")?;
-    std::fs::create_dir_all(&cfg.log_dir)
-        .with_context(|| format!("creating {}", cfg.log_dir.display()))?;
+    std::fs::create_dir_all(&cfg.log_dir).map_err(|source| StackError::Io {
+        path: cfg.log_dir.clone(),
+        source,
+    })?;
     shared_mem_schema::transport::cleanup_dead_nodes();
     let mode = if cfg.lockstep { "lockstep" } else { "realtime" };
     let mut sim_cmd = Command::new(&sim_bin);
@@ -177,11 +267,11 @@ pub fn run(cfg: &StackConfig) -> Result<std::process::ExitStatus> {
         for p in [&mut sim, &mut ctl] {
             if let Some(s) = p.try_wait() {
                 policy.stop(Duration::from_secs(3));
-                bail!(
-                    "{} exited early ({s}); see {}",
-                    p.name,
-                    cfg.log_dir.join(format!("{}.log", p.name)).display()
-                );
+                return Err(StackError::ExitedEarly {
+                    name: p.name.clone(),
+                    status: s,
+                    log: cfg.log_dir.join(format!("{}.log", p.name)),
+                });
             }
         }
         if termination_requested() {

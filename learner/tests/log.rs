@@ -3,8 +3,9 @@
 //! anywhere): an error naming the offset, never a panic, and a recovered copy
 //! that holds every intact message.
 
+use learner::collect::EpisodePolicy;
 use learner::log::events::{Event, Outcome, Reset};
-use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, topics};
+use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, RunConfig, RunMode, topics};
 use shared_mem_schema::{CameraFrame, Header, Pod, PolicyAction, SensorFrame};
 use std::path::{Path, PathBuf};
 
@@ -44,18 +45,31 @@ fn camera(i: u64, w: u32, h: u32) -> Box<CameraFrame> {
     c
 }
 
+/// The configuration record of the test episodes.
+fn run_config() -> RunConfig {
+    let mut c = RunConfig::new(
+        RunMode::Live,
+        hw_sim::WorldConfig::default(),
+        EpisodePolicy::Heuristic,
+        1,
+        3,
+    );
+    c.lockstep = Some(true);
+    c.namespace = Some("test".into());
+    c
+}
+
 /// 3 s of a small episode: 3000 sensor frames, 60 actions and camera frames.
 fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
     let mut w = LogWriter::create_with(path, opts).unwrap();
-    w.config(0, &serde_json::json!({"world": {"peg": "square"}}))
-        .unwrap();
+    w.config(0, &run_config()).unwrap();
     w.event(
         0,
         &Event::Reset(Box::new(Reset {
             episode: 1,
             seed: 3,
             peg: hw_sim::PegShape::Square,
-            policy: "heuristic".into(),
+            policy: EpisodePolicy::Heuristic,
             lockstep: None,
             world: None,
             hole_pos_m: [0.6, 0.0, 0.1],
@@ -121,10 +135,26 @@ fn round_trip_with_views_and_time_ranges() {
     assert_eq!(events.len(), 2);
     assert!(matches!(&events[0].1, Event::Reset(r) if r.seed == 3));
     assert!(matches!(&events[1].1, Event::Outcome(o) if o.stage == hw_sim::Stage::Touched));
+    let configs = r.read_config(None).unwrap();
+    assert_eq!(configs.len(), 1);
+    // Compared by field: serde_json's default float parsing need not give
+    // back every world value bit for bit.
+    let (t, c) = &configs[0];
+    assert_eq!(*t, 0);
     assert_eq!(
-        r.read_json(topics::CONFIG, None).unwrap()[0].1["world"]["peg"],
-        "square"
+        (c.mode, c.policy),
+        (RunMode::Live, EpisodePolicy::Heuristic)
     );
+    assert_eq!((c.episode, c.seed, c.lockstep), (1, 3, Some(true)));
+    assert_eq!(c.namespace.as_deref(), Some("test"));
+    assert_eq!(c.robot, c.world.robot);
+    assert_eq!(c.world.task.peg, hw_sim::PegShape::Square);
+    assert!(c.controller.is_none());
+    // The JSON keeps the names older readers index by.
+    let json = &r.read_json(topics::CONFIG, None).unwrap()[0].1;
+    assert_eq!(json["world"]["task"]["peg"], "square");
+    assert_eq!(json["policy"], "heuristic");
+    assert_eq!(json["mode"], "live");
 
     // A time range reads exactly its messages.
     let window: Vec<SensorFrame> = r

@@ -3,7 +3,6 @@
 
 use super::*;
 use crate::policy::WRENCH_WINDOW;
-use anyhow::{Context, Result, bail, ensure};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -23,6 +22,14 @@ pub(super) struct Builder {
 }
 
 impl Builder {
+    /// An I/O failure on the dataset's file `name`.
+    fn io_err(&self, name: &str, source: std::io::Error) -> DatasetError {
+        DatasetError::Io {
+            path: self.dir.join(name),
+            source,
+        }
+    }
+
     pub(super) fn add_episode(&mut self, source: &Path, ep: EpisodeSamples) -> Result<()> {
         if ep.samples.is_empty() {
             self.meta
@@ -33,14 +40,13 @@ impl Builder {
         if self.meta.samples == 0 {
             (self.meta.width, self.meta.height) = ep.size;
         }
-        ensure!(
-            ep.size == (self.meta.width, self.meta.height),
-            "{}: images of {:?}, the dataset's are {}×{}",
-            source.display(),
-            ep.size,
-            self.meta.width,
-            self.meta.height
-        );
+        if ep.size != (self.meta.width, self.meta.height) {
+            return Err(DatasetError::ImageSize {
+                log: source.to_path_buf(),
+                size: ep.size,
+                dataset: (self.meta.width, self.meta.height),
+            });
+        }
         let episode = self.meta.episodes.len() as u32;
         self.meta.episodes.push(EpisodeInfo {
             episode,
@@ -72,7 +78,9 @@ impl Builder {
             self.contact_next += s.contact_next as u64;
             self.mask_px += s.mask.iter().map(|&m| m as u64).sum::<u64>();
             for x in &s.wrench {
-                self.wrench_table.write_all(&x.to_le_bytes())?;
+                self.wrench_table
+                    .write_all(&x.to_le_bytes())
+                    .map_err(|e| self.io_err("wrench.bin", e))?;
             }
             self.contacts.push(s.contact as u8);
             s.encode(&mut self.pending);
@@ -91,15 +99,20 @@ impl Builder {
         }
         if self.shard.is_none() {
             let name = format!("shard-{:05}.vtds", self.meta.shards.len());
-            let mut f = std::fs::File::create(self.dir.join(&name))
-                .with_context(|| format!("creating {name}"))?;
-            f.write_all(SHARD_MAGIC)?;
+            let err = |e| self.io_err(&name, e);
+            let mut f = std::fs::File::create(self.dir.join(&name)).map_err(err)?;
+            f.write_all(SHARD_MAGIC).map_err(err)?;
             self.meta.shards.push((name, Vec::new()));
             self.shard = Some((f, SHARD_MAGIC.len() as u64, Vec::new(), 0));
         }
+        let name = &self.meta.shards.last().expect("opened").0;
+        let err = |e| DatasetError::Io {
+            path: self.dir.join(name),
+            source: e,
+        };
+        let z = zstd::bulk::compress(&self.pending, self.cfg.zstd_level).map_err(err)?;
         let (f, offset, blocks, count) = self.shard.as_mut().expect("opened");
-        let z = zstd::bulk::compress(&self.pending, self.cfg.zstd_level)?;
-        f.write_all(&z)?;
+        f.write_all(&z).map_err(err)?;
         let first_id = self.meta.samples - self.pending_n as u64;
         blocks.push(BlockIndex {
             offset: *offset,
@@ -119,9 +132,14 @@ impl Builder {
 
     pub(super) fn close_shard(&mut self) -> Result<()> {
         if let Some((mut f, _, blocks, _)) = self.shard.take() {
-            f.write_all(SHARD_MAGIC)?;
-            f.sync_all()?;
-            self.meta.shards.last_mut().expect("opened").1 = blocks;
+            let shard = self.meta.shards.last_mut().expect("opened");
+            let err = |source| DatasetError::Io {
+                path: self.dir.join(&shard.0),
+                source,
+            };
+            f.write_all(SHARD_MAGIC).map_err(err)?;
+            f.sync_all().map_err(err)?;
+            shard.1 = blocks;
         }
         Ok(())
     }
@@ -129,8 +147,11 @@ impl Builder {
     pub(super) fn finish(mut self) -> Result<Meta> {
         self.flush_block()?;
         self.close_shard()?;
-        self.wrench_table.flush()?;
-        std::fs::write(self.dir.join("contacts.bin"), &self.contacts)?;
+        self.wrench_table
+            .flush()
+            .map_err(|e| self.io_err("wrench.bin", e))?;
+        std::fs::write(self.dir.join("contacts.bin"), &self.contacts)
+            .map_err(|e| self.io_err("contacts.bin", e))?;
         let n = self.meta.samples.max(1) as f64;
         self.stats.contact_next_ratio = self.contact_next as f64 / n;
         self.stats.mask_ratio =
@@ -145,15 +166,19 @@ impl Builder {
         ] {
             m.finish();
         }
-        std::fs::write(
-            self.dir.join("stats.json"),
-            serde_json::to_string_pretty(&self.stats)?,
-        )?;
-        std::fs::write(
-            self.dir.join("meta.json"),
-            serde_json::to_string_pretty(&self.meta)?,
-        )?;
+        self.write_json("stats.json", &self.stats)?;
+        self.write_json("meta.json", &self.meta)?;
         Ok(self.meta)
+    }
+
+    /// Writes `value` as pretty JSON into the dataset's file `name`.
+    fn write_json(&self, name: &str, value: &impl serde::Serialize) -> Result<()> {
+        let path = self.dir.join(name);
+        let text = serde_json::to_string_pretty(value).map_err(|source| DatasetError::Json {
+            path: path.clone(),
+            source,
+        })?;
+        std::fs::write(&path, text).map_err(|source| DatasetError::Io { path, source })
     }
 }
 
@@ -163,7 +188,10 @@ pub fn find_logs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     for p in inputs {
         if p.is_dir() {
             let mut v: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("reading {}", p.display()))?
+                .map_err(|source| DatasetError::Io {
+                    path: p.clone(),
+                    source,
+                })?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
                 .collect();
@@ -172,7 +200,7 @@ pub fn find_logs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         } else if p.exists() {
             out.push(p.clone());
         } else {
-            bail!("{}: no such file or directory", p.display());
+            return Err(DatasetError::NoInput(p.clone()));
         }
     }
     Ok(out)
@@ -188,11 +216,16 @@ pub fn build(
     workers: usize,
     mut on_log: impl FnMut(&Path, Result<usize, String>),
 ) -> Result<Meta> {
-    ensure!(
-        cfg.block_samples > 0 && cfg.shard_samples > 0,
-        "block and shard sizes must be > 0"
-    );
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    if cfg.block_samples == 0 || cfg.shard_samples == 0 {
+        return Err(DatasetError::EmptyBlocks {
+            block_samples: cfg.block_samples,
+            shard_samples: cfg.shard_samples,
+        });
+    }
+    let io_err = |path: PathBuf| move |source| DatasetError::Io { path, source };
+    std::fs::create_dir_all(out).map_err(io_err(out.to_path_buf()))?;
+    let wrench_path = out.join("wrench.bin");
+    let wrench_table = std::fs::File::create(&wrench_path).map_err(io_err(wrench_path))?;
     let mut b = Builder {
         dir: out.to_path_buf(),
         cfg: cfg.clone(),
@@ -208,7 +241,7 @@ pub fn build(
             build: cfg.clone(),
         },
         stats: stats_new(),
-        wrench_table: std::io::BufWriter::new(std::fs::File::create(out.join("wrench.bin"))?),
+        wrench_table: std::io::BufWriter::new(wrench_table),
         contacts: Vec::new(),
         shard: None,
         pending: Vec::new(),
@@ -253,7 +286,7 @@ pub fn build(
                         on_log(path, Ok(n));
                     }
                     Err(e) => {
-                        let text = format!("{e:#}");
+                        let text = e.to_string();
                         b.meta
                             .skipped
                             .push((path.display().to_string(), text.clone()));

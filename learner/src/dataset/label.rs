@@ -2,10 +2,11 @@
 //! labelled samples.
 
 use super::*;
+use crate::collect::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
 use crate::log::{CameraImage, LogReader, topics};
 use crate::policy::WRENCH_WINDOW;
-use anyhow::{Context, Result, ensure};
+use hw_sim::PegShape;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::{PolicyAction, SensorFrame};
 use std::collections::HashMap;
@@ -45,9 +46,9 @@ impl Default for BuildConfig {
 /// The samples of one log.
 pub struct EpisodeSamples {
     /// Peg.
-    pub peg: String,
+    pub peg: PegShape,
     /// Policy.
-    pub policy: String,
+    pub policy: EpisodePolicy,
     /// Samples in order.
     pub samples: Vec<Sample>,
     /// Image size.
@@ -59,7 +60,10 @@ pub struct EpisodeSamples {
 pub struct Models(HashMap<String, robot_model::Model>);
 
 impl Models {
-    pub(super) fn get(&mut self, robot: &str) -> Result<robot_model::Model> {
+    pub(super) fn get(
+        &mut self,
+        robot: &str,
+    ) -> Result<robot_model::Model, robot_model::ModelError> {
         if let Some(m) = self.0.get(robot) {
             return Ok(m.clone());
         }
@@ -77,18 +81,25 @@ pub fn episode_samples(
 ) -> Result<EpisodeSamples> {
     let r = LogReader::open(path)?;
     let config = r
-        .read_json(topics::CONFIG, None)?
+        .read_config(None)?
         .into_iter()
         .next()
-        .with_context(|| format!("{}: no configuration message on /config", path.display()))?
+        .ok_or_else(|| DatasetError::NoConfig(path.to_path_buf()))?
         .1;
-    let world: hw_sim::WorldConfig = serde_json::from_value(config["world"].clone())
-        .with_context(|| format!("{}: the /config world does not parse", path.display()))?;
-    let model = models.get(&world.robot)?;
+    let world = &config.world;
+    let model = models
+        .get(&world.robot)
+        .map_err(|source| DatasetError::Robot {
+            log: path.to_path_buf(),
+            robot: world.robot.clone(),
+            source: Box::new(source),
+        })?;
     let frames: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None)?;
     let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None)?;
     let cams: Vec<CameraImage> = r.read_camera(None)?;
-    ensure!(!frames.is_empty(), "{}: no sensor frames", path.display());
+    if frames.is_empty() {
+        return Err(DatasetError::NoSensorFrames(path.to_path_buf()));
+    }
     let by_time: HashMap<u64, usize> = frames
         .iter()
         .enumerate()
@@ -138,17 +149,21 @@ pub fn episode_samples(
         };
         if labeler.is_none() {
             let cal = c0.calibration;
-            labeler = Some(FlowLabeler::new(model.clone(), &world.task, &cal)?);
+            labeler = Some(FlowLabeler::new(model.clone(), &world.task, &cal).map_err(
+                |source| DatasetError::Labels {
+                    log: path.to_path_buf(),
+                    source: Box::new(source),
+                },
+            )?);
             size = (cal.width as usize, cal.height as usize);
         }
-        ensure!(
-            (
-                c0.calibration.width as usize,
-                c0.calibration.height as usize
-            ) == size,
-            "{}: the image size changes within the episode",
-            path.display()
+        let cal_size = (
+            c0.calibration.width as usize,
+            c0.calibration.height as usize,
         );
+        if cal_size != size {
+            return Err(DatasetError::ImageSizeChanges(path.to_path_buf()));
+        }
         let l = labeler.as_mut().expect("made");
         l.label(
             &frames[i0].q[..nq],
@@ -189,10 +204,9 @@ pub fn episode_samples(
             ee_next: [ee1[0] as f32, ee1[1] as f32, ee1[2] as f32],
         });
     }
-    let str_of = |v: &serde_json::Value| v.as_str().unwrap_or("unknown").to_string();
     Ok(EpisodeSamples {
-        peg: world.task.peg.name().into(),
-        policy: str_of(&config["policy"]),
+        peg: world.task.peg,
+        policy: config.policy,
         samples: out,
         size,
     })

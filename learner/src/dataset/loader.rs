@@ -1,7 +1,6 @@
 //! The shuffling, streaming loader with pairing negatives.
 
 use super::*;
-use anyhow::Result;
 
 /// A batch, flattened row-major, sample-major.
 #[derive(Debug, Clone, Default)]

@@ -2,6 +2,8 @@
 //! constants, label ratios).
 
 use super::*;
+use crate::collect::EpisodePolicy;
+use hw_sim::PegShape;
 use serde::{Deserialize, Serialize};
 
 /// Where a block is in its shard.
@@ -25,9 +27,9 @@ pub struct EpisodeInfo {
     /// The log it came from.
     pub source: String,
     /// Peg.
-    pub peg: String,
+    pub peg: PegShape,
     /// Policy that collected it.
-    pub policy: String,
+    pub policy: EpisodePolicy,
     /// Id of its first sample (its samples are consecutive).
     pub first_id: u64,
     /// Samples.

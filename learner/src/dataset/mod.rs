@@ -11,9 +11,10 @@
 //! Files: `sample` (the sample and its encoding), `label` (log → samples),
 //! `meta` (meta.json, stats.json), `build` (the writer and the parallel
 //! build), `reader` (an opened dataset), `loader` (shuffled batches with
-//! pairing negatives), `sheet` (the contact sheet).
+//! pairing negatives), `sheet` (the contact sheet), `error` (what can fail).
 
 mod build;
+mod error;
 mod label;
 mod loader;
 mod meta;
@@ -22,6 +23,7 @@ mod sample;
 mod sheet;
 
 pub use build::{build, find_logs};
+pub use error::{DatasetError, Result};
 pub use label::{BuildConfig, EpisodeSamples, Models, episode_samples};
 pub use loader::{Batch, Loader, LoaderConfig};
 pub use meta::{BlockIndex, EpisodeInfo, Meta, Moments, Stats};

@@ -1,7 +1,6 @@
 //! An opened dataset: its tables and block reads.
 
 use super::*;
-use anyhow::{Context, Result, ensure};
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
@@ -23,41 +22,47 @@ impl Dataset {
     /// Opens a dataset directory; checks the format version and the tables.
     pub fn open(dir: &Path) -> Result<Self> {
         let read = |name: &str| {
-            std::fs::read(dir.join(name))
-                .with_context(|| format!("dataset {}: reading {name}", dir.display()))
+            let path = dir.join(name);
+            std::fs::read(&path).map_err(|source| DatasetError::Io { path, source })
         };
-        let meta: Meta = serde_json::from_slice(&read("meta.json")?)
-            .with_context(|| format!("dataset {}: meta.json does not parse", dir.display()))?;
-        ensure!(
-            meta.format_version == FORMAT_VERSION,
-            "dataset {}: format version {}, this build reads version {FORMAT_VERSION}",
-            dir.display(),
-            meta.format_version
-        );
-        let stats: Stats = serde_json::from_slice(&read("stats.json")?)
-            .with_context(|| format!("dataset {}: stats.json does not parse", dir.display()))?;
+        let parse_err = |name: &str| {
+            let path = dir.join(name);
+            move |source| DatasetError::Json { path, source }
+        };
+        let meta: Meta =
+            serde_json::from_slice(&read("meta.json")?).map_err(parse_err("meta.json"))?;
+        if meta.format_version != FORMAT_VERSION {
+            return Err(DatasetError::FormatVersion {
+                dir: dir.to_path_buf(),
+                found: meta.format_version,
+                expected: FORMAT_VERSION,
+            });
+        }
+        let stats: Stats =
+            serde_json::from_slice(&read("stats.json")?).map_err(parse_err("stats.json"))?;
         let raw = read("wrench.bin")?;
         let per = meta.wrench_window * 6;
-        ensure!(
-            raw.len() as u64 == meta.samples * per as u64 * 4,
-            "dataset {}: wrench.bin holds {} bytes, {} samples need {}",
-            dir.display(),
-            raw.len(),
-            meta.samples,
-            meta.samples * per as u64 * 4
-        );
+        let need = meta.samples * per as u64 * 4;
+        if raw.len() as u64 != need {
+            return Err(DatasetError::WrenchTable {
+                path: dir.join("wrench.bin"),
+                bytes: raw.len() as u64,
+                samples: meta.samples,
+                need,
+            });
+        }
         let wrench = raw
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes(b.try_into().expect("4")))
             .collect();
         let contacts = read("contacts.bin")?;
-        ensure!(
-            contacts.len() as u64 == meta.samples,
-            "dataset {}: contacts.bin holds {} entries for {} samples",
-            dir.display(),
-            contacts.len(),
-            meta.samples
-        );
+        if contacts.len() as u64 != meta.samples {
+            return Err(DatasetError::ContactTable {
+                path: dir.join("contacts.bin"),
+                entries: contacts.len() as u64,
+                samples: meta.samples,
+            });
+        }
         let mut episode_of = vec![0u32; meta.samples as usize];
         let mut by_contact = Vec::new();
         for e in &meta.episodes {
@@ -147,34 +152,37 @@ pub(super) fn read_block(
     let (name, blocks) = &meta.shards[shard];
     let b = &blocks[block];
     let path = dir.join(name);
-    let mut f =
-        std::fs::File::open(&path).with_context(|| format!("dataset shard {}", path.display()))?;
+    let io_err = |source| DatasetError::Io {
+        path: path.clone(),
+        source,
+    };
+    let mut f = std::fs::File::open(&path).map_err(io_err)?;
     let mut z = vec![0u8; b.length as usize];
-    f.seek(SeekFrom::Start(b.offset))?;
-    f.read_exact(&mut z).with_context(|| {
-        format!(
-            "dataset shard {}: block at byte offset {} is cut short",
-            path.display(),
-            b.offset
-        )
-    })?;
+    f.seek(SeekFrom::Start(b.offset)).map_err(io_err)?;
+    f.read_exact(&mut z)
+        .map_err(|source| DatasetError::BlockCut {
+            path: path.clone(),
+            offset: b.offset,
+            source,
+        })?;
     let (w, h) = (meta.width, meta.height);
     let size = sample_bytes(w, h);
     let mut plain = vec![0u8; size * b.samples as usize];
-    let n = zstd::bulk::decompress_to_buffer(&z, &mut plain).map_err(|e| {
-        anyhow::anyhow!(
-            "dataset shard {}: block at byte offset {}: {e}",
-            path.display(),
-            b.offset
-        )
+    let n = zstd::bulk::decompress_to_buffer(&z, &mut plain).map_err(|source| {
+        DatasetError::BlockDecompress {
+            path: path.clone(),
+            offset: b.offset,
+            source,
+        }
     })?;
-    ensure!(
-        n == plain.len(),
-        "dataset shard {}: block at byte offset {} holds {n} bytes, expected {}",
-        path.display(),
-        b.offset,
-        plain.len()
-    );
+    if n != plain.len() {
+        return Err(DatasetError::BlockSize {
+            path,
+            offset: b.offset,
+            got: n,
+            expected: plain.len(),
+        });
+    }
     Ok(plain
         .chunks_exact(size)
         .map(|c| Sample::decode(c, w, h))

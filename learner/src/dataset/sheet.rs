@@ -1,7 +1,6 @@
 //! The contact sheet of `learner dataset inspect`.
 
 use super::*;
-use anyhow::{Context, Result, bail};
 use std::path::Path;
 
 /// A contact sheet: for `n` samples, a row of RGB, depth, flow and mask.
@@ -48,8 +47,10 @@ pub fn contact_sheet(ds: &Dataset, n: usize, path: &Path) -> Result<()> {
             }
         }
     }
-    hw_sim::png::write(path, sw as u32, sh as u32, 3, &img)
-        .with_context(|| format!("writing {}", path.display()))
+    hw_sim::png::write(path, sw as u32, sh as u32, 3, &img).map_err(|source| DatasetError::Sheet {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 pub(super) fn locate(ds: &Dataset, id: u64) -> Result<(usize, usize)> {
@@ -60,5 +61,5 @@ pub(super) fn locate(ds: &Dataset, id: u64) -> Result<(usize, usize)> {
             }
         }
     }
-    bail!("sample {id} is in no block")
+    Err(DatasetError::NoSuchSample(id))
 }

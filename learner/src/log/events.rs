@@ -1,6 +1,7 @@
 //! The episode events of a log's `/events` channel, one typed value each,
 //! written and read with serde (JSON tagged by `"event"`).
 
+use crate::collect::EpisodePolicy;
 use hw_sim::{PegShape, Stage, WorldConfig};
 use serde::{Deserialize, Serialize};
 
@@ -28,8 +29,8 @@ pub struct Reset {
     pub seed: u64,
     /// The peg.
     pub peg: PegShape,
-    /// The policy's name.
-    pub policy: String,
+    /// The policy that acts.
+    pub policy: EpisodePolicy,
     /// Live runs: whether the stack ran in lockstep.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lockstep: Option<bool>,

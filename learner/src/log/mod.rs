@@ -6,9 +6,9 @@
 //! the schema version, and the reader refuses another version. Camera frames
 //! are stored compactly: the struct's fixed fields, then the `width × height`
 //! RGB bytes, then the `width × height` depth floats. Episode events (reset,
-//! stage reached, outcome) and the configuration are JSON. Beside them, the
-//! [`foxglove`] view channels show the images, the transforms, the
-//! end-effector pose and the wrench in Foxglove.
+//! stage reached, outcome; [`Event`]) and the configuration ([`RunConfig`])
+//! are JSON. Beside them, the [`foxglove`] view channels show the images,
+//! the transforms, the end-effector pose and the wrench in Foxglove.
 //!
 //! Log time is the hardware time, publish time the monotonic clock. Files
 //! are chunked (1 MiB), zstd-compressed and indexed; the writer closes a
@@ -16,10 +16,12 @@
 //! writer killed mid-run leaves every earlier chunk readable, and
 //! [`recover`] turns such a file into a valid one. See docs/data.md.
 
+pub mod config;
 pub mod events;
 pub mod foxglove;
 mod read;
 
+pub use config::{RunConfig, RunMode};
 pub use events::Event;
 pub use read::{
     CameraImage, LogMessage, LogReader, ReadError, RecoverReport, ScanReport, TopicInfo, recover,
@@ -57,7 +59,7 @@ pub mod topics {
     pub const CAMERA: &str = "/camera/rgbd";
     /// Episode events, JSON.
     pub const EVENTS: &str = "/events";
-    /// The configuration in force, JSON.
+    /// The configuration in force, JSON ([`super::RunConfig`]).
     pub const CONFIG: &str = "/config";
     /// Foxglove view: RGB image.
     pub const VIEW_RGB: &str = "/camera/rgb";
@@ -493,9 +495,9 @@ impl LogWriter {
         self.write(Stream::Events, t_hw_ns, now, text.as_bytes())
     }
 
-    /// Logs the configuration in force (JSON object) at `t_hw_ns`.
-    pub fn config(&mut self, t_hw_ns: u64, json: &serde_json::Value) -> Result<(), LogError> {
-        let text = json.to_string();
+    /// Logs the configuration in force at `t_hw_ns`.
+    pub fn config(&mut self, t_hw_ns: u64, config: &RunConfig) -> Result<(), LogError> {
+        let text = serde_json::to_string(config).expect("configurations serialise");
         let now = shared_mem_schema::process::mono_now_ns();
         self.write(Stream::Config, t_hw_ns, now, text.as_bytes())
     }

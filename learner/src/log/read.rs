@@ -780,6 +780,14 @@ impl LogReader {
         self.read_serde(super::topics::EVENTS, range)
     }
 
+    /// The configuration records of `/config`, typed.
+    pub fn read_config(
+        &self,
+        range: Option<(u64, u64)>,
+    ) -> Result<Vec<(u64, super::RunConfig)>, ReadError> {
+        self.read_serde(super::topics::CONFIG, range)
+    }
+
     /// The JSON messages of `topic` (events, configuration, views) with
     /// their log times.
     pub fn read_json(

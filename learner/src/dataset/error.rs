@@ -1,0 +1,175 @@
+//! What can fail when building, opening or reading a dataset.
+
+use crate::labels::LabelError;
+use crate::log::ReadError;
+use std::path::PathBuf;
+
+/// A dataset failure; names the file (log, shard, table) and the value at
+/// fault.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// A file or directory could not be read, created or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An input given for the build does not exist.
+    #[error("{}: no such file or directory", .0.display())]
+    NoInput(PathBuf),
+    /// meta.json or stats.json does not parse (or could not be printed).
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// meta.json is of another format version.
+    #[error("dataset {}: format version {found}, this build reads version {expected}", dir.display())]
+    FormatVersion {
+        /// The dataset.
+        dir: PathBuf,
+        /// The version in meta.json.
+        found: u32,
+        /// [`super::FORMAT_VERSION`].
+        expected: u32,
+    },
+    /// The pairing table (wrench.bin) does not match meta.json.
+    #[error("{}: holds {bytes} bytes, {samples} samples need {need}", path.display())]
+    WrenchTable {
+        /// The file.
+        path: PathBuf,
+        /// Its size.
+        bytes: u64,
+        /// Samples in meta.json.
+        samples: u64,
+        /// The size they need.
+        need: u64,
+    },
+    /// The contact table (contacts.bin) does not match meta.json.
+    #[error("{}: holds {entries} entries for {samples} samples", path.display())]
+    ContactTable {
+        /// The file.
+        path: PathBuf,
+        /// Its entries.
+        entries: u64,
+        /// Samples in meta.json.
+        samples: u64,
+    },
+    /// A shard ends inside a block.
+    #[error(
+        "dataset shard {}: block at byte offset {offset} is cut short: {source}",
+        path.display()
+    )]
+    BlockCut {
+        /// The shard.
+        path: PathBuf,
+        /// Where the block starts.
+        offset: u64,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A block does not decompress.
+    #[error("dataset shard {}: block at byte offset {offset}: {source}", path.display())]
+    BlockDecompress {
+        /// The shard.
+        path: PathBuf,
+        /// Where the block starts.
+        offset: u64,
+        /// zstd's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A block decompresses to another size than its samples need.
+    #[error(
+        "dataset shard {}: block at byte offset {offset} holds {got} bytes, expected {expected}",
+        path.display()
+    )]
+    BlockSize {
+        /// The shard.
+        path: PathBuf,
+        /// Where the block starts.
+        offset: u64,
+        /// Bytes it holds.
+        got: usize,
+        /// Bytes its samples need.
+        expected: usize,
+    },
+    /// A sample id past the last block.
+    #[error("sample {0} is in no block")]
+    NoSuchSample(u64),
+    /// Block or shard size of zero in the build configuration.
+    #[error(
+        "block and shard sizes must be > 0 (block_samples {block_samples}, shard_samples \
+         {shard_samples})"
+    )]
+    EmptyBlocks {
+        /// Samples per block.
+        block_samples: usize,
+        /// Samples per shard.
+        shard_samples: usize,
+    },
+    /// A log's images are not of the dataset's size.
+    #[error(
+        "{}: images of {}×{}, the dataset's are {}×{}",
+        log.display(), size.0, size.1, dataset.0, dataset.1
+    )]
+    ImageSize {
+        /// The log.
+        log: PathBuf,
+        /// Its image size (width, height).
+        size: (usize, usize),
+        /// The dataset's.
+        dataset: (usize, usize),
+    },
+    /// A log's image size changes within the episode.
+    #[error("{}: the image size changes within the episode", .0.display())]
+    ImageSizeChanges(PathBuf),
+    /// A log has no `/config` record.
+    #[error("{}: no configuration message on /config", .0.display())]
+    NoConfig(PathBuf),
+    /// A log has no sensor frames.
+    #[error("{}: no sensor frames", .0.display())]
+    NoSensorFrames(PathBuf),
+    /// The robot a log names does not load.
+    #[error("{}: robot {robot}: {source}", log.display())]
+    Robot {
+        /// The log.
+        log: PathBuf,
+        /// The robot description it names.
+        robot: String,
+        /// Why (boxed: the error is large and this path is rare).
+        #[source]
+        source: Box<robot_model::ModelError>,
+    },
+    /// No flow labeler for a log's camera and task.
+    #[error("{}: {source}", log.display())]
+    Labels {
+        /// The log.
+        log: PathBuf,
+        /// Why (boxed: the error is large and this path is rare).
+        #[source]
+        source: Box<LabelError>,
+    },
+    /// The contact sheet could not be written.
+    #[error("writing {}: {source}", path.display())]
+    Sheet {
+        /// The image file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: hw_sim::png::PngError,
+    },
+    /// A log could not be read.
+    #[error(transparent)]
+    Log(#[from] ReadError),
+}
+
+/// Results of the dataset module.
+pub type Result<T, E = DatasetError> = std::result::Result<T, E>;
