@@ -124,6 +124,10 @@ pub struct CollectConfig {
     pub out_dir: PathBuf,
     /// 20 Hz states to collect (episodes run until this many are written).
     pub states: u64,
+    /// At most this many episodes (none: as many as `states` needs). With
+    /// several workers the episode count for a state budget depends on how
+    /// the threads were scheduled; a fixed count does not.
+    pub episodes: Option<u64>,
     /// Actions per episode.
     pub episode_actions: u32,
     /// Pegs, taken in turn.
@@ -412,6 +416,9 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
                         return Ok(());
                     }
                     let i = next_episode.fetch_add(1, Ordering::Relaxed);
+                    if cfg.episodes.is_some_and(|n| i >= n) {
+                        return Ok(());
+                    }
                     let mut world = cfg.world.clone();
                     world.task.enabled = true;
                     world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];

@@ -103,6 +103,10 @@ struct CollectArgs {
     /// 20 Hz states to collect.
     #[arg(long, default_value_t = 1000)]
     states: u64,
+    /// Stop after this many episodes even if fewer states were written
+    /// (fast mode; a fixed episode count whatever the thread scheduling).
+    #[arg(long)]
+    episodes: Option<u64>,
     /// Output directory.
     #[arg(long, default_value = "data/collect")]
     out: PathBuf,
@@ -191,6 +195,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
     let cfg = CollectConfig {
         out_dir: a.out.clone(),
         states: a.states,
+        episodes: a.episodes,
         episode_actions: a.episode_actions,
         pegs,
         seed: a.seed,

@@ -84,7 +84,8 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
 fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::collect::CollectSummary {
     let cfg = CollectConfig {
         out_dir: dir.to_path_buf(),
-        states: 1,
+        states: u64::MAX,
+        episodes: Some(2),
         episode_actions: actions,
         pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon],
         seed: 11,
@@ -107,7 +108,7 @@ fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::colle
 fn a_short_collection_builds_the_expected_dataset() {
     let logs = scratch("logs");
     let summary = collect(&logs, 1.0, 60);
-    // Two workers, one state asked for: each worker ends its episode.
+    // Two episodes, whichever worker ran them.
     assert_eq!(summary.shards.len(), 2);
     assert_eq!(summary.states, 2 * 59);
     assert!(logs.join("manifest.jsonl").exists());

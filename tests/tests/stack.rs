@@ -252,15 +252,18 @@ impl Lcg {
 }
 
 #[test]
-fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
+fn garbage_actions_never_produce_torques_beyond_limits() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("garbage");
     let dir = tests::scratch_dir("garbage");
     let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let model = robot_model::descriptions::builtin("iiwa14").unwrap();
     let limits = model.effort_limits();
+    let cfg = rt_controller::ControllerConfig::default();
+    let max_rate_step = cfg.qp.torque_rate_limit_nm_s * cfg.period_s;
     let node = transport::create_node("e2e-garbage").unwrap();
     let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
     let publisher = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
     assert!(wait_for(&torques, Duration::from_secs(20), |_| true).is_some());
@@ -278,16 +281,33 @@ fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
         -0.2,
     ];
     let mut rng = Lcg(7);
-    let (mut checked, mut bad) = (0usize, Vec::new());
+    let mut checked = 0usize;
+    let mut bad = Vec::new();
+    let mut rate_bad = Vec::new();
+    let mut prev: Option<TorqueCommand> = None;
     let mut check = |c: &TorqueCommand| {
         for (i, &t) in c.tau[..7].iter().enumerate() {
             if !(t.is_finite() && t.abs() <= limits[i] + 1e-9) {
                 bad.push((c.state_step, i, t));
             }
         }
+        // Commands of consecutive steps of one episode: the rate limit.
+        if let Some(p) = prev
+            .filter(|p| p.header.episode == c.header.episode && p.state_step + 1 == c.state_step)
+        {
+            for i in 0..7 {
+                let d = (c.tau[i] - p.tau[i]).abs();
+                if d.is_nan() || d > max_rate_step + 1e-9 {
+                    rate_bad.push((c.state_step, i, d));
+                }
+            }
+        }
+        prev = Some(*c);
         checked += 1;
     };
-    for k in 0..10_000u64 {
+    const N: u64 = 4000;
+    let (mut bad_schema, mut bad_value) = (0u64, 0u64);
+    for k in 0..N {
         let mut a = action(k + 1, 0.0, SCHEMA_VERSION);
         let pick = |rng: &mut Lcg| match rng.next() % 3 {
             0 => specials[(rng.next() % specials.len() as u64) as usize],
@@ -298,31 +318,66 @@ fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
         a.delta_roll_rad = pick(&mut rng);
         if rng.next().is_multiple_of(50) {
             a.header.schema_version = SCHEMA_VERSION + 1 + (rng.next() % 5) as u32;
+            bad_schema += 1;
+        } else if rt_controller::supervisor::Supervisor::check_action(&cfg.safety, &a.delta())
+            .is_err()
+        {
+            bad_value += 1;
         }
         transport::send(&publisher, &a).unwrap();
-        if k % 2 == 1 {
-            std::thread::sleep(Duration::from_micros(900));
+        // One action in flight: wait for the second sensor frame published
+        // after the send. Its cycle began after the first one's publication,
+        // so it drained and applied this action; neither the daemon's
+        // subscriber buffer nor its queue can overflow, however the
+        // scheduler treats the processes.
+        let sent = mono_now_ns();
+        let mut after = 0;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while after < 2 {
+            assert!(
+                Instant::now() < deadline,
+                "no sensor frames after action {k}"
+            );
+            transport::drain(&frames, |f| after += (f.header.t_mono_ns > sent) as u32).unwrap();
             transport::drain(&torques, &mut check).unwrap();
+            std::thread::sleep(Duration::from_micros(200));
         }
     }
-    std::thread::sleep(Duration::from_millis(300));
     transport::drain(&torques, &mut check).unwrap();
-    assert!(checked > 3000, "only {checked} torque commands seen");
+    assert!(checked > 1000, "only {checked} torque commands seen");
     assert!(
         bad.is_empty(),
         "torques beyond limits: {:?}",
         &bad[..bad.len().min(5)]
     );
-    let s = wait_for(&status, Duration::from_secs(2), |s| {
-        s.actions_received >= 10_000
+    assert!(
+        rate_bad.is_empty(),
+        "torque steps beyond the rate limit ({max_rate_step} N·m): {:?}",
+        &rate_bad[..rate_bad.len().min(5)]
+    );
+    let s = wait_for(&status, Duration::from_secs(10), |s| {
+        s.actions_received >= N
     })
     .expect("the status never counted the actions");
-    assert_eq!(s.actions_received, 10_000);
-    assert!(
-        s.actions_rejected > 3000,
-        "only {} garbage actions counted",
-        s.actions_rejected
+    assert_eq!(s.actions_received, N);
+    // Every action received is accounted for exactly once.
+    assert_eq!(
+        s.actions_accepted + s.actions_rejected + s.actions_ignored,
+        N,
+        "{s:?}"
     );
+    assert!(
+        bad_schema > 0 && bad_value > N / 2,
+        "{bad_schema} {bad_value}"
+    );
+    if s.faults == 0 {
+        assert_eq!(s.actions_rejected, bad_schema + bad_value, "{s:?}");
+        assert_eq!(s.actions_ignored, 0);
+    } else {
+        // In Fault valid and invalid actions alike are ignored.
+        assert!(s.actions_rejected >= bad_schema, "{s:?}");
+        assert!(s.actions_rejected + s.actions_ignored >= bad_schema + bad_value);
+    }
 }
 
 #[test]

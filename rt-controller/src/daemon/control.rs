@@ -294,6 +294,10 @@ impl<H: Hardware> Daemon<H> {
         let sent = mono_now_ns();
         self.last_command.header.t_mono_ns = sent;
         self.hw.send(&self.last_command)?;
+        // Silence counts from the command the hardware answers: a lockstep
+        // wait for the policy's action above can be long, and the hardware
+        // cannot step before it has the command.
+        self.last_state_ns = self.last_state_ns.max(sent);
         if matches!(info.action, ActionStatus::Applied | ActionStatus::Clamped)
             && let Some(a) = &action
         {
