@@ -12,18 +12,19 @@
 use crate::env::{ACTION_PERIOD, FastEnv};
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter};
+use crate::progress::Progress;
 use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
 };
 use anyhow::{Context, Result};
-use hw_sim::{PegShape, WorldConfig};
+use hw_sim::{PegShape, WorldConfig, rng};
 use rt_controller::ControllerConfig;
-use shared_mem_schema::{Pod, Stage, hw_time_ns};
+use shared_mem_schema::{Message, Stage, hw_time_ns};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The policy mix.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,14 +72,14 @@ pub struct MixedPolicy {
     heuristic: HeuristicPolicy,
     random: RandomPolicy,
     noise_m: f64,
-    rng: hw_sim::rng::SimRng,
+    rng: rng::SimRng,
 }
 
 impl MixedPolicy {
     /// Draws the episode's policy from `seed`.
     pub fn new(mix: &Mix, seed: u64) -> Self {
-        let mut rng = hw_sim::rng::SimRng::new(seed, 23);
-        let kind = if rng.unit() < mix.heuristic_fraction {
+        let mut rng = rng::seeded(seed, 23);
+        let kind = if rng::unit(&mut rng) < mix.heuristic_fraction {
             EpisodePolicy::Heuristic
         } else {
             EpisodePolicy::Random
@@ -108,7 +109,7 @@ impl MixedPolicy {
             EpisodePolicy::Heuristic => {
                 let mut a = self.heuristic.act(obs, wrench, task);
                 for x in &mut a[..3] {
-                    *x += self.noise_m * self.rng.normal();
+                    *x += self.noise_m * rng::normal(&mut self.rng);
                 }
                 a
             }
@@ -174,94 +175,6 @@ pub struct CollectSummary {
     pub states: u64,
     /// Wall time, s.
     pub wall_s: f64,
-}
-
-/// A progress line on stderr: a bar on a terminal, a line every few
-/// seconds otherwise.
-pub struct Progress {
-    total: u64,
-    start: Instant,
-    tty: bool,
-    last: Mutex<Instant>,
-}
-
-impl Progress {
-    /// Progress towards `total` states.
-    pub fn new(total: u64) -> Self {
-        // SAFETY: isatty only reads the descriptor's state.
-        let tty = unsafe { libc::isatty(2) } == 1;
-        Self {
-            total,
-            start: Instant::now(),
-            tty,
-            last: Mutex::new(Instant::now() - Duration::from_secs(60)),
-        }
-    }
-
-    /// Reports `done` states (throttled).
-    pub fn update(&self, done: u64, episodes: u64) {
-        let every = if self.tty {
-            Duration::from_millis(250)
-        } else {
-            Duration::from_secs(5)
-        };
-        let mut last = self.last.lock().expect("not poisoned");
-        if last.elapsed() < every && done != self.total {
-            return;
-        }
-        *last = Instant::now();
-        let line = self.line(done, episodes);
-        let mut err = std::io::stderr().lock();
-        let _ = if self.tty {
-            write!(err, "\r{line}\x1b[K")
-        } else {
-            writeln!(err, "{line}")
-        };
-        let _ = err.flush();
-    }
-
-    /// Ends the bar's line.
-    pub fn finish(&self, done: u64, episodes: u64) {
-        let line = self.line(done, episodes);
-        let mut err = std::io::stderr().lock();
-        let _ = if self.tty {
-            writeln!(err, "\r{line}\x1b[K")
-        } else {
-            writeln!(err, "{line}")
-        };
-    }
-
-    fn line(&self, done: u64, episodes: u64) -> String {
-        let el = self.start.elapsed().as_secs_f64();
-        let rate = done as f64 / el.max(1e-9);
-        let frac = (done as f64 / self.total.max(1) as f64).min(1.0);
-        let width = 30;
-        let full = (frac * width as f64).round() as usize;
-        let eta = if rate > 0.0 && done < self.total {
-            fmt_duration((self.total - done) as f64 / rate)
-        } else {
-            "-".into()
-        };
-        format!(
-            "[{}{}] {done}/{} states, {episodes} episodes, {rate:.0} states/s, elapsed {}, left {eta}",
-            "#".repeat(full),
-            ".".repeat(width - full),
-            self.total,
-            fmt_duration(el)
-        )
-    }
-}
-
-/// `1h02m`, `3m07s`, `12s`.
-pub fn fmt_duration(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    if s >= 3600 {
-        format!("{}h{:02}m", s / 3600, s % 3600 / 60)
-    } else if s >= 60 {
-        format!("{}m{:02}s", s / 60, s % 60)
-    } else {
-        format!("{s}s")
-    }
 }
 
 /// The task geometry the policies need, from the simulated world.
@@ -397,7 +310,7 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
     let next_episode = AtomicU64::new(0);
     let done = AtomicU64::new(0);
     let episodes_done = AtomicU64::new(0);
-    let progress = Progress::new(cfg.states);
+    let progress = Progress::new(cfg.states, "states");
     let shards = Mutex::new(Vec::new());
     let manifest = Mutex::new(
         std::fs::OpenOptions::new()
@@ -439,7 +352,10 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
                         &cfg.log,
                         || {
                             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                            progress.update(n, episodes_done.load(Ordering::Relaxed));
+                            progress.update(
+                                n,
+                                format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
+                            );
                             !stop.load(Ordering::Relaxed)
                         },
                     )
@@ -457,7 +373,11 @@ pub fn collect_fast(cfg: &CollectConfig, stop: &AtomicBool) -> Result<CollectSum
         Ok(())
     })?;
     let states = done.load(Ordering::Relaxed);
-    progress.finish(states, episodes_done.load(Ordering::Relaxed));
+    progress.update(
+        states,
+        format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
+    );
+    progress.finish();
     let mut shards = shards.into_inner().expect("not poisoned");
     shards.sort_by_key(|s| s.episode);
     Ok(CollectSummary {

@@ -11,13 +11,6 @@ use learner::policy::{HeuristicConfig, HeuristicPolicy};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vt-dataset-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn world() -> hw_sim::WorldConfig {
     let mut w = hw_sim::WorldConfig::default();
     w.task.enabled = true;
@@ -30,7 +23,7 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
     env.reset(5).unwrap();
     let task = learner::collect::task_of(env.world()).unwrap();
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
-    let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Pod>::boxed_zeroed();
+    let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Message>::boxed_zeroed();
     env.render_camera(&mut msg);
     let cam = env.world().camera().clone();
     let cal = msg.calibration;
@@ -106,7 +99,8 @@ fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::colle
 
 #[test]
 fn a_short_collection_builds_the_expected_dataset() {
-    let logs = scratch("logs");
+    let logs_dir = test_support::scratch_dir("logs");
+    let logs = logs_dir.path().to_path_buf();
     let summary = collect(&logs, 1.0, 60);
     // Two episodes, whichever worker ran them.
     assert_eq!(summary.shards.len(), 2);
@@ -118,7 +112,8 @@ fn a_short_collection_builds_the_expected_dataset() {
     let good = std::fs::read(&summary.shards[0].file).unwrap();
     std::fs::write(&bad, &good[..good.len() / 2]).unwrap();
 
-    let out = scratch("ds");
+    let out_dir = test_support::scratch_dir("ds");
+    let out = out_dir.path();
     let files = dataset::find_logs(std::slice::from_ref(&logs)).unwrap();
     assert_eq!(files.len(), 3);
     let cfg = BuildConfig {
@@ -244,7 +239,11 @@ fn a_short_collection_builds_the_expected_dataset() {
     // A contact sheet is written.
     let sheet = out.join("sheet.png");
     dataset::contact_sheet(&ds, 4, &sheet).unwrap();
-    assert!(std::fs::read(&sheet).unwrap().starts_with(b"\x89PNG"));
+    // Four rows (samples) of four tiles (RGB, depth, flow, mask) each.
+    let png = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&sheet).unwrap()));
+    let info = png.read_info().unwrap().info().clone();
+    let (w, h) = (ds.meta.width as u32, ds.meta.height as u32);
+    assert_eq!((info.width, info.height), (4 * w, 4 * h));
 
     // Damaged datasets: a cut shard names its block's offset, a foreign
     // format version is refused.
@@ -265,6 +264,4 @@ fn a_short_collection_builds_the_expected_dataset() {
     .unwrap();
     let e = Dataset::open(&out).err().unwrap().to_string();
     assert!(e.contains("format version 9"), "{e}");
-    let _ = std::fs::remove_dir_all(&logs);
-    let _ = std::fs::remove_dir_all(&out);
 }

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::Rng;
+use test_support::Uniform;
 use nalgebra::{DMatrix, Matrix6xX};
 use robot_model::*;
 use serde_json::{Value, json};
@@ -105,13 +105,13 @@ fn matches_pinocchio() {
             .filter(|f| f.kind == FrameKind::Link)
             .map(|f| f.name.clone())
             .collect();
-        let mut rng = Rng::new(42);
+        let mut rng = test_support::rng(42);
         let samples: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..25)
             .map(|_| {
                 (
-                    rng.config(&model),
-                    rng.vec(nv, -2.0, 2.0),
-                    rng.vec(nv, -4.0, 4.0),
+                    common::random_config(&mut rng, &model),
+                    rng.uniform_vec(nv, -2.0, 2.0),
+                    rng.uniform_vec(nv, -4.0, 4.0),
                 )
             })
             .collect();

@@ -11,10 +11,7 @@ use crate::{ActionStatus, ConfigError};
 use robot_model::Model;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
-use shared_mem_schema::{
-    ControllerMode, ControllerStatus, HardwareState, Pod, PolicyAction, SCHEMA_VERSION,
-    SensorFrame, TorqueCommand,
-};
+use shared_mem_schema::{ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction, SCHEMA_VERSION, SensorFrame, TorqueCommand};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -119,11 +116,6 @@ impl<H: Hardware> Daemon<H> {
     /// Records whether the real-time set-up succeeded (reported in status).
     pub fn set_realtime(&mut self, ok: bool) {
         self.realtime = ok;
-    }
-
-    /// The last hardware state received, if any.
-    pub fn hardware_state(&self) -> Option<&HardwareState> {
-        self.have_state.then_some(&self.state)
     }
 
     /// The mode as published.

@@ -1,0 +1,48 @@
+//! # test-support
+//!
+//! What the workspace's tests share, so that no crate keeps its own copy:
+//! the counting global allocator behind every allocation test ([`alloc`]),
+//! the seeded generator of test inputs ([`rng`]) and scratch directories
+//! ([`scratch_dir`]).
+//!
+//! A dev-dependency only: nothing a deployed process runs may depend on it,
+//! and it depends on no crate of the workspace (every crate can use it).
+
+pub mod alloc;
+
+pub use rand::RngExt;
+use rand::SeedableRng;
+
+/// The tests' generator: the same PCG-64 as the simulator's
+/// (`hw_sim::rng::SimRng`), seeded from a `u64`.
+pub type Rng = rand_pcg::Pcg64;
+
+/// A generator for `seed`: the same numbers on every run and platform.
+pub fn rng(seed: u64) -> Rng {
+    Rng::seed_from_u64(seed)
+}
+
+/// Uniform test inputs from any generator of rand's.
+pub trait Uniform {
+    /// Uniform in `[lo, hi)`.
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64;
+    /// `n` values uniform in `[lo, hi)`.
+    fn uniform_vec(&mut self, n: usize, lo: f64, hi: f64) -> Vec<f64> {
+        (0..n).map(|_| self.uniform(lo, hi)).collect()
+    }
+}
+
+impl<R: rand::Rng> Uniform for R {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.random::<f64>()
+    }
+}
+
+/// A fresh scratch directory, removed when the guard drops. `tag` appears in
+/// its name so that a kept directory (`TempDir::keep`) is easy to find.
+pub fn scratch_dir(tag: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("vt-{tag}-"))
+        .tempdir()
+        .expect("creating a scratch directory")
+}
