@@ -66,7 +66,9 @@ fn joint_accelerations_match_model_dynamics() {
             for _ in 0..50 {
                 let q: Vec<f64> = (0..7).map(|_| rng::uniform(&mut rng, -1.5, 1.5)).collect();
                 let v: Vec<f64> = (0..7).map(|_| rng::uniform(&mut rng, -1.0, 1.0)).collect();
-                let tau: Vec<f64> = (0..7).map(|k| rng::uniform(&mut rng, -0.3, 0.3) * effort[k]).collect();
+                let tau: Vec<f64> = (0..7)
+                    .map(|k| rng::uniform(&mut rng, -0.3, 0.3) * effort[k])
+                    .collect();
                 world.set_joint_state(&q, &v).unwrap();
                 world.step(&tau).unwrap();
                 let a_sim: Vec<f64> = world

@@ -12,10 +12,10 @@
 use crate::env::{ACTION_PERIOD, FastEnv};
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter};
-use crate::progress::Progress;
 use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
 };
+use crate::progress::Progress;
 use anyhow::{Context, Result};
 use hw_sim::{PegShape, WorldConfig, rng};
 use rt_controller::ControllerConfig;

@@ -12,7 +12,9 @@ use crate::policy::{Action4, Observation, WrenchHistory};
 use hw_sim::{SimHardware, World, WorldConfig};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
-use shared_mem_schema::{HardwareState, Header, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns};
+use shared_mem_schema::{
+    HardwareState, Header, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
+};
 
 /// Control cycles per policy action (20 Hz at 1 kHz).
 pub const ACTION_PERIOD: u64 = shared_mem_schema::rates::ACTION_PERIOD_STEPS;

@@ -8,11 +8,11 @@
 //! addressed to step 50m, so runs are deterministic.
 
 use crate::collect::{Mix, MixedPolicy};
-use crate::progress::Progress;
 use crate::env::ACTION_PERIOD;
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
+use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};

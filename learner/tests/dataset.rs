@@ -8,7 +8,6 @@ use learner::env::{ACTION_PERIOD, FastEnv};
 use learner::labels::FlowLabeler;
 use learner::log::LogOptions;
 use learner::policy::{HeuristicConfig, HeuristicPolicy};
-use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 fn world() -> hw_sim::WorldConfig {
@@ -100,7 +99,7 @@ fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::colle
 #[test]
 fn a_short_collection_builds_the_expected_dataset() {
     let logs_dir = test_support::scratch_dir("logs");
-    let logs = logs_dir.path().to_path_buf();
+    let logs = logs_dir.to_path_buf();
     let summary = collect(&logs, 1.0, 60);
     // Two episodes, whichever worker ran them.
     assert_eq!(summary.shards.len(), 2);
@@ -112,8 +111,7 @@ fn a_short_collection_builds_the_expected_dataset() {
     let good = std::fs::read(&summary.shards[0].file).unwrap();
     std::fs::write(&bad, &good[..good.len() / 2]).unwrap();
 
-    let out_dir = test_support::scratch_dir("ds");
-    let out = out_dir.path();
+    let out = test_support::scratch_dir("ds");
     let files = dataset::find_logs(std::slice::from_ref(&logs)).unwrap();
     assert_eq!(files.len(), 3);
     let cfg = BuildConfig {
@@ -240,7 +238,9 @@ fn a_short_collection_builds_the_expected_dataset() {
     let sheet = out.join("sheet.png");
     dataset::contact_sheet(&ds, 4, &sheet).unwrap();
     // Four rows (samples) of four tiles (RGB, depth, flow, mask) each.
-    let png = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&sheet).unwrap()));
+    let png = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(&sheet).unwrap(),
+    ));
     let info = png.read_info().unwrap().info().clone();
     let (w, h) = (ds.meta.width as u32, ds.meta.height as u32);
     assert_eq!((info.width, info.height), (4 * w, 4 * h));

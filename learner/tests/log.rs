@@ -6,7 +6,7 @@
 use learner::log::events::{Event, Outcome, Reset};
 use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, topics};
 use shared_mem_schema::{CameraFrame, Header, Message, PolicyAction, SensorFrame};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 fn sensor(i: u64) -> SensorFrame {
     let mut f = *SensorFrame::boxed_zeroed();

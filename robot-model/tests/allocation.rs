@@ -35,27 +35,28 @@ fn algorithms_do_not_allocate() {
         let mut checksum = 0.0;
 
         let n = count(|| {
-        for i in 0..5000 {
-            let (q, v, a) = &states[i % states.len()];
-            forward_kinematics(&model, &mut data, q);
-            let x = frame_se3(&model, &data, frame);
-            frame_jacobian(&model, &data, frame, Reference::Base, &mut jac);
-            frame_jacobian(&model, &data, frame, Reference::Local, &mut jac);
-            let jdv = frame_jdot_v(&model, &mut data, q, v, frame, Reference::Base);
-            forward_kinematics_second_order(&model, &mut data, q, v, Some(a));
-            let fv = frame_velocity(&model, &data, frame, Reference::Local);
-            let fa = frame_acceleration(&model, &data, frame, Reference::Base);
-            crba(&model, &mut data, q);
-            gravity(&model, &mut data, q);
-            nonlinear_effects(&model, &mut data, q, v);
-            let tau_sum = rnea(&model, &mut data, q, v, a).sum();
-            let ddq_sum = forward_dynamics(&model, &mut data, q, v, a).unwrap().sum();
-            coriolis_matrix(&model, &mut data, q, v);
-            let e =
-                kinetic_energy(&model, &mut data, q, v) + potential_energy(&model, &mut data, q);
-            let com = center_of_mass(&model, &data);
-            checksum += x.trans.x + jdv.lin.x + fv.ang.y + fa.lin.z + tau_sum + ddq_sum + e + com.z;
-        }
+            for i in 0..5000 {
+                let (q, v, a) = &states[i % states.len()];
+                forward_kinematics(&model, &mut data, q);
+                let x = frame_se3(&model, &data, frame);
+                frame_jacobian(&model, &data, frame, Reference::Base, &mut jac);
+                frame_jacobian(&model, &data, frame, Reference::Local, &mut jac);
+                let jdv = frame_jdot_v(&model, &mut data, q, v, frame, Reference::Base);
+                forward_kinematics_second_order(&model, &mut data, q, v, Some(a));
+                let fv = frame_velocity(&model, &data, frame, Reference::Local);
+                let fa = frame_acceleration(&model, &data, frame, Reference::Base);
+                crba(&model, &mut data, q);
+                gravity(&model, &mut data, q);
+                nonlinear_effects(&model, &mut data, q, v);
+                let tau_sum = rnea(&model, &mut data, q, v, a).sum();
+                let ddq_sum = forward_dynamics(&model, &mut data, q, v, a).unwrap().sum();
+                coriolis_matrix(&model, &mut data, q, v);
+                let e = kinetic_energy(&model, &mut data, q, v)
+                    + potential_energy(&model, &mut data, q);
+                let com = center_of_mass(&model, &data);
+                checksum +=
+                    x.trans.x + jdv.lin.x + fv.ang.y + fa.lin.z + tau_sum + ddq_sum + e + com.z;
+            }
         })
         .allocations;
         assert!(checksum.is_finite());

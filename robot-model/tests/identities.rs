@@ -4,10 +4,10 @@
 mod common;
 
 use common::{axpy, robots};
-use test_support::{RngExt, Uniform};
 use nalgebra::{DMatrix, DVector, Matrix6xX};
 use robot_model::spatial::log3;
 use robot_model::*;
+use test_support::{RngExt, Uniform};
 
 const SAMPLES: usize = 200;
 

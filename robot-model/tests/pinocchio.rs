@@ -8,12 +8,12 @@
 
 mod common;
 
-use test_support::Uniform;
 use nalgebra::{DMatrix, Matrix6xX};
 use robot_model::*;
 use serde_json::{Value, json};
 use std::io::Write;
 use std::process::{Command, Stdio};
+use test_support::Uniform;
 
 const TOL: f64 = 1e-9;
 

@@ -5,10 +5,10 @@
 mod common;
 
 use common::{Bench, PANDA_READY, action, panda};
-use test_support::{Rng, Uniform};
 use nalgebra::Vector3;
 use rt_controller::trajectory::{fixed_xyz_angles, wrap_angle};
 use rt_controller::{ControllerConfig, Mode, QpOutcome};
+use test_support::{Rng, Uniform};
 
 /// Drives the reference to `pos + offset` as a true step (no feed-forward),
 /// records the response along `axis` for `seconds`, and returns the error

@@ -4,12 +4,12 @@
 mod common;
 
 use common::panda;
-use test_support::Uniform;
 use nalgebra::{DMatrix, DVector, Matrix6xX, Vector3, Vector6};
 use robot_model::Reference;
 use rt_controller::osc::{self, OscData, OscInputs};
 use rt_controller::qp::{QpFilter, QpProblem};
 use rt_controller::{QpConfig, QpOutcome};
+use test_support::Uniform;
 
 fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     (a.dot(b) / (a.norm() * b.norm())).clamp(-1.0, 1.0).acos()

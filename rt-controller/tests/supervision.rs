@@ -4,10 +4,10 @@
 mod common;
 
 use common::{Bench, PANDA_READY, action, panda};
-use test_support::{Rng, RngExt, Uniform};
 use rt_controller::{
     ActionStatus, ControllerConfig, FaultReason, Mode, Rejection, RobotState, step,
 };
+use test_support::{Rng, RngExt, Uniform};
 
 #[test]
 fn garbage_actions_are_counted_and_the_target_holds() {

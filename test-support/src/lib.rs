@@ -12,6 +12,7 @@ pub mod alloc;
 
 pub use rand::RngExt;
 use rand::SeedableRng;
+use std::path::Path;
 
 /// The tests' generator: the same PCG-64 as the simulator's
 /// (`hw_sim::rng::SimRng`), seeded from a `u64`.
@@ -38,11 +39,49 @@ impl<R: rand::Rng> Uniform for R {
     }
 }
 
-/// A fresh scratch directory, removed when the guard drops. `tag` appears in
-/// its name so that a kept directory (`TempDir::keep`) is easy to find.
-pub fn scratch_dir(tag: &str) -> tempfile::TempDir {
-    tempfile::Builder::new()
+/// A fresh scratch directory, removed when the guard drops — unless the
+/// test is failing: then it is kept and its path printed, so that the logs
+/// of a failed run can be read. `tag` appears in its name.
+pub fn scratch_dir(tag: &str) -> ScratchDir {
+    let dir = tempfile::Builder::new()
         .prefix(&format!("vt-{tag}-"))
         .tempdir()
-        .expect("creating a scratch directory")
+        .expect("creating a scratch directory");
+    ScratchDir(Some(dir))
+}
+
+/// A scratch directory (see [`scratch_dir`]); derefs to its path.
+pub struct ScratchDir(Option<tempfile::TempDir>);
+
+impl ScratchDir {
+    /// The directory.
+    pub fn path(&self) -> &Path {
+        self.0.as_ref().expect("present until dropped").path()
+    }
+}
+
+impl std::ops::Deref for ScratchDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.path()
+    }
+}
+
+impl AsRef<Path> for ScratchDir {
+    fn as_ref(&self) -> &Path {
+        self.path()
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        if let Some(dir) = self.0.take()
+            && std::thread::panicking()
+        {
+            eprintln!(
+                "test failed: its files are kept in {}",
+                dir.keep().display()
+            );
+        }
+    }
 }

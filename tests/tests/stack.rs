@@ -14,6 +14,7 @@ use shared_mem_schema::{
 };
 use std::process::Command;
 use std::time::{Duration, Instant};
+use test_support::{RngExt, Uniform};
 
 /// Drains `sub` until `pred` holds for a message or `timeout` passes.
 fn wait_for<T: shared_mem_schema::Message>(
@@ -43,12 +44,12 @@ fn heuristic_policy_completes_insertion_through_the_stack() {
     let _g = tests::exclusive();
     tests::stack_bins();
     for (mode, peg) in [("realtime", "square"), ("lockstep", "triangle")] {
-        let dir = tests::scratch_dir(&format!("stack-{mode}"));
+        let dir = test_support::scratch_dir(&format!("stack-{mode}"));
         let mut cmd = Command::new(tests::stack_bins().join("learner"));
         cmd.args(["stack", "--episodes", "1", "--peg", peg, "--namespace"])
             .arg(tests::unique_namespace(mode))
             .arg("--log-dir")
-            .arg(&dir);
+            .arg(dir.path());
         if mode == "lockstep" {
             cmd.arg("--lockstep");
         }
@@ -98,7 +99,7 @@ fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
 fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("policy-loss");
-    let dir = tests::scratch_dir("policy-loss");
+    let dir = test_support::scratch_dir("policy-loss");
     let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let node = transport::create_node("e2e-observer").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
@@ -159,7 +160,7 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
 fn silent_hardware_is_a_fault_with_no_further_torques() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("hw-loss");
-    let dir = tests::scratch_dir("hw-loss");
+    let dir = test_support::scratch_dir("hw-loss");
     let (mut sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let node = transport::create_node("e2e-observer").unwrap();
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
@@ -195,7 +196,7 @@ fn processes_of_another_schema_version_are_refused() {
     // A peer built with another version owns the hardware service: the
     // daemon must refuse to start, saying why.
     let ns = tests::unique_namespace("schema");
-    let dir = tests::scratch_dir("schema");
+    let dir = test_support::scratch_dir("schema");
     let node = transport::create_node("e2e-other-version").unwrap();
     let _other = Channel::<HardwareState>::open_as_version(&node, &ns, SCHEMA_VERSION + 1).unwrap();
     let mut ctl = tests::start(
@@ -235,27 +236,11 @@ fn processes_of_another_schema_version_are_refused() {
     }
 }
 
-/// A small deterministic generator for the garbage test.
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> u64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        self.0 >> 11
-    }
-    fn unit(&mut self) -> f64 {
-        self.next() as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[test]
 fn garbage_actions_never_produce_torques_beyond_limits() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("garbage");
-    let dir = tests::scratch_dir("garbage");
+    let dir = test_support::scratch_dir("garbage");
     let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let model = robot_model::descriptions::builtin("iiwa14").unwrap();
     let limits = model.effort_limits();
@@ -280,7 +265,7 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
         0.5,
         -0.2,
     ];
-    let mut rng = Lcg(7);
+    let mut rng = test_support::rng(7);
     let mut checked = 0usize;
     let mut bad = Vec::new();
     let mut rate_bad = Vec::new();
@@ -309,15 +294,15 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     let (mut bad_schema, mut bad_value) = (0u64, 0u64);
     for k in 0..N {
         let mut a = action(k + 1, 0.0, SCHEMA_VERSION);
-        let pick = |rng: &mut Lcg| match rng.next() % 3 {
-            0 => specials[(rng.next() % specials.len() as u64) as usize],
-            1 => (rng.unit() - 0.5) * 0.02, // plausible steps
-            _ => (rng.unit() - 0.5) * 2e3,  // far out of range
+        let pick = |rng: &mut test_support::Rng| match rng.random_range(0..3) {
+            0 => specials[rng.random_range(0..specials.len())],
+            1 => rng.uniform(-0.01, 0.01), // plausible steps
+            _ => rng.uniform(-1e3, 1e3),   // far out of range
         };
         a.delta_pos_m = [pick(&mut rng), pick(&mut rng), pick(&mut rng)];
         a.delta_roll_rad = pick(&mut rng);
-        if rng.next().is_multiple_of(50) {
-            a.header.schema_version = SCHEMA_VERSION + 1 + (rng.next() % 5) as u32;
+        if rng.random_range(0..50) == 0 {
+            a.header.schema_version = SCHEMA_VERSION + rng.random_range(1..6);
             bad_schema += 1;
         } else if rt_controller::supervisor::Supervisor::check_action(&cfg.safety, &a.delta())
             .is_err()
@@ -384,7 +369,7 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
 fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("lockstep");
-    let dir = tests::scratch_dir("lockstep");
+    let dir = test_support::scratch_dir("lockstep");
     let _sim = tests::start(
         "hw-sim",
         &["--namespace", &ns, "--mode", "lockstep", "--no-camera"],
@@ -467,7 +452,7 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
     use std::os::unix::net::UnixDatagram;
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("systemd");
-    let dir = tests::scratch_dir("systemd");
+    let dir = test_support::scratch_dir("systemd");
     let sock_path = dir.join("notify.sock");
     let sock = UnixDatagram::bind(&sock_path).unwrap();
     sock.set_read_timeout(Some(Duration::from_millis(200)))

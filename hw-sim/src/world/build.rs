@@ -247,7 +247,8 @@ impl World {
         // (s_ψ = 0): the drawn yaw is then a roll error for the policy to
         // correct, never a half turn that ends at the wrist's limit.
         let peg_x = self.peg_tip_pose().rotation * Vector3::x();
-        let yaw = peg_x.y.atan2(peg_x.x) + rng::uniform(rng, -t.box_yaw_range_rad, t.box_yaw_range_rad);
+        let yaw =
+            peg_x.y.atan2(peg_x.x) + rng::uniform(rng, -t.box_yaw_range_rad, t.box_yaw_range_rad);
         let peg = &self.peg.as_ref().expect("task has a peg").info;
         // The hole frame has z up and the peg's frame z down the peg:
         // aligned (s_ψ = 0) they differ by a half turn about x, which

@@ -138,7 +138,11 @@ impl World {
         // channels cost nothing and turning one on leaves the others' draws.
         let [q_rng, v_rng, f_rng, m_rng] = &mut self.noise_rngs;
         let draw = |rng: &mut SimRng, std: f64| {
-            if std > 0.0 { std * rng::normal(rng) } else { 0.0 }
+            if std > 0.0 {
+                std * rng::normal(rng)
+            } else {
+                0.0
+            }
         };
         for k in 0..self.q.len() {
             r.q[k] = self.q[k] + draw(q_rng, n.q_std_rad);

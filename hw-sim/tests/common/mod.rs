@@ -9,7 +9,9 @@ use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
 use shared_mem_schema::rates::{ACTION_PERIOD_STEPS, CONTROL_PERIOD_S};
-use shared_mem_schema::{HardwareState, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns};
+use shared_mem_schema::{
+    HardwareState, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
+};
 
 /// A policy action: Δx, Δy, Δz (m), Δroll (rad).
 pub type Action = [f64; 4];
@@ -117,7 +119,11 @@ impl Rig {
         for k in 0..n {
             // Keep the policy "alive" with zero actions so the controller
             // keeps its running mode (it holds after 100 ms without one).
-            self.cycle(if k % ACTION_PERIOD_STEPS == 0 { Some(&ZERO) } else { None });
+            self.cycle(if k % ACTION_PERIOD_STEPS == 0 {
+                Some(&ZERO)
+            } else {
+                None
+            });
         }
     }
 

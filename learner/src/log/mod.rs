@@ -27,7 +27,10 @@ pub use read::{
 };
 
 use mcap::records::MessageHeader;
-use shared_mem_schema::{CameraFrame, ControllerStatus, EpisodeReport, Message, PolicyAction, SCHEMA_VERSION, SensorFrame};
+use shared_mem_schema::{
+    CameraFrame, ControllerStatus, EpisodeReport, Message, PolicyAction, SCHEMA_VERSION,
+    SensorFrame,
+};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;

@@ -11,7 +11,10 @@ use crate::{ActionStatus, ConfigError};
 use robot_model::Model;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
-use shared_mem_schema::{ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction, SCHEMA_VERSION, SensorFrame, TorqueCommand};
+use shared_mem_schema::{
+    ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction, SCHEMA_VERSION,
+    SensorFrame, TorqueCommand,
+};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
