@@ -7,6 +7,7 @@
 //! `cargo bench -p hw-sim --bench sim` (prints a table; asserts nothing).
 
 use hw_sim::{CameraFrame, PegShape, Stage, WorldConfig};
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use std::time::Instant;
 
 #[path = "../tests/common/mod.rs"]
@@ -57,8 +58,8 @@ fn toward_bottom(l: &Loop) -> Action {
 /// Drives the peg to the bottom of its hole with 20 Hz actions.
 fn inserted(peg: PegShape) -> Loop {
     let mut l = fixed_box(peg);
-    for k in 0..10_000 {
-        let action = (k % 50 == 0).then(|| toward_bottom(&l));
+    for k in 0..10_000u64 {
+        let action = (k % ACTION_PERIOD_STEPS == 0).then(|| toward_bottom(&l));
         l.cycle(action.as_ref());
     }
     l
@@ -86,7 +87,7 @@ fn main() {
             physics.push(1.0 / t0.elapsed().as_secs_f64());
             let t0 = Instant::now();
             for k in 0..1000 {
-                l.cycle((k % 50 == 0).then_some(&ZERO));
+                l.cycle((k % ACTION_PERIOD_STEPS == 0).then_some(&ZERO));
             }
             full.push(1.0 / t0.elapsed().as_secs_f64());
         }
@@ -142,7 +143,7 @@ fn main() {
             let t0 = Instant::now();
             for _ in 0..500 {
                 let a = toward_bottom(&l);
-                for k in 0..50 {
+                for k in 0..ACTION_PERIOD_STEPS {
                     l.control((k == 0).then_some(&a));
                     let t1 = Instant::now();
                     l.apply();

@@ -77,8 +77,8 @@ mod tests {
 
     #[test]
     fn written_images_decode_to_the_same_pixels() {
-        let dir = std::env::temp_dir().join(format!("vt-png-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         for (channels, name) in [(1u8, "grey.png"), (3, "rgb.png")] {
             let (w, h) = (5u32, 3u32);
             let px: Vec<u8> = (0..w * h * channels as u32)
@@ -102,6 +102,5 @@ mod tests {
             write(dir.join("bad.png"), 1, 1, 2, &[0; 2]),
             Err(PngError::Channels(2))
         ));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -1,7 +1,7 @@
 //! The simulated arm against robot-model: initial poses, and joint
 //! accelerations under torque against M⁻¹(τ − h).
 
-use hw_sim::rng::SimRng;
+use hw_sim::rng;
 use hw_sim::{World, WorldConfig};
 use nalgebra::DVector;
 
@@ -27,9 +27,9 @@ fn link_poses_match_forward_kinematics() {
         let mut world = bare_arm(robot, 1e-3);
         let model = world.model().clone();
         let mut data = model.create_data();
-        let mut rng = SimRng::new(11, 0);
+        let mut rng = rng::seeded(11, 0);
         for _ in 0..20 {
-            let q: Vec<f64> = (0..7).map(|_| rng.uniform(-1.5, 1.5)).collect();
+            let q: Vec<f64> = (0..7).map(|_| rng::uniform(&mut rng, -1.5, 1.5)).collect();
             world.set_joint_state(&q, &[0.0; 7]).unwrap();
             assert!(
                 world.q().iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-12),
@@ -61,12 +61,14 @@ fn joint_accelerations_match_model_dynamics() {
             let model = world.model().clone();
             let mut data = model.create_data();
             let effort = model.effort_limits();
-            let mut rng = SimRng::new(5, 0);
+            let mut rng = rng::seeded(5, 0);
             let mut max_rel: f64 = 0.0;
             for _ in 0..50 {
-                let q: Vec<f64> = (0..7).map(|_| rng.uniform(-1.5, 1.5)).collect();
-                let v: Vec<f64> = (0..7).map(|_| rng.uniform(-1.0, 1.0)).collect();
-                let tau: Vec<f64> = (0..7).map(|k| rng.uniform(-0.3, 0.3) * effort[k]).collect();
+                let q: Vec<f64> = (0..7).map(|_| rng::uniform(&mut rng, -1.5, 1.5)).collect();
+                let v: Vec<f64> = (0..7).map(|_| rng::uniform(&mut rng, -1.0, 1.0)).collect();
+                let tau: Vec<f64> = (0..7)
+                    .map(|k| rng::uniform(&mut rng, -0.3, 0.3) * effort[k])
+                    .collect();
                 world.set_joint_state(&q, &v).unwrap();
                 world.step(&tau).unwrap();
                 let a_sim: Vec<f64> = world

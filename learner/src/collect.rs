@@ -15,14 +15,15 @@ use crate::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, RandomConfig, RandomPolicy, TaskGeometry,
 };
-use hw_sim::{PegShape, WorldConfig};
+use crate::progress::Progress;
+use hw_sim::{PegShape, WorldConfig, rng};
 use rt_controller::ControllerConfig;
-use shared_mem_schema::{Pod, Stage, hw_time_ns};
+use shared_mem_schema::{Message, Stage, hw_time_ns};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The policy mix.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,14 +72,14 @@ pub struct MixedPolicy {
     heuristic: HeuristicPolicy,
     random: RandomPolicy,
     noise_m: f64,
-    rng: hw_sim::rng::SimRng,
+    rng: rng::SimRng,
 }
 
 impl MixedPolicy {
     /// Draws the episode's policy from `seed`.
     pub fn new(mix: &Mix, seed: u64) -> Self {
-        let mut rng = hw_sim::rng::SimRng::new(seed, 23);
-        let kind = if rng.unit() < mix.heuristic_fraction {
+        let mut rng = rng::seeded(seed, 23);
+        let kind = if rng::unit(&mut rng) < mix.heuristic_fraction {
             EpisodePolicy::Heuristic
         } else {
             EpisodePolicy::Random
@@ -108,7 +109,7 @@ impl MixedPolicy {
             EpisodePolicy::Heuristic => {
                 let mut a = self.heuristic.act(obs, wrench, task);
                 for x in &mut a[..3] {
-                    *x += self.noise_m * self.rng.normal();
+                    *x += self.noise_m * rng::normal(&mut self.rng);
                 }
                 a
             }
@@ -124,6 +125,10 @@ pub struct CollectConfig {
     pub out_dir: PathBuf,
     /// 20 Hz states to collect (episodes run until this many are written).
     pub states: u64,
+    /// At most this many episodes (none: as many as `states` needs). With
+    /// several workers the episode count for a state budget depends on how
+    /// the threads were scheduled; a fixed count does not.
+    pub episodes: Option<u64>,
     /// Actions per episode.
     pub episode_actions: u32,
     /// Pegs, taken in turn.
@@ -170,94 +175,6 @@ pub struct CollectSummary {
     pub states: u64,
     /// Wall time, s.
     pub wall_s: f64,
-}
-
-/// A progress line on stderr: a bar on a terminal, a line every few
-/// seconds otherwise.
-pub struct Progress {
-    total: u64,
-    start: Instant,
-    tty: bool,
-    last: Mutex<Instant>,
-}
-
-impl Progress {
-    /// Progress towards `total` states.
-    pub fn new(total: u64) -> Self {
-        // SAFETY: isatty only reads the descriptor's state.
-        let tty = unsafe { libc::isatty(2) } == 1;
-        Self {
-            total,
-            start: Instant::now(),
-            tty,
-            last: Mutex::new(Instant::now() - Duration::from_secs(60)),
-        }
-    }
-
-    /// Reports `done` states (throttled).
-    pub fn update(&self, done: u64, episodes: u64) {
-        let every = if self.tty {
-            Duration::from_millis(250)
-        } else {
-            Duration::from_secs(5)
-        };
-        let mut last = self.last.lock().expect("not poisoned");
-        if last.elapsed() < every && done != self.total {
-            return;
-        }
-        *last = Instant::now();
-        let line = self.line(done, episodes);
-        let mut err = std::io::stderr().lock();
-        let _ = if self.tty {
-            write!(err, "\r{line}\x1b[K")
-        } else {
-            writeln!(err, "{line}")
-        };
-        let _ = err.flush();
-    }
-
-    /// Ends the bar's line.
-    pub fn finish(&self, done: u64, episodes: u64) {
-        let line = self.line(done, episodes);
-        let mut err = std::io::stderr().lock();
-        let _ = if self.tty {
-            writeln!(err, "\r{line}\x1b[K")
-        } else {
-            writeln!(err, "{line}")
-        };
-    }
-
-    fn line(&self, done: u64, episodes: u64) -> String {
-        let el = self.start.elapsed().as_secs_f64();
-        let rate = done as f64 / el.max(1e-9);
-        let frac = (done as f64 / self.total.max(1) as f64).min(1.0);
-        let width = 30;
-        let full = (frac * width as f64).round() as usize;
-        let eta = if rate > 0.0 && done < self.total {
-            fmt_duration((self.total - done) as f64 / rate)
-        } else {
-            "-".into()
-        };
-        format!(
-            "[{}{}] {done}/{} states, {episodes} episodes, {rate:.0} states/s, elapsed {}, left {eta}",
-            "#".repeat(full),
-            ".".repeat(width - full),
-            self.total,
-            fmt_duration(el)
-        )
-    }
-}
-
-/// `1h02m`, `3m07s`, `12s`.
-pub fn fmt_duration(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    if s >= 3600 {
-        format!("{}h{:02}m", s / 3600, s % 3600 / 60)
-    } else if s >= 60 {
-        format!("{}m{:02}s", s / 60, s % 60)
-    } else {
-        format!("{s}s")
-    }
 }
 
 /// The task geometry the policies need, from the simulated world.
@@ -405,7 +322,7 @@ pub fn collect_fast(
     let next_episode = AtomicU64::new(0);
     let done = AtomicU64::new(0);
     let episodes_done = AtomicU64::new(0);
-    let progress = Progress::new(cfg.states);
+    let progress = Progress::new(cfg.states, "states");
     let shards = Mutex::new(Vec::new());
     let manifest_path = cfg.out_dir.join("manifest.jsonl");
     let manifest_err = |source: std::io::Error| CollectError::Io {
@@ -429,6 +346,9 @@ pub fn collect_fast(
                         return Ok(());
                     }
                     let i = next_episode.fetch_add(1, Ordering::Relaxed);
+                    if cfg.episodes.is_some_and(|n| i >= n) {
+                        return Ok(());
+                    }
                     let mut world = cfg.world.clone();
                     world.task.enabled = true;
                     world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
@@ -449,7 +369,10 @@ pub fn collect_fast(
                         &cfg.log,
                         || {
                             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                            progress.update(n, episodes_done.load(Ordering::Relaxed));
+                            progress.update(
+                                n,
+                                format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
+                            );
                             !stop.load(Ordering::Relaxed)
                         },
                     )
@@ -474,7 +397,11 @@ pub fn collect_fast(
         Ok(())
     })?;
     let states = done.load(Ordering::Relaxed);
-    progress.finish(states, episodes_done.load(Ordering::Relaxed));
+    progress.update(
+        states,
+        format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
+    );
+    progress.finish();
     let mut shards = shards.into_inner().expect("not poisoned");
     shards.sort_by_key(|s| s.episode);
     Ok(CollectSummary {

@@ -14,7 +14,7 @@ use hw_sim::{SimError, SimHardware, World, WorldConfig};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
 use shared_mem_schema::{
-    HardwareState, Header, Pod, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
+    HardwareState, Header, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
 };
 
 /// Why the fast path could not be built or stepped.

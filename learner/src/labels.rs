@@ -102,8 +102,13 @@ impl FlowLabeler {
             links: &self.links,
             box_pose: None,
         };
-        self.camera
-            .render(&poses, 0.05, &none, (0.0, 0.0), &mut self.b);
+        self.camera.render(
+            &poses,
+            shared_mem_schema::rates::ACTION_PERIOD_S,
+            &none,
+            (0.0, 0.0),
+            &mut self.b,
+        );
         for i in 0..self.flow_px.len() {
             let seen = depth0.get(i).copied().unwrap_or(0.0);
             let visible = self.b.flow_mask[i] == 1

@@ -20,4 +20,5 @@ pub mod labels;
 pub mod live;
 pub mod log;
 pub mod policy;
+pub mod progress;
 pub mod stack;

@@ -7,11 +7,12 @@
 //! lockstep simulator: on the frame of step 50m−1 it publishes the action
 //! addressed to step 50m, so runs are deterministic.
 
-use crate::collect::{EpisodePolicy, Mix, MixedPolicy, Progress};
+use crate::collect::{EpisodePolicy, Mix, MixedPolicy};
 use crate::env::ACTION_PERIOD;
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
+use crate::progress::Progress;
 use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
@@ -377,7 +378,7 @@ pub fn run(
     transport::quiet_logs();
     let mut node = PolicyNode::open(&cfg.namespace)?;
     let mut outcomes = Vec::new();
-    let progress = cfg.target_states.map(Progress::new);
+    let progress = cfg.target_states.map(|t| Progress::new(t, "states"));
     let mut total_actions = 0u64;
     for i in 0..cfg.episodes {
         if termination_requested() || cfg.target_states.is_some_and(|t| total_actions >= t) {
@@ -388,14 +389,15 @@ pub fn run(
         let done = outcomes.len() as u64;
         let outcome = ep.run(&mut node, cfg, &mut total_actions, |total| {
             if let Some(p) = &progress {
-                p.update(total, done);
+                p.update(total, format!("{done} episodes"));
             }
         })?;
         on_outcome(&outcome);
         outcomes.push(outcome);
     }
     if let Some(p) = &progress {
-        p.finish(total_actions, outcomes.len() as u64);
+        p.update(total_actions, format!("{} episodes", outcomes.len()));
+        p.finish();
     }
     Ok(outcomes)
 }

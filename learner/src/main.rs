@@ -103,6 +103,10 @@ struct CollectArgs {
     /// 20 Hz states to collect.
     #[arg(long, default_value_t = 1000)]
     states: u64,
+    /// Stop after this many episodes even if fewer states were written
+    /// (fast mode; a fixed episode count whatever the thread scheduling).
+    #[arg(long)]
+    episodes: Option<u64>,
     /// Output directory.
     #[arg(long, default_value = "data/collect")]
     out: PathBuf,
@@ -191,6 +195,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
     let cfg = CollectConfig {
         out_dir: a.out.clone(),
         states: a.states,
+        episodes: a.episodes,
         episode_actions: a.episode_actions,
         pegs,
         seed: a.seed,
@@ -282,17 +287,18 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             };
             let workers = workers
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            let progress = learner::collect::Progress::new(files.len() as u64);
-            let mut done = 0;
+            let progress = learner::progress::Progress::new(files.len() as u64, "logs");
+            let (mut done, mut skipped) = (0, 0);
             let t = std::time::Instant::now();
             let meta = dataset::build(&files, &out, &cfg, workers, |path, r| {
                 done += 1;
                 if let Err(e) = r {
-                    eprintln!("\nskipped {}: {e}", path.display());
+                    skipped += 1;
+                    progress.suspend(|| eprintln!("skipped {}: {e}", path.display()));
                 }
-                progress.update(done, done);
+                progress.update(done, format!("{skipped} skipped"));
             })?;
-            progress.finish(done, done);
+            progress.finish();
             println!(
                 "built {} samples from {} episodes ({} logs skipped) in {:.1} s into {}",
                 meta.samples,

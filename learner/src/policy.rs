@@ -6,6 +6,7 @@
 //! moves above it, aligns the roll, descends to contact, searches on a
 //! spiral when it lands on the surface, and inserts.
 
+use hw_sim::rng;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use shared_mem_schema::SensorFrame;
 
@@ -337,7 +338,7 @@ impl Default for RandomConfig {
 pub struct RandomPolicy {
     /// Tuning.
     pub cfg: RandomConfig,
-    rng: hw_sim::rng::SimRng,
+    rng: rng::SimRng,
 }
 
 impl RandomPolicy {
@@ -345,7 +346,7 @@ impl RandomPolicy {
     pub fn new(cfg: RandomConfig, seed: u64) -> Self {
         Self {
             cfg,
-            rng: hw_sim::rng::SimRng::new(seed, 17),
+            rng: rng::seeded(seed, 17),
         }
     }
 
@@ -357,7 +358,7 @@ impl RandomPolicy {
         let hi = [c.region_half_m, c.region_half_m, c.region_z_m.1];
         let mut d = Vector3::zeros();
         for k in 0..3 {
-            let x = self.rng.uniform(-c.max_step_m, c.max_step_m);
+            let x = rng::uniform(&mut self.rng, -c.max_step_m, c.max_step_m);
             d[k] = if s[k] < lo[k] {
                 x.abs()
             } else if s[k] > hi[k] {
@@ -367,7 +368,7 @@ impl RandomPolicy {
             };
         }
         let d = task.hole_pose.rotation * d;
-        let roll = self.rng.uniform(-c.max_roll_rad, c.max_roll_rad);
+        let roll = rng::uniform(&mut self.rng, -c.max_roll_rad, c.max_roll_rad);
         [d.x, d.y, d.z, roll]
     }
 }

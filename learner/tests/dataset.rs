@@ -8,15 +8,7 @@ use learner::env::{ACTION_PERIOD, FastEnv};
 use learner::labels::FlowLabeler;
 use learner::log::LogOptions;
 use learner::policy::{HeuristicConfig, HeuristicPolicy};
-use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vt-dataset-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 fn world() -> hw_sim::WorldConfig {
     let mut w = hw_sim::WorldConfig::default();
@@ -30,7 +22,7 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
     env.reset(5).unwrap();
     let task = learner::collect::task_of(env.world()).unwrap();
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
-    let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Pod>::boxed_zeroed();
+    let mut msg = <shared_mem_schema::CameraFrame as shared_mem_schema::Message>::boxed_zeroed();
     env.render_camera(&mut msg);
     let cam = env.world().camera().clone();
     let cal = msg.calibration;
@@ -84,7 +76,8 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
 fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::collect::CollectSummary {
     let cfg = CollectConfig {
         out_dir: dir.to_path_buf(),
-        states: 1,
+        states: u64::MAX,
+        episodes: Some(2),
         episode_actions: actions,
         pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon],
         seed: 11,
@@ -105,9 +98,10 @@ fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::colle
 
 #[test]
 fn a_short_collection_builds_the_expected_dataset() {
-    let logs = scratch("logs");
+    let logs_dir = test_support::scratch_dir("logs");
+    let logs = logs_dir.to_path_buf();
     let summary = collect(&logs, 1.0, 60);
-    // Two workers, one state asked for: each worker ends its episode.
+    // Two episodes, whichever worker ran them.
     assert_eq!(summary.shards.len(), 2);
     assert_eq!(summary.states, 2 * 59);
     assert!(logs.join("manifest.jsonl").exists());
@@ -117,7 +111,7 @@ fn a_short_collection_builds_the_expected_dataset() {
     let good = std::fs::read(&summary.shards[0].file).unwrap();
     std::fs::write(&bad, &good[..good.len() / 2]).unwrap();
 
-    let out = scratch("ds");
+    let out = test_support::scratch_dir("ds");
     let files = dataset::find_logs(std::slice::from_ref(&logs)).unwrap();
     assert_eq!(files.len(), 3);
     let cfg = BuildConfig {
@@ -243,7 +237,13 @@ fn a_short_collection_builds_the_expected_dataset() {
     // A contact sheet is written.
     let sheet = out.join("sheet.png");
     dataset::contact_sheet(&ds, 4, &sheet).unwrap();
-    assert!(std::fs::read(&sheet).unwrap().starts_with(b"\x89PNG"));
+    // Four rows (samples) of four tiles (RGB, depth, flow, mask) each.
+    let png = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(&sheet).unwrap(),
+    ));
+    let info = png.read_info().unwrap().info().clone();
+    let (w, h) = (ds.meta.width as u32, ds.meta.height as u32);
+    assert_eq!((info.width, info.height), (4 * w, 4 * h));
 
     // Damaged datasets: a cut shard names its block's offset, a foreign
     // format version is refused.
@@ -264,6 +264,4 @@ fn a_short_collection_builds_the_expected_dataset() {
     .unwrap();
     let e = Dataset::open(&out).err().unwrap().to_string();
     assert!(e.contains("format version 9"), "{e}");
-    let _ = std::fs::remove_dir_all(&logs);
-    let _ = std::fs::remove_dir_all(&out);
 }

@@ -6,14 +6,8 @@
 use learner::collect::EpisodePolicy;
 use learner::log::events::{Event, Outcome, Reset};
 use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, RunConfig, RunMode, topics};
-use shared_mem_schema::{CameraFrame, Header, Pod, PolicyAction, SensorFrame};
-use std::path::{Path, PathBuf};
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vt-log-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+use shared_mem_schema::{CameraFrame, Header, Message, PolicyAction, SensorFrame};
+use std::path::Path;
 
 fn sensor(i: u64) -> SensorFrame {
     let mut f = *SensorFrame::boxed_zeroed();
@@ -108,7 +102,8 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
 
 #[test]
 fn round_trip_with_views_and_time_ranges() {
-    let path = scratch("round-trip.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("round-trip.mcap");
     let frames = write_log(&path, LogOptions::default());
     let r = LogReader::open(&path).unwrap();
     let back: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None).unwrap();
@@ -192,7 +187,8 @@ fn round_trip_with_views_and_time_ranges() {
 
 #[test]
 fn views_can_be_thinned_or_left_out() {
-    let path = scratch("thin.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("thin.mcap");
     write_log(
         &path,
         LogOptions {
@@ -218,7 +214,8 @@ fn views_can_be_thinned_or_left_out() {
 
 #[test]
 fn another_schema_version_is_refused_by_name() {
-    let path = scratch("version.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("version.mcap");
     let mut w = LogWriter::create(&path).unwrap();
     let mut f = sensor(1);
     let foreign = shared_mem_schema::SCHEMA_VERSION + 1;
@@ -248,7 +245,8 @@ fn missing_and_foreign_files_are_named() {
         .err()
         .unwrap();
     assert!(e.to_string().contains("/nonexistent/x.mcap"), "{e}");
-    let path = scratch("foreign.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("foreign.mcap");
     std::fs::write(&path, b"PK\x03\x04 not a log at all").unwrap();
     let e = LogReader::open(&path).err().unwrap();
     assert!(matches!(e, ReadError::NotMcap { .. }), "{e}");
@@ -265,12 +263,15 @@ fn small_chunks() -> LogOptions {
 
 #[test]
 fn truncated_files_name_the_offset_and_recover_to_a_prefix() {
-    let path = scratch("full.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("full.mcap");
     write_log(&path, small_chunks());
     let full = std::fs::read(&path).unwrap();
     let all = LogReader::open(&path).unwrap().read(&[], None).unwrap();
-    let cut_path = scratch("cut.mcap");
-    let out_path = scratch("cut-recovered.mcap");
+    let cut_path_dir = test_support::scratch_dir("log");
+    let cut_path = cut_path_dir.path().join("cut.mcap");
+    let out_path_dir = test_support::scratch_dir("log");
+    let out_path = out_path_dir.path().join("cut-recovered.mcap");
     let mut last_count = 0;
     for k in 1..40 {
         let cut = full.len() * k / 40;
@@ -314,7 +315,8 @@ fn truncated_files_name_the_offset_and_recover_to_a_prefix() {
 
 #[test]
 fn flipped_bytes_give_errors_not_panics() {
-    let path = scratch("flip.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("flip.mcap");
     write_log(&path, small_chunks());
     let full = std::fs::read(&path).unwrap();
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
@@ -357,7 +359,8 @@ fn flipped_bytes_give_errors_not_panics() {
 
 #[test]
 fn recovery_refuses_to_overwrite_its_input() {
-    let path = scratch("self.mcap");
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("self.mcap");
     write_log(&path, small_chunks());
     let before = std::fs::read(&path).unwrap();
     assert!(log::recover(&path, &path).is_err());

@@ -8,19 +8,14 @@ use nalgebra::Matrix6xX;
 use robot_model::*;
 use std::hint::black_box;
 use std::time::Duration;
+use test_support::Uniform;
 
 const POOL: usize = 256;
 
-/// Deterministic states (splitmix64), within the joint limits.
+/// Deterministic states within the joint limits.
 fn states(model: &Model) -> Vec<[Vec<f64>; 3]> {
-    let mut s: u64 = 7;
-    let mut next = move || {
-        s = s.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = s;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = test_support::rng(7);
+    let mut next = move || rng.uniform(0.0, 1.0);
     (0..POOL)
         .map(|_| {
             let q = model.joints[1..]

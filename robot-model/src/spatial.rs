@@ -87,16 +87,6 @@ impl Se3 {
         }
     }
 
-    /// `self⁻¹ * other`, without forming the inverse.
-    #[inline]
-    pub fn inv_mul(&self, other: &Se3) -> Se3 {
-        let rt = self.rot.transpose();
-        Se3 {
-            rot: rt * other.rot,
-            trans: rt * (other.trans - self.trans),
-        }
-    }
-
     /// Maps a point from `b` to `a`.
     #[inline]
     pub fn act_point(&self, p: &Vector3<f64>) -> Vector3<f64> {

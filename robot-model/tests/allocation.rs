@@ -5,31 +5,8 @@ mod common;
 
 use nalgebra::Matrix6xX;
 use robot_model::*;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use test_support::Uniform;
+use test_support::alloc::{Counting, count};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -39,14 +16,14 @@ fn algorithms_do_not_allocate() {
     for (name, model) in common::robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = common::Rng::new(11);
+        let mut rng = test_support::rng(11);
         // Inputs and outputs are made before counting starts.
         let states: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..64)
             .map(|_| {
                 (
-                    rng.config(&model),
-                    rng.vec(nv, -1.0, 1.0),
-                    rng.vec(nv, -1.0, 1.0),
+                    common::random_config(&mut rng, &model),
+                    rng.uniform_vec(nv, -1.0, 1.0),
+                    rng.uniform_vec(nv, -1.0, 1.0),
                 )
             })
             .collect();
@@ -57,31 +34,31 @@ fn algorithms_do_not_allocate() {
             .unwrap();
         let mut checksum = 0.0;
 
-        ALLOCATIONS.store(0, Ordering::SeqCst);
-        COUNTING.store(true, Ordering::SeqCst);
-        for i in 0..5000 {
-            let (q, v, a) = &states[i % states.len()];
-            forward_kinematics(&model, &mut data, q);
-            let x = frame_se3(&model, &data, frame);
-            frame_jacobian(&model, &data, frame, Reference::Base, &mut jac);
-            frame_jacobian(&model, &data, frame, Reference::Local, &mut jac);
-            let jdv = frame_jdot_v(&model, &mut data, q, v, frame, Reference::Base);
-            forward_kinematics_second_order(&model, &mut data, q, v, Some(a));
-            let fv = frame_velocity(&model, &data, frame, Reference::Local);
-            let fa = frame_acceleration(&model, &data, frame, Reference::Base);
-            crba(&model, &mut data, q);
-            gravity(&model, &mut data, q);
-            nonlinear_effects(&model, &mut data, q, v);
-            let tau_sum = rnea(&model, &mut data, q, v, a).sum();
-            let ddq_sum = forward_dynamics(&model, &mut data, q, v, a).unwrap().sum();
-            coriolis_matrix(&model, &mut data, q, v);
-            let e =
-                kinetic_energy(&model, &mut data, q, v) + potential_energy(&model, &mut data, q);
-            let com = center_of_mass(&model, &data);
-            checksum += x.trans.x + jdv.lin.x + fv.ang.y + fa.lin.z + tau_sum + ddq_sum + e + com.z;
-        }
-        COUNTING.store(false, Ordering::SeqCst);
-        let n = ALLOCATIONS.load(Ordering::SeqCst);
+        let n = count(|| {
+            for i in 0..5000 {
+                let (q, v, a) = &states[i % states.len()];
+                forward_kinematics(&model, &mut data, q);
+                let x = frame_se3(&model, &data, frame);
+                frame_jacobian(&model, &data, frame, Reference::Base, &mut jac);
+                frame_jacobian(&model, &data, frame, Reference::Local, &mut jac);
+                let jdv = frame_jdot_v(&model, &mut data, q, v, frame, Reference::Base);
+                forward_kinematics_second_order(&model, &mut data, q, v, Some(a));
+                let fv = frame_velocity(&model, &data, frame, Reference::Local);
+                let fa = frame_acceleration(&model, &data, frame, Reference::Base);
+                crba(&model, &mut data, q);
+                gravity(&model, &mut data, q);
+                nonlinear_effects(&model, &mut data, q, v);
+                let tau_sum = rnea(&model, &mut data, q, v, a).sum();
+                let ddq_sum = forward_dynamics(&model, &mut data, q, v, a).unwrap().sum();
+                coriolis_matrix(&model, &mut data, q, v);
+                let e = kinetic_energy(&model, &mut data, q, v)
+                    + potential_energy(&model, &mut data, q);
+                let com = center_of_mass(&model, &data);
+                checksum +=
+                    x.trans.x + jdv.lin.x + fv.ang.y + fa.lin.z + tau_sum + ddq_sum + e + com.z;
+            }
+        })
+        .allocations;
         assert!(checksum.is_finite());
         assert_eq!(
             n, 0,
@@ -93,10 +70,10 @@ fn algorithms_do_not_allocate() {
 /// The counter does count: a deliberate allocation is seen.
 #[test]
 fn counter_sees_allocations() {
-    ALLOCATIONS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
-    let v: Vec<u64> = std::hint::black_box(vec![1, 2, 3]);
-    COUNTING.store(false, Ordering::SeqCst);
+    let mut v = Vec::new();
+    let c = count(|| v = std::hint::black_box(vec![1u64, 2, 3]));
     assert_eq!(v.len(), 3);
-    assert!(ALLOCATIONS.load(Ordering::SeqCst) >= 1);
+    assert!(c.allocations >= 1);
+    let c = count(|| drop(std::mem::take(&mut v)));
+    assert_eq!((c.allocations, c.frees), (0, 1));
 }

@@ -3,10 +3,11 @@
 
 mod common;
 
-use common::{Rng, axpy, robots};
+use common::{axpy, robots};
 use nalgebra::{DMatrix, DVector, Matrix6xX};
 use robot_model::spatial::log3;
 use robot_model::*;
+use test_support::{RngExt, Uniform};
 
 const SAMPLES: usize = 200;
 
@@ -18,9 +19,9 @@ fn dv(x: &[f64]) -> DVector<f64> {
 fn mass_matrix_is_symmetric_positive_definite() {
     for (name, model) in robots() {
         let mut data = model.create_data();
-        let mut rng = Rng::new(1);
+        let mut rng = test_support::rng(1);
         for _ in 0..SAMPLES {
-            let q = rng.config(&model);
+            let q = common::random_config(&mut rng, &model);
             let m = crba(&model, &mut data, &q).clone();
             assert!(
                 (&m - m.transpose()).amax() < 1e-12,
@@ -40,12 +41,12 @@ fn rnea_gravity_mass_matrix_and_nle_agree() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(2);
+        let mut rng = test_support::rng(2);
         let zero = vec![0.0; nv];
         for _ in 0..SAMPLES {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
-            let a = rng.vec(nv, -5.0, 5.0);
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
+            let a = rng.uniform_vec(nv, -5.0, 5.0);
             let g = gravity(&model, &mut data, &q).clone();
             let tau0 = rnea(&model, &mut data, &q, &zero, &zero).clone();
             assert!((&tau0 - &g).amax() < 1e-10, "{name}: RNEA(q,0,0) != g(q)");
@@ -81,10 +82,10 @@ fn coriolis_makes_mdot_minus_2c_skew_symmetric() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(3);
+        let mut rng = test_support::rng(3);
         for _ in 0..50 {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
             let mp = crba(&model, &mut data, &axpy(&q, eps, &v)).clone();
             let mm = crba(&model, &mut data, &axpy(&q, -eps, &v)).clone();
             let mdot = (mp - mm) / (2.0 * eps);
@@ -101,11 +102,11 @@ fn forward_dynamics_inverts_rnea() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(4);
+        let mut rng = test_support::rng(4);
         for _ in 0..SAMPLES {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
-            let a = rng.vec(nv, -5.0, 5.0);
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
+            let a = rng.uniform_vec(nv, -5.0, 5.0);
             let tau: Vec<f64> = rnea(&model, &mut data, &q, &v, &a)
                 .iter()
                 .copied()
@@ -160,10 +161,10 @@ fn jacobian_matches_finite_differences_of_forward_kinematics() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(5);
+        let mut rng = test_support::rng(5);
         let mut jac = Matrix6xX::zeros(nv);
         for _ in 0..40 {
-            let q = rng.config(&model);
+            let q = common::random_config(&mut rng, &model);
             for frame in 0..model.frames.len() {
                 for reference in [Reference::Base, Reference::Local] {
                     let fd = fd_jacobian(&model, &mut data, &q, frame, reference);
@@ -187,13 +188,13 @@ fn jdot_v_matches_finite_differences_of_jacobian() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(6);
+        let mut rng = test_support::rng(6);
         let mut jp = Matrix6xX::zeros(nv);
         let mut jm = Matrix6xX::zeros(nv);
         for _ in 0..60 {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
-            let frame = rng.next_u64() as usize % model.frames.len();
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
+            let frame = rng.random_range(0..model.frames.len());
             for reference in [Reference::Base, Reference::Local] {
                 forward_kinematics(&model, &mut data, &axpy(&q, eps, &v));
                 frame_jacobian(&model, &data, frame, reference, &mut jp);
@@ -213,13 +214,13 @@ fn frame_velocity_and_acceleration_match_jacobian() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(7);
+        let mut rng = test_support::rng(7);
         let mut jac = Matrix6xX::zeros(nv);
         for _ in 0..60 {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
-            let a = rng.vec(nv, -3.0, 3.0);
-            let frame = rng.next_u64() as usize % model.frames.len();
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
+            let a = rng.uniform_vec(nv, -3.0, 3.0);
+            let frame = rng.random_range(0..model.frames.len());
             for reference in [Reference::Base, Reference::Local] {
                 let jdv = frame_jdot_v(&model, &mut data, &q, &v, frame, reference).to_vector();
                 forward_kinematics_second_order(&model, &mut data, &q, &v, Some(&a));
@@ -242,10 +243,10 @@ fn energies_match_mass_matrix_and_gravity() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(8);
+        let mut rng = test_support::rng(8);
         for _ in 0..50 {
-            let q = rng.config(&model);
-            let v = rng.vec(nv, -2.0, 2.0);
+            let q = common::random_config(&mut rng, &model);
+            let v = rng.uniform_vec(nv, -2.0, 2.0);
             let m = crba(&model, &mut data, &q).clone();
             let ke = kinetic_energy(&model, &mut data, &q, &v);
             assert!(
@@ -271,10 +272,10 @@ fn passive_simulation_conserves_energy() {
     for (name, model) in robots() {
         let nv = model.nv();
         let mut data = model.create_data();
-        let mut rng = Rng::new(9);
+        let mut rng = test_support::rng(9);
         let tau = vec![0.0; nv];
-        let mut q = rng.config(&model);
-        let mut v = rng.vec(nv, -1.0, 1.0);
+        let mut q = common::random_config(&mut rng, &model);
+        let mut v = rng.uniform_vec(nv, -1.0, 1.0);
         let energy = |data: &mut Data, q: &[f64], v: &[f64]| {
             kinetic_energy(&model, data, q, v) + potential_energy(&model, data, q)
         };

@@ -8,12 +8,12 @@
 
 mod common;
 
-use common::Rng;
 use nalgebra::{DMatrix, Matrix6xX};
 use robot_model::*;
 use serde_json::{Value, json};
 use std::io::Write;
 use std::process::{Command, Stdio};
+use test_support::Uniform;
 
 const TOL: f64 = 1e-9;
 
@@ -105,13 +105,13 @@ fn matches_pinocchio() {
             .filter(|f| f.kind == FrameKind::Link)
             .map(|f| f.name.clone())
             .collect();
-        let mut rng = Rng::new(42);
+        let mut rng = test_support::rng(42);
         let samples: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..25)
             .map(|_| {
                 (
-                    rng.config(&model),
-                    rng.vec(nv, -2.0, 2.0),
-                    rng.vec(nv, -4.0, 4.0),
+                    common::random_config(&mut rng, &model),
+                    rng.uniform_vec(nv, -2.0, 2.0),
+                    rng.uniform_vec(nv, -4.0, 4.0),
                 )
             })
             .collect();

@@ -11,13 +11,12 @@
 
 use criterion::Criterion;
 use nalgebra::Vector3;
-use robot_model::{LoadOptions, Model};
+use robot_model::Model;
 use rt_controller::{
     ControlCycle, Controller, ControllerConfig, ControllerData, QpOutcome, RobotState, step,
 };
-use shared_mem_schema::{HardwareState, Pod, SensorFrame, TorqueCommand};
+use shared_mem_schema::{HardwareState, Message, SensorFrame, TorqueCommand};
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::Instant;
 
 use robot_model::descriptions::PANDA_READY_Q as READY;
@@ -33,8 +32,7 @@ struct Case {
 
 impl Case {
     fn new(saturated: bool) -> Self {
-        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/panda.urdf");
-        let model = Model::from_urdf_file(&path, &LoadOptions::default()).unwrap();
+        let model = robot_model::descriptions::builtin("panda").unwrap();
         let ctrl = Controller::new(&model, ControllerConfig::default()).unwrap();
         let data = ctrl.create_data(&model);
         // Moving slowly, so that Coriolis terms and J̇v are not zero.
@@ -106,8 +104,7 @@ fn main() {
         crit.bench_function(name, |b| b.iter(|| black_box(c.cycle())));
     }
     {
-        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/panda.urdf");
-        let model = Model::from_urdf_file(&path, &LoadOptions::default()).unwrap();
+        let model = robot_model::descriptions::builtin("panda").unwrap();
         let mut cycle = ControlCycle::new(&model, ControllerConfig::default()).unwrap();
         let mut state = HardwareState::empty(7);
         state.q[..7].copy_from_slice(&READY);

@@ -21,10 +21,7 @@ use shared_mem_schema::{
 
 impl From<&PolicyAction> for Action {
     fn from(a: &PolicyAction) -> Self {
-        Self {
-            delta_pos_m: a.delta_pos_m,
-            delta_roll_rad: a.delta_roll_rad,
-        }
+        Self::from(a.delta())
     }
 }
 

@@ -62,6 +62,24 @@ pub struct Action {
     pub delta_roll_rad: f64,
 }
 
+impl Action {
+    /// The policy's vector `(Δx, Δy, Δz, Δroll)`.
+    pub fn delta(&self) -> [f64; 4] {
+        let [x, y, z] = self.delta_pos_m;
+        [x, y, z, self.delta_roll_rad]
+    }
+}
+
+impl From<[f64; 4]> for Action {
+    /// From the policy's vector `(Δx, Δy, Δz, Δroll)`.
+    fn from([x, y, z, roll]: [f64; 4]) -> Self {
+        Self {
+            delta_pos_m: [x, y, z],
+            delta_roll_rad: roll,
+        }
+    }
+}
+
 /// The measured robot state of one cycle.
 #[derive(Debug, Clone, Copy)]
 pub struct RobotState<'a> {
@@ -430,12 +448,7 @@ pub fn step(
     // The action.
     let mut action_status = ActionStatus::None;
     if let Some(a) = action {
-        let delta = [
-            a.delta_pos_m[0],
-            a.delta_pos_m[1],
-            a.delta_pos_m[2],
-            a.delta_roll_rad,
-        ];
+        let delta = a.delta();
         action_status = match Supervisor::check_action(&cfg.safety, &delta) {
             Err(r) => {
                 d.supervisor.counters.actions_rejected += 1;

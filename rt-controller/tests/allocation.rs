@@ -14,11 +14,8 @@ mod common;
 
 use common::{PANDA_READY, action, panda};
 use rt_controller::{ControllerConfig, Mode};
-#[path = "common/counting.rs"]
-mod counting;
-
-use counting::{Counting, LARGEST, LIVE_BYTES, TRACE, count};
 use std::sync::atomic::Ordering;
+use test_support::alloc::{Counting, TRACE, count, largest, live_bytes};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -89,7 +86,8 @@ fn control_steps_allocate_nothing_but_clarabels_fixed_timer_block() {
             if info.mode == Mode::Fault && k == 4001 {
                 data.reset(t);
             }
-        });
+        })
+        .allocations;
         match outcome {
             Some(
                 rt_controller::QpOutcome::Solved { .. } | rt_controller::QpOutcome::Fallback(_),
@@ -104,7 +102,7 @@ fn control_steps_allocate_nothing_but_clarabels_fixed_timer_block() {
             _ => outside_solver += n,
         }
         if k == 1000 {
-            live_after_warmup = Some(LIVE_BYTES.load(Ordering::Relaxed));
+            live_after_warmup = Some(live_bytes());
         }
         let tau: Vec<f64> = data.torques().to_vec();
         let acc = robot_model::forward_dynamics(&model, &mut sim, &q, &v, &tau)
@@ -135,10 +133,10 @@ fn control_steps_allocate_nothing_but_clarabels_fixed_timer_block() {
     );
     let (&n, _) = per_solve.iter().next().unwrap();
     assert_eq!(n, 1, "allocations per solve");
-    let largest = LARGEST.load(Ordering::Relaxed);
+    let largest = largest();
     assert!(largest <= 1024, "largest block {largest} bytes");
     // No growth: what the solver takes it gives back.
-    let live = LIVE_BYTES.load(Ordering::Relaxed);
+    let live = live_bytes();
     assert_eq!(Some(live), live_after_warmup, "live heap grew");
     println!("{solved} solves, {n} allocations each, largest block {largest} B");
 }

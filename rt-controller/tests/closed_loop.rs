@@ -4,10 +4,11 @@
 
 mod common;
 
-use common::{Bench, PANDA_READY, Rng, action, panda};
+use common::{Bench, PANDA_READY, action, panda};
 use nalgebra::Vector3;
 use rt_controller::trajectory::{fixed_xyz_angles, wrap_angle};
 use rt_controller::{ControllerConfig, Mode, QpOutcome};
+use test_support::{Rng, Uniform};
 
 /// Drives the reference to `pos + offset` as a true step (no feed-forward),
 /// records the response along `axis` for `seconds`, and returns the error
@@ -109,10 +110,9 @@ fn a_sequence_of_20hz_actions_is_tracked() {
                 -0.001,
                 if k < 30 { 0.02 } else { -0.01 },
             );
-            sum[0] += a.delta_pos_m[0];
-            sum[1] += a.delta_pos_m[1];
-            sum[2] += a.delta_pos_m[2];
-            sum[3] += a.delta_roll_rad;
+            for (s, d) in sum.iter_mut().zip(a.delta()) {
+                *s += d;
+            }
             a
         })
         .collect();
@@ -199,7 +199,7 @@ fn aggressive_random_actions_stay_within_torque_and_rate_limits() {
     let mut config = ControllerConfig::default();
     config.impedance.kp = [1500.0; 6];
     let mut b = Bench::new(panda(), config, &PANDA_READY);
-    let mut rng = Rng(7);
+    let mut rng = test_support::rng(7);
     let mut k = 0;
     b.run(6.0, 50, |_| {
         k += 1;

@@ -13,10 +13,6 @@
 //! other allocation fails it; removing the remaining one is an open item of
 //! the real-time stack issue.
 
-#[path = "common/counting.rs"]
-mod counting;
-
-use counting::{Counting, LIVE_BYTES, count};
 #[path = "common/daemon_rig.rs"]
 mod daemon_rig;
 
@@ -26,6 +22,7 @@ use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
 use shared_mem_schema::{ControllerStatus, PolicyAction, SCHEMA_VERSION, SensorFrame};
 use std::sync::atomic::Ordering;
+use test_support::alloc::{Counting, TRACE, count, live_bytes};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -38,7 +35,7 @@ fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
 
 #[test]
 fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
-    counting::TRACE.store(
+    TRACE.store(
         std::env::var_os("RT_ALLOC_TRACE").is_some(),
         Ordering::Relaxed,
     );
@@ -76,7 +73,8 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
             let now = mono_now_ns();
             let fresh = rig.daemon.poll_hardware(now).unwrap();
             outcome = Some(rig.daemon.cycle(now, fresh).unwrap());
-        });
+        })
+        .allocations;
         assert_eq!(outcome, Some(CycleOutcome::Sent), "cycle {k}");
         let c = transport::drain(&rig.torques, |c| {
             assert_eq!(c.state_step, k);
@@ -97,7 +95,7 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
             worst_excess = worst_excess.max(n as i64 - publications);
         }
         if k == 100 {
-            live_after_warmup = Some(LIVE_BYTES.load(Ordering::Relaxed));
+            live_after_warmup = Some(live_bytes());
         }
     }
     assert_eq!(commands, 5000);
@@ -110,7 +108,7 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
         "{} of {counted} cycles allocated other than one block per publication (worst: {worst_excess} more)",
         counted - exact
     );
-    let growth = LIVE_BYTES.load(Ordering::Relaxed) - live_after_warmup.unwrap();
+    let growth = live_bytes() - live_after_warmup.unwrap();
     assert!(growth <= 0, "the live heap grew by {growth} bytes");
     let garbage = rig.daemon.control.data.supervisor.counters.actions_rejected
         + rig.daemon.stats.actions_garbage;

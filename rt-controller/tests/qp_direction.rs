@@ -3,12 +3,13 @@
 
 mod common;
 
-use common::{Rng, panda};
+use common::panda;
 use nalgebra::{DMatrix, DVector, Matrix6xX, Vector3, Vector6};
 use robot_model::Reference;
 use rt_controller::osc::{self, OscData, OscInputs};
 use rt_controller::qp::{QpFilter, QpProblem};
 use rt_controller::{QpConfig, QpOutcome};
+use test_support::Uniform;
 
 fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     (a.dot(b) / (a.norm() * b.norm())).clamp(-1.0, 1.0).acos()
@@ -30,7 +31,7 @@ fn saturated_qp_keeps_the_force_direction_far_better_than_clipping() {
     let cfg = QpConfig::default();
     let tau_max = model.effort_limits();
     let (lo, hi) = (model.lower_limits(), model.upper_limits());
-    let mut rng = Rng(42);
+    let mut rng = test_support::rng(42);
     let mut qp_err = Vec::new();
     let mut clip_err = Vec::new();
     let mut qp_filter: Option<QpFilter> = None;

@@ -3,10 +3,11 @@
 
 mod common;
 
-use common::{Bench, PANDA_READY, Rng, action, panda};
+use common::{Bench, PANDA_READY, action, panda};
 use rt_controller::{
     ActionStatus, ControllerConfig, FaultReason, Mode, Rejection, RobotState, step,
 };
+use test_support::{Rng, RngExt, Uniform};
 
 #[test]
 fn garbage_actions_are_counted_and_the_target_holds() {
@@ -44,7 +45,7 @@ fn garbage_actions_are_counted_and_the_target_holds() {
 #[test]
 fn ten_thousand_random_and_malformed_actions_never_exceed_the_limits() {
     let mut b = Bench::new(panda(), ControllerConfig::default(), &PANDA_READY);
-    let mut rng = Rng(99);
+    let mut rng = test_support::rng(99);
     let specials = [
         f64::NAN,
         f64::INFINITY,
@@ -59,7 +60,7 @@ fn ten_thousand_random_and_malformed_actions_never_exceed_the_limits() {
     for k in 0..10_000 {
         let pick = |r: &mut Rng| {
             if r.uniform(0.0, 1.0) < 0.3 {
-                specials[(r.next_u64() % specials.len() as u64) as usize]
+                specials[r.random_range(0..specials.len())]
             } else {
                 r.uniform(-0.012, 0.012)
             }

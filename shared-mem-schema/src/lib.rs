@@ -20,6 +20,7 @@
 pub mod process;
 pub mod transport;
 
+use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the message layout. Bump it whenever any message's layout or
@@ -84,56 +85,6 @@ pub fn service_name(namespace: &str, topic: &str) -> String {
     format!("{namespace}/{topic}")
 }
 
-/// Plain old data: `#[repr(C)]`, no padding, every bit pattern valid (all
-/// fields are integers, floats or arrays of them).
-///
-/// # Safety
-/// Implement only for types that satisfy the above; [`Pod::as_bytes`] reads
-/// every byte and [`Pod::zeroed`] writes all zeros.
-pub unsafe trait Pod: Copy + Sized + 'static {
-    /// The value's bytes in memory order (native endianness).
-    fn as_bytes(&self) -> &[u8] {
-        // SAFETY: no padding, so every byte is initialised.
-        unsafe { core::slice::from_raw_parts((self as *const Self).cast(), size_of::<Self>()) }
-    }
-
-    /// Writes all-zero bytes into uninitialised memory and returns it as a
-    /// value reference (large messages are built in place, never on the
-    /// stack).
-    fn zero_in_place(slot: &mut core::mem::MaybeUninit<Self>) -> &mut Self {
-        // SAFETY: all-zero is a valid value of every field.
-        unsafe {
-            core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1);
-            slot.assume_init_mut()
-        }
-    }
-
-    /// A boxed all-zero value (for messages too large for the stack).
-    fn boxed_zeroed() -> Box<Self> {
-        let mut b = Box::<Self>::new_uninit();
-        Self::zero_in_place(&mut b);
-        // SAFETY: just initialised.
-        unsafe { b.assume_init() }
-    }
-
-    /// Copies a value out of `bytes`; `None` when the length differs.
-    fn read_from(bytes: &[u8]) -> Option<Box<Self>> {
-        if bytes.len() != size_of::<Self>() {
-            return None;
-        }
-        let mut b = Self::boxed_zeroed();
-        // SAFETY: same length, any bytes are a valid value.
-        unsafe {
-            core::ptr::copy_nonoverlapping(
-                bytes.as_ptr(),
-                (&mut *b as *mut Self).cast::<u8>(),
-                bytes.len(),
-            );
-        }
-        Some(b)
-    }
-}
-
 /// A hardware time in seconds as [`Header::t_hw_ns`] stamps it (rounded to
 /// the nanosecond). Every stamping goes through here, and every reading
 /// through [`hw_time_s`], so the control law sees the same `now` whether the
@@ -150,7 +101,7 @@ pub fn hw_time_s(ns: u64) -> f64 {
 
 /// Fields every message starts with.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Pod, Zeroable)]
 pub struct Header {
     /// [`SCHEMA_VERSION`] of the sender.
     pub schema_version: u32,
@@ -183,7 +134,7 @@ impl Header {
 
 /// Robot → controller, every hardware cycle (1 kHz).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct HardwareState {
     /// Header; `flags` bits: [`HardwareState::BRAKES_ENGAGED`].
     pub header: Header,
@@ -230,7 +181,7 @@ impl HardwareState {
 
 /// Controller → robot, every control cycle.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct TorqueCommand {
     /// Header.
     pub header: Header,
@@ -263,7 +214,7 @@ impl TorqueCommand {
 
 /// Controller → learner, every control cycle (1 kHz).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct SensorFrame {
     /// Header (`t_hw_ns` is the hardware time of the state).
     pub header: Header,
@@ -372,7 +323,7 @@ impl core::fmt::Display for Stage {
 /// Learner → controller, 20 Hz: the paper's action, a displacement of the
 /// end-effector target.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct PolicyAction {
     /// Header (`t_hw_ns`: hardware time of the observation it answers).
     pub header: Header,
@@ -410,7 +361,7 @@ impl PolicyAction {
 /// with it, and what the flow labeler and the simulator's camera are built
 /// from.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct CameraCalibration {
     /// Image width, pixels (≤ [`MAX_IMAGE_WIDTH`] in a message).
     pub width: u32,
@@ -431,7 +382,7 @@ pub struct CameraCalibration {
 /// calibration. Only the first `width × height` pixels of each buffer are
 /// meaningful.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct CameraFrame {
     /// Header (`t_hw_ns`: exposure time).
     pub header: Header,
@@ -488,7 +439,7 @@ impl ControllerMode {
 
 /// A histogram of durations in 1 µs bins, cumulative since start.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct LatencyHistogram {
     /// Samples recorded.
     pub count: u64,
@@ -553,7 +504,7 @@ impl LatencyHistogram {
 
 /// Controller → anyone, ~10 Hz: mode, counters and timing.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct ControllerStatus {
     /// Header.
     pub header: Header,
@@ -597,7 +548,7 @@ pub struct ControllerStatus {
 
 /// Learner → hw-sim: episode control.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct SimCommand {
     /// Header (`seq` is the request id echoed in [`EpisodeReport`]).
     pub header: Header,
@@ -622,7 +573,7 @@ impl SimCommand {
 /// hw-sim → learner: the episode and task state, at 20 Hz and after each
 /// command (the simulator's ground truth; a real cell has none of it).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 pub struct EpisodeReport {
     /// Header (`episode`: the current episode).
     pub header: Header,
@@ -697,20 +648,8 @@ pub fn write_text(buf: &mut [u8], text: &str) -> u32 {
     n as u32
 }
 
-// SAFETY (all impls): `#[repr(C)]`, fields of u8/u32/u64/f32/f64 or arrays of
-// them, ordered so that no padding arises; the size checks below fail the
-// build if a change introduces any.
-unsafe impl Pod for Header {}
-unsafe impl Pod for HardwareState {}
-unsafe impl Pod for TorqueCommand {}
-unsafe impl Pod for SensorFrame {}
-unsafe impl Pod for PolicyAction {}
-unsafe impl Pod for CameraFrame {}
-unsafe impl Pod for LatencyHistogram {}
-unsafe impl Pod for ControllerStatus {}
-unsafe impl Pod for SimCommand {}
-unsafe impl Pod for EpisodeReport {}
-
+// The derives of `Pod` reject padding; these pin the layouts the schema
+// version stands for.
 const H: usize = 40;
 const J: usize = 8 * MAX_JOINTS;
 const _: () = assert!(size_of::<Header>() == H);
@@ -728,7 +667,8 @@ const _: () =
 const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
 const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
 
-/// A message type with its topic.
+/// A message type with its topic. Messages are plain old data (`bytemuck`):
+/// their bytes are what logs store and what travels.
 pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
     /// Its topic (see [`topics`]).
     const TOPIC: &'static str;
@@ -736,6 +676,28 @@ pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
     const NAME: &'static str;
     /// Its header.
     fn header(&self) -> &Header;
+
+    /// A boxed all-zero message, built on the heap (camera frames and
+    /// commands are too large for a thread's stack).
+    fn boxed_zeroed() -> Box<Self> {
+        bytemuck::zeroed_box()
+    }
+
+    /// The message's bytes (native endianness).
+    fn as_bytes(&self) -> &[u8] {
+        bytemuck::bytes_of(self)
+    }
+
+    /// A boxed copy of the message whose bytes are `bytes` (any alignment);
+    /// `None` when the length differs from the message's size.
+    fn read_from(bytes: &[u8]) -> Option<Box<Self>> {
+        if bytes.len() != size_of::<Self>() {
+            return None;
+        }
+        let mut b = Self::boxed_zeroed();
+        bytemuck::bytes_of_mut(&mut *b).copy_from_slice(bytes);
+        Some(b)
+    }
 }
 
 macro_rules! message {

@@ -275,8 +275,14 @@ pub fn send_with<T: Message>(
     let mut sample = publisher
         .loan_uninit()
         .map_err(|e| ipc_err(T::TOPIC, "loaning sample", e))?;
-    fill(T::zero_in_place(sample.payload_mut()));
-    // SAFETY: zero_in_place initialised the payload.
+    let slot = sample.payload_mut();
+    // SAFETY: messages are `Zeroable`, so all-zero bytes are a valid value;
+    // they are written in place (`T::zeroed()` would build the value on the
+    // stack first, and a camera frame is larger than a real-time stack).
+    unsafe { core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1) };
+    // SAFETY: initialised just above.
+    fill(unsafe { slot.assume_init_mut() });
+    // SAFETY: initialised above.
     let sample = unsafe { sample.assume_init() };
     sample
         .send()

@@ -1,7 +1,7 @@
 //! The version handshake and a round trip through real iceoryx2 services.
 
 use shared_mem_schema::transport::{self, Channel, TransportError};
-use shared_mem_schema::{Header, Pod, PolicyAction, SCHEMA_VERSION};
+use shared_mem_schema::{Header, Message, PolicyAction, SCHEMA_VERSION};
 
 fn namespace(tag: &str) -> String {
     format!("test-{tag}-{}", std::process::id())

@@ -73,11 +73,3 @@ pub fn start(name: &str, args: &[&str], log_dir: &Path) -> Managed {
     Managed::spawn(name, cmd, Some(&log_dir.join(format!("{name}.log"))))
         .unwrap_or_else(|e| panic!("starting {}: {e:#}", bin.display()))
 }
-
-/// A fresh scratch directory under the system's temporary directory.
-pub fn scratch_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vt-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("scratch directory");
-    d
-}

@@ -14,6 +14,7 @@ use shared_mem_schema::{
 };
 use std::process::Command;
 use std::time::{Duration, Instant};
+use test_support::{RngExt, Uniform};
 
 /// Drains `sub` until `pred` holds for a message or `timeout` passes.
 fn wait_for<T: shared_mem_schema::Message>(
@@ -43,12 +44,12 @@ fn heuristic_policy_completes_insertion_through_the_stack() {
     let _g = tests::exclusive();
     tests::stack_bins();
     for (mode, peg) in [("realtime", "square"), ("lockstep", "triangle")] {
-        let dir = tests::scratch_dir(&format!("stack-{mode}"));
+        let dir = test_support::scratch_dir(&format!("stack-{mode}"));
         let mut cmd = Command::new(tests::stack_bins().join("learner"));
         cmd.args(["stack", "--episodes", "1", "--peg", peg, "--namespace"])
             .arg(tests::unique_namespace(mode))
             .arg("--log-dir")
-            .arg(&dir);
+            .arg(dir.path());
         if mode == "lockstep" {
             cmd.arg("--lockstep");
         }
@@ -98,7 +99,7 @@ fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
 fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("policy-loss");
-    let dir = tests::scratch_dir("policy-loss");
+    let dir = test_support::scratch_dir("policy-loss");
     let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let node = transport::create_node("e2e-observer").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
@@ -159,7 +160,7 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
 fn silent_hardware_is_a_fault_with_no_further_torques() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("hw-loss");
-    let dir = tests::scratch_dir("hw-loss");
+    let dir = test_support::scratch_dir("hw-loss");
     let (mut sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let node = transport::create_node("e2e-observer").unwrap();
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
@@ -195,7 +196,7 @@ fn processes_of_another_schema_version_are_refused() {
     // A peer built with another version owns the hardware service: the
     // daemon must refuse to start, saying why.
     let ns = tests::unique_namespace("schema");
-    let dir = tests::scratch_dir("schema");
+    let dir = test_support::scratch_dir("schema");
     let node = transport::create_node("e2e-other-version").unwrap();
     let _other = Channel::<HardwareState>::open_as_version(&node, &ns, SCHEMA_VERSION + 1).unwrap();
     let mut ctl = tests::start(
@@ -235,32 +236,19 @@ fn processes_of_another_schema_version_are_refused() {
     }
 }
 
-/// A small deterministic generator for the garbage test.
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> u64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        self.0 >> 11
-    }
-    fn unit(&mut self) -> f64 {
-        self.next() as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[test]
-fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
+fn garbage_actions_never_produce_torques_beyond_limits() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("garbage");
-    let dir = tests::scratch_dir("garbage");
+    let dir = test_support::scratch_dir("garbage");
     let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
     let model = robot_model::descriptions::builtin("iiwa14").unwrap();
     let limits = model.effort_limits();
+    let cfg = rt_controller::ControllerConfig::default();
+    let max_rate_step = cfg.qp.torque_rate_limit_nm_s * cfg.period_s;
     let node = transport::create_node("e2e-garbage").unwrap();
     let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
     let publisher = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
     assert!(wait_for(&torques, Duration::from_secs(20), |_| true).is_some());
@@ -277,59 +265,111 @@ fn ten_thousand_garbage_actions_never_produce_torques_beyond_limits() {
         0.5,
         -0.2,
     ];
-    let mut rng = Lcg(7);
-    let (mut checked, mut bad) = (0usize, Vec::new());
+    let mut rng = test_support::rng(7);
+    let mut checked = 0usize;
+    let mut bad = Vec::new();
+    let mut rate_bad = Vec::new();
+    let mut prev: Option<TorqueCommand> = None;
     let mut check = |c: &TorqueCommand| {
         for (i, &t) in c.tau[..7].iter().enumerate() {
             if !(t.is_finite() && t.abs() <= limits[i] + 1e-9) {
                 bad.push((c.state_step, i, t));
             }
         }
+        // Commands of consecutive steps of one episode: the rate limit.
+        if let Some(p) = prev
+            .filter(|p| p.header.episode == c.header.episode && p.state_step + 1 == c.state_step)
+        {
+            for i in 0..7 {
+                let d = (c.tau[i] - p.tau[i]).abs();
+                if d.is_nan() || d > max_rate_step + 1e-9 {
+                    rate_bad.push((c.state_step, i, d));
+                }
+            }
+        }
+        prev = Some(*c);
         checked += 1;
     };
-    for k in 0..10_000u64 {
+    const N: u64 = 4000;
+    let (mut bad_schema, mut bad_value) = (0u64, 0u64);
+    for k in 0..N {
         let mut a = action(k + 1, 0.0, SCHEMA_VERSION);
-        let pick = |rng: &mut Lcg| match rng.next() % 3 {
-            0 => specials[(rng.next() % specials.len() as u64) as usize],
-            1 => (rng.unit() - 0.5) * 0.02, // plausible steps
-            _ => (rng.unit() - 0.5) * 2e3,  // far out of range
+        let pick = |rng: &mut test_support::Rng| match rng.random_range(0..3) {
+            0 => specials[rng.random_range(0..specials.len())],
+            1 => rng.uniform(-0.01, 0.01), // plausible steps
+            _ => rng.uniform(-1e3, 1e3),   // far out of range
         };
         a.delta_pos_m = [pick(&mut rng), pick(&mut rng), pick(&mut rng)];
         a.delta_roll_rad = pick(&mut rng);
-        if rng.next().is_multiple_of(50) {
-            a.header.schema_version = SCHEMA_VERSION + 1 + (rng.next() % 5) as u32;
+        if rng.random_range(0..50) == 0 {
+            a.header.schema_version = SCHEMA_VERSION + rng.random_range(1..6);
+            bad_schema += 1;
+        } else if rt_controller::supervisor::Supervisor::check_action(&cfg.safety, &a.delta())
+            .is_err()
+        {
+            bad_value += 1;
         }
         transport::send(&publisher, &a).unwrap();
-        if k % 2 == 1 {
-            std::thread::sleep(Duration::from_micros(900));
+        // One action in flight: wait for the second sensor frame published
+        // after the send. Its cycle began after the first one's publication,
+        // so it drained and applied this action; neither the daemon's
+        // subscriber buffer nor its queue can overflow, however the
+        // scheduler treats the processes.
+        let sent = mono_now_ns();
+        let mut after = 0;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while after < 2 {
+            assert!(
+                Instant::now() < deadline,
+                "no sensor frames after action {k}"
+            );
+            transport::drain(&frames, |f| after += (f.header.t_mono_ns > sent) as u32).unwrap();
             transport::drain(&torques, &mut check).unwrap();
+            std::thread::sleep(Duration::from_micros(200));
         }
     }
-    std::thread::sleep(Duration::from_millis(300));
     transport::drain(&torques, &mut check).unwrap();
-    assert!(checked > 3000, "only {checked} torque commands seen");
+    assert!(checked > 1000, "only {checked} torque commands seen");
     assert!(
         bad.is_empty(),
         "torques beyond limits: {:?}",
         &bad[..bad.len().min(5)]
     );
-    let s = wait_for(&status, Duration::from_secs(2), |s| {
-        s.actions_received >= 10_000
+    assert!(
+        rate_bad.is_empty(),
+        "torque steps beyond the rate limit ({max_rate_step} N·m): {:?}",
+        &rate_bad[..rate_bad.len().min(5)]
+    );
+    let s = wait_for(&status, Duration::from_secs(10), |s| {
+        s.actions_received >= N
     })
     .expect("the status never counted the actions");
-    assert_eq!(s.actions_received, 10_000);
-    assert!(
-        s.actions_rejected > 3000,
-        "only {} garbage actions counted",
-        s.actions_rejected
+    assert_eq!(s.actions_received, N);
+    // Every action received is accounted for exactly once.
+    assert_eq!(
+        s.actions_accepted + s.actions_rejected + s.actions_ignored,
+        N,
+        "{s:?}"
     );
+    assert!(
+        bad_schema > 0 && bad_value > N / 2,
+        "{bad_schema} {bad_value}"
+    );
+    if s.faults == 0 {
+        assert_eq!(s.actions_rejected, bad_schema + bad_value, "{s:?}");
+        assert_eq!(s.actions_ignored, 0);
+    } else {
+        // In Fault valid and invalid actions alike are ignored.
+        assert!(s.actions_rejected >= bad_schema, "{s:?}");
+        assert!(s.actions_rejected + s.actions_ignored >= bad_schema + bad_value);
+    }
 }
 
 #[test]
 fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("lockstep");
-    let dir = tests::scratch_dir("lockstep");
+    let dir = test_support::scratch_dir("lockstep");
     let _sim = tests::start(
         "hw-sim",
         &["--namespace", &ns, "--mode", "lockstep", "--no-camera"],
@@ -412,7 +452,7 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
     use std::os::unix::net::UnixDatagram;
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("systemd");
-    let dir = tests::scratch_dir("systemd");
+    let dir = test_support::scratch_dir("systemd");
     let sock_path = dir.join("notify.sock");
     let sock = UnixDatagram::bind(&sock_path).unwrap();
     sock.set_read_timeout(Some(Duration::from_millis(200)))

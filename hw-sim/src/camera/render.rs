@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::config::CameraConfig;
-use crate::rng::SimRng;
+use crate::rng::{self, SimRng};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Vector3};
 use shared_mem_schema::CameraCalibration;
 
@@ -274,7 +274,7 @@ impl Camera {
             cur: vec![None; n],
             has_prev: false,
             frames: 0,
-            rng: SimRng::new(seed, 4),
+            rng: rng::seeded(seed, 4),
         }
     }
 
@@ -481,13 +481,13 @@ impl Camera {
             for k in 0..3 {
                 let mut c = 255.0 * prim.color[k] * shade;
                 if rgb_std > 0.0 {
-                    c += rgb_std * self.rng.normal();
+                    c += rgb_std * rng::normal(&mut self.rng);
                 }
                 frame.rgb[3 * i + k] = to_level(c);
             }
             let mut depth = t;
             if depth_std > 0.0 {
-                depth += depth_std * self.rng.normal();
+                depth += depth_std * rng::normal(&mut self.rng);
             }
             frame.depth_m[i] = depth as f32;
             frame.class[i] = prim.class as u8;

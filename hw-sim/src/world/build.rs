@@ -241,13 +241,14 @@ impl World {
             let tip = self.peg_tip_pose().translation.vector;
             [tip.x, tip.y]
         };
-        let x = center[0] + rng.uniform(-t.box_xy_range_m[0], t.box_xy_range_m[0]);
-        let y = center[1] + rng.uniform(-t.box_xy_range_m[1], t.box_xy_range_m[1]);
+        let x = center[0] + rng::uniform(rng, -t.box_xy_range_m[0], t.box_xy_range_m[0]);
+        let y = center[1] + rng::uniform(rng, -t.box_xy_range_m[1], t.box_xy_range_m[1]);
         // The yaw about which the hole fits the peg as the arm starts
         // (s_ψ = 0): the drawn yaw is then a roll error for the policy to
         // correct, never a half turn that ends at the wrist's limit.
         let peg_x = self.peg_tip_pose().rotation * Vector3::x();
-        let yaw = peg_x.y.atan2(peg_x.x) + rng.uniform(-t.box_yaw_range_rad, t.box_yaw_range_rad);
+        let yaw =
+            peg_x.y.atan2(peg_x.x) + rng::uniform(rng, -t.box_yaw_range_rad, t.box_yaw_range_rad);
         let peg = &self.peg.as_ref().expect("task has a peg").info;
         // The hole frame has z up and the peg's frame z down the peg:
         // aligned (s_ψ = 0) they differ by a half turn about x, which

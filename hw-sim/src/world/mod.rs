@@ -11,7 +11,7 @@
 use crate::camera::{Camera, CameraFrame, CameraShot};
 use crate::config::{ConfigError, WorldConfig};
 use crate::convert::{from_glam, pose_from_glam, to_glam};
-use crate::rng::SimRng;
+use crate::rng::{self, SimRng};
 use crate::shapes::BoxWithHole;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rapier3d_f64::prelude::{MultibodyJointHandle, PhysicsWorld, RigidBodyHandle};
@@ -156,7 +156,7 @@ impl World {
             box_state: None,
             pushes: Vec::new(),
             occlusions: Vec::new(),
-            noise_rngs: [0, 1, 2, 3].map(|k| SimRng::new(0, k)),
+            noise_rngs: [0, 1, 2, 3].map(|k| rng::seeded(0, k)),
             ft_alpha: 1.0,
             step_index: 0,
             q: vec![0.0; nv],
@@ -198,8 +198,8 @@ impl World {
 
         // Episode randomness: one stream per use. Streams 1–2 are the box
         // and the perturbations, 3 and 5–7 the sensors, 4 the camera.
-        let mut box_rng = SimRng::new(seed, 1);
-        let mut perturb_rng = SimRng::new(seed, 2);
+        let mut box_rng = rng::seeded(seed, 1);
+        let mut perturb_rng = rng::seeded(seed, 2);
         self.reset_sensors(seed);
 
         let q0 = if cfg.initial_q.is_empty() {
@@ -453,33 +453,6 @@ impl World {
     /// The peg (None without a task).
     pub fn peg(&self) -> Option<&PegInfo> {
         self.peg.as_ref().map(|p| &p.info)
-    }
-
-    /// Moves the box so that its hole frame is at `hole_pose` (tests and
-    /// scripted set-ups; an episode places it from the seed).
-    pub fn set_hole_pose(&mut self, hole_pose: Isometry3<f64>) {
-        if let Some(b) = self.box_state.take() {
-            let body = self.physics.colliders[b.colliders[0]]
-                .parent()
-                .expect("box body");
-            self.physics.bodies.remove(
-                body,
-                &mut self.physics.islands,
-                &mut self.physics.colliders,
-                &mut self.physics.impulse_joints,
-                &mut self.physics.multibody_joints,
-                &mut self.physics.soft_bodies,
-                true,
-            );
-            self.place_box(b.geometry, hole_pose);
-            self.task = None;
-            self.update_task(false);
-            self.camera = Some(Camera::new(
-                &self.config.camera,
-                self.primitives(),
-                self.config.seed,
-            ));
-        }
     }
 
     /// Pose of the body moved by joint `j` (0: the base), base frame.

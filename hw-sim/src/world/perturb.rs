@@ -28,9 +28,9 @@ impl World {
             })
             .collect();
         for _ in 0..p.random_pushes {
-            let start = rng.uniform(p.random_window_s[0], p.random_window_s[1]);
-            let mag = rng.uniform(p.random_push_force_n[0], p.random_push_force_n[1]);
-            let dir = rng.uniform(0.0, std::f64::consts::TAU);
+            let start = rng::uniform(rng, p.random_window_s[0], p.random_window_s[1]);
+            let mag = rng::uniform(rng, p.random_push_force_n[0], p.random_push_force_n[1]);
+            let dir = rng::uniform(rng, 0.0, std::f64::consts::TAU);
             self.pushes.push(ScheduledPush {
                 start_s: start,
                 duration_s: p.random_push_duration_s,
@@ -40,10 +40,10 @@ impl World {
         }
         self.occlusions = p.occlusions.clone();
         for _ in 0..p.random_occlusions {
-            let start = rng.uniform(p.random_window_s[0], p.random_window_s[1]);
+            let start = rng::uniform(rng, p.random_window_s[0], p.random_window_s[1]);
             let side = p.random_occlusion_side_px;
-            let x = (rng.unit() * cfg.camera.width.saturating_sub(side) as f64) as u32;
-            let y = (rng.unit() * cfg.camera.height.saturating_sub(side) as f64) as u32;
+            let x = (rng::unit(rng) * cfg.camera.width.saturating_sub(side) as f64) as u32;
+            let y = (rng::unit(rng) * cfg.camera.height.saturating_sub(side) as f64) as u32;
             self.occlusions.push(Occlusion {
                 start_s: start,
                 end_s: start + p.random_occlusion_duration_s,

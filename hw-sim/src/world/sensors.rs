@@ -25,7 +25,7 @@ pub struct SensorReadings {
 impl World {
     /// The noise streams and the F/T filter of an episode.
     pub(super) fn reset_sensors(&mut self, seed: u64) {
-        self.noise_rngs = [3, 5, 6, 7].map(|k| SimRng::new(seed, k));
+        self.noise_rngs = [3, 5, 6, 7].map(|k| rng::seeded(seed, k));
         let hz = self.config.noise.ft_filter_hz;
         self.ft_alpha = if hz > 0.0 {
             1.0 - (-std::f64::consts::TAU * hz * self.config.dt_s).exp()
@@ -138,7 +138,11 @@ impl World {
         // channels cost nothing and turning one on leaves the others' draws.
         let [q_rng, v_rng, f_rng, m_rng] = &mut self.noise_rngs;
         let draw = |rng: &mut SimRng, std: f64| {
-            if std > 0.0 { std * rng.normal() } else { 0.0 }
+            if std > 0.0 {
+                std * rng::normal(rng)
+            } else {
+                0.0
+            }
         };
         for k in 0..self.q.len() {
             r.q[k] = self.q[k] + draw(q_rng, n.q_std_rad);

@@ -8,7 +8,10 @@ use hw_sim::{SimHardware, World, WorldConfig};
 use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
-use shared_mem_schema::{HardwareState, Pod, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns};
+use shared_mem_schema::rates::{ACTION_PERIOD_STEPS, CONTROL_PERIOD_S};
+use shared_mem_schema::{
+    HardwareState, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
+};
 
 /// A policy action: Δx, Δy, Δz (m), Δroll (rad).
 pub type Action = [f64; 4];
@@ -108,15 +111,19 @@ impl Rig {
     pub fn run(&mut self, actions: &[Action], hold_s: f64) {
         for a in actions {
             self.cycle(Some(a));
-            for _ in 1..50 {
+            for _ in 1..ACTION_PERIOD_STEPS {
                 self.cycle(None);
             }
         }
-        let n = (hold_s / 0.001).round() as usize;
+        let n = (hold_s / CONTROL_PERIOD_S).round() as u64;
         for k in 0..n {
             // Keep the policy "alive" with zero actions so the controller
             // keeps its running mode (it holds after 100 ms without one).
-            self.cycle(if k % 50 == 0 { Some(&ZERO) } else { None });
+            self.cycle(if k % ACTION_PERIOD_STEPS == 0 {
+                Some(&ZERO)
+            } else {
+                None
+            });
         }
     }
 

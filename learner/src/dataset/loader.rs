@@ -1,6 +1,9 @@
 //! The shuffling, streaming loader with pairing negatives.
 
 use super::*;
+use hw_sim::rng;
+use rand::RngExt;
+use rand::seq::SliceRandom;
 
 /// A batch, flattened row-major, sample-major.
 #[derive(Debug, Clone, Default)]
@@ -49,7 +52,7 @@ pub struct Loader<'a> {
     cfg: LoaderConfig,
     rx: std::sync::mpsc::Receiver<Result<Vec<(u64, Sample)>>>,
     buffer: Vec<(u64, Sample)>,
-    rng: hw_sim::rng::SimRng,
+    rng: rng::SimRng,
     _reader: std::thread::JoinHandle<()>,
     done: bool,
 }
@@ -57,12 +60,9 @@ pub struct Loader<'a> {
 impl<'a> Loader<'a> {
     /// Starts an epoch.
     pub fn new(ds: &'a Dataset, cfg: LoaderConfig) -> Self {
-        let mut rng = hw_sim::rng::SimRng::new(cfg.seed, 31);
+        let mut rng = rng::seeded(cfg.seed, 31);
         let mut blocks = ds.blocks();
-        for i in (1..blocks.len()).rev() {
-            let j = (rng.unit() * (i + 1) as f64) as usize;
-            blocks.swap(i, j.min(i));
-        }
+        blocks.shuffle(&mut rng);
         let (tx, rx) = std::sync::mpsc::sync_channel(4);
         let dir = ds.dir.clone();
         let meta = ds.meta.clone();
@@ -115,12 +115,11 @@ impl Iterator for Loader<'_> {
             if self.buffer.is_empty() {
                 break;
             }
-            let i =
-                ((self.rng.unit() * self.buffer.len() as f64) as usize).min(self.buffer.len() - 1);
+            let i = self.rng.random_range(0..self.buffer.len());
             let (id, mut s) = self.buffer.swap_remove(i);
             let mut paired = 1;
-            if self.rng.unit() < self.cfg.negative_fraction
-                && let Some(j) = self.ds.negative_for(id, self.rng.unit())
+            if rng::unit(&mut self.rng) < self.cfg.negative_fraction
+                && let Some(j) = self.ds.negative_for(id, rng::unit(&mut self.rng))
             {
                 s.wrench.copy_from_slice(self.ds.wrench_of(j));
                 paired = 0;

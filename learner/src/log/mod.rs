@@ -30,7 +30,7 @@ pub use read::{
 
 use mcap::records::MessageHeader;
 use shared_mem_schema::{
-    CameraFrame, ControllerStatus, EpisodeReport, Message, Pod, PolicyAction, SCHEMA_VERSION,
+    CameraFrame, ControllerStatus, EpisodeReport, Message, PolicyAction, SCHEMA_VERSION,
     SensorFrame,
 };
 use std::collections::BTreeMap;

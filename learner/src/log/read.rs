@@ -7,7 +7,7 @@
 
 use super::{CAMERA_ENCODING, RAW_ENCODING, topics};
 use mcap::records::{self, Record};
-use shared_mem_schema::{CameraCalibration, CameraFrame, Header, Message, Pod, SCHEMA_VERSION};
+use shared_mem_schema::{CameraCalibration, CameraFrame, Header, Message, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -129,7 +129,7 @@ impl CameraImage {
                 data.len()
             ));
         }
-        let header = *Header::read_from(&data[..size_of::<Header>()]).expect("length checked");
+        let header: Header = bytemuck::pod_read_unaligned(&data[..size_of::<Header>()]);
         if header.schema_version != SCHEMA_VERSION {
             return Err(format!(
                 "camera frame of schema version {}, this build reads version {SCHEMA_VERSION}",

@@ -3,6 +3,7 @@
 
 use robot_model::{LoadOptions, Model};
 use std::path::PathBuf;
+use test_support::Uniform;
 
 /// Path of a file under the crate directory.
 pub fn crate_path(rel: &str) -> PathBuf {
@@ -25,44 +26,16 @@ pub fn robots() -> Vec<(&'static str, Model)> {
     .collect()
 }
 
-/// Deterministic pseudo-random numbers (splitmix64): tests must be
-/// reproducible without a rand dependency.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * u
-    }
-
-    pub fn vec(&mut self, n: usize, lo: f64, hi: f64) -> Vec<f64> {
-        (0..n).map(|_| self.uniform(lo, hi)).collect()
-    }
-
-    /// A configuration inside the joint limits (within ±π for unbounded).
-    pub fn config(&mut self, model: &Model) -> Vec<f64> {
-        model.joints[1..]
-            .iter()
-            .map(|j| {
-                let lo = j.limits.lower.max(-std::f64::consts::PI);
-                let hi = j.limits.upper.min(std::f64::consts::PI);
-                self.uniform(lo, hi)
-            })
-            .collect()
-    }
+/// A configuration inside the joint limits (within ±π for unbounded).
+pub fn random_config(rng: &mut test_support::Rng, model: &Model) -> Vec<f64> {
+    model.joints[1..]
+        .iter()
+        .map(|j| {
+            let lo = j.limits.lower.max(-std::f64::consts::PI);
+            let hi = j.limits.upper.min(std::f64::consts::PI);
+            rng.uniform(lo, hi)
+        })
+        .collect()
 }
 
 pub fn axpy(x: &[f64], s: f64, d: &[f64]) -> Vec<f64> {

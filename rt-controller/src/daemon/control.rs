@@ -12,7 +12,7 @@ use robot_model::Model;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{
-    ControllerMode, ControllerStatus, HardwareState, Pod, PolicyAction, SCHEMA_VERSION,
+    ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction, SCHEMA_VERSION,
     SensorFrame, TorqueCommand,
 };
 use std::sync::Arc;
@@ -119,11 +119,6 @@ impl<H: Hardware> Daemon<H> {
     /// Records whether the real-time set-up succeeded (reported in status).
     pub fn set_realtime(&mut self, ok: bool) {
         self.realtime = ok;
-    }
-
-    /// The last hardware state received, if any.
-    pub fn hardware_state(&self) -> Option<&HardwareState> {
-        self.have_state.then_some(&self.state)
     }
 
     /// The mode as published.
@@ -294,6 +289,10 @@ impl<H: Hardware> Daemon<H> {
         let sent = mono_now_ns();
         self.last_command.header.t_mono_ns = sent;
         self.hw.send(&self.last_command)?;
+        // Silence counts from the command the hardware answers: a lockstep
+        // wait for the policy's action above can be long, and the hardware
+        // cannot step before it has the command.
+        self.last_state_ns = self.last_state_ns.max(sent);
         if matches!(info.action, ActionStatus::Applied | ActionStatus::Clamped)
             && let Some(a) = &action
         {

@@ -64,7 +64,7 @@ impl DaemonRig {
     pub fn publish_state(&mut self, k: u64) {
         self.state.header.seq = k + 1;
         self.state.header.t_mono_ns = shared_mem_schema::process::mono_now_ns();
-        self.state.header.t_hw_ns = k * 1_000_000;
+        self.state.header.t_hw_ns = k * shared_mem_schema::rates::CONTROL_PERIOD_NS;
         self.state.step = k;
         transport::send(&self.hw, &self.state).unwrap();
     }

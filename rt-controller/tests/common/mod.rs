@@ -4,39 +4,19 @@
 #![allow(dead_code)]
 
 use nalgebra::{Matrix3, Vector3};
-use robot_model::{LoadOptions, Model};
+use robot_model::Model;
 use rt_controller::{Action, Controller, ControllerConfig, ControllerData, RobotState, StepInfo};
-use std::path::PathBuf;
 
 /// The Panda's "ready" pose: peg tip at (0.307, 0, 0.470) pointing down.
 #[allow(unused_imports)]
 pub use robot_model::descriptions::PANDA_READY_Q as PANDA_READY;
 
 pub fn panda() -> Model {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/panda.urdf");
-    Model::from_urdf_file(&path, &LoadOptions::default()).expect("panda.urdf loads")
+    robot_model::descriptions::builtin("panda").expect("the built-in Panda loads")
 }
 
 pub fn iiwa() -> Model {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../robot-model/urdf/iiwa14.urdf");
-    Model::from_urdf_file(&path, &LoadOptions::default()).expect("iiwa14.urdf loads")
-}
-
-/// Deterministic pseudo-random numbers (splitmix64).
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
+    robot_model::descriptions::builtin("iiwa14").expect("the built-in iiwa 14 loads")
 }
 
 /// Per-cycle record.
@@ -202,8 +182,5 @@ impl Bench {
 }
 
 pub fn action(dx: f64, dy: f64, dz: f64, droll: f64) -> Action {
-    Action {
-        delta_pos_m: [dx, dy, dz],
-        delta_roll_rad: droll,
-    }
+    Action::from([dx, dy, dz, droll])
 }

@@ -47,15 +47,17 @@ fn set_fifo(priority: i32) -> bool {
 }
 
 /// The bare timer: absolute 1 ms sleeps, nothing else.
+use shared_mem_schema::rates::CONTROL_PERIOD_NS;
+
 fn bare_timer(duration_s: f64, priority: Option<i32>) -> (LatencyHistogram, bool) {
     let fifo = priority.is_some_and(set_fifo);
     let mut h = LatencyHistogram::EMPTY;
     let end = mono_now_ns() + (duration_s * 1e9) as u64;
-    let mut deadline = mono_now_ns() + 1_000_000;
+    let mut deadline = mono_now_ns() + CONTROL_PERIOD_NS;
     while deadline < end && !termination_requested() {
         sleep_until_ns(deadline);
         h.record(mono_now_ns().saturating_sub(deadline));
-        deadline += 1_000_000;
+        deadline += CONTROL_PERIOD_NS;
     }
     (h, fifo)
 }

@@ -1,0 +1,83 @@
+//! Progress of long jobs (collection, dataset build, training): an indicatif
+//! bar on a terminal; elsewhere (a job in the background writing to a file)
+//! a plain line every few seconds, which indicatif does not draw.
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// How often a line is written when stderr is not a terminal.
+const LOG_EVERY: Duration = Duration::from_secs(10);
+
+/// A progress bar over `total` units of work (states, logs, samples).
+pub struct Progress {
+    bar: ProgressBar,
+    unit: &'static str,
+    /// Last plain line, when stderr is not a terminal.
+    plain: Option<Mutex<Instant>>,
+}
+
+impl Progress {
+    /// A bar towards `total` `unit`s (e.g. "states") on stderr.
+    pub fn new(total: u64, unit: &'static str) -> Self {
+        let tty = std::io::stderr().is_terminal();
+        let bar = ProgressBar::with_draw_target(
+            Some(total),
+            if tty {
+                ProgressDrawTarget::stderr()
+            } else {
+                ProgressDrawTarget::hidden()
+            },
+        );
+        let template = format!(
+            "[{{bar:30}}] {{human_pos}}/{{human_len}} {unit} {{msg}} {{per_sec}} elapsed {{elapsed}} left {{eta}}"
+        );
+        bar.set_style(
+            ProgressStyle::with_template(&template)
+                .expect("a valid template")
+                .progress_chars("#>."),
+        );
+        let plain = (!tty).then(|| Mutex::new(Instant::now()));
+        Self { bar, unit, plain }
+    }
+
+    /// Sets the work done and a short note (e.g. "12 episodes").
+    pub fn update(&self, done: u64, note: impl Into<String>) {
+        self.bar.set_position(done);
+        self.bar.set_message(note.into());
+        if let Some(last) = &self.plain {
+            let mut last = last.lock().expect("not poisoned");
+            if last.elapsed() >= LOG_EVERY {
+                *last = Instant::now();
+                eprintln!("{}", self.line());
+            }
+        }
+    }
+
+    /// Runs `f` (which writes to the terminal) with the bar cleared.
+    pub fn suspend<R>(&self, f: impl FnOnce() -> R) -> R {
+        self.bar.suspend(f)
+    }
+
+    /// Ends the bar, leaving its last state on screen (or in the log).
+    pub fn finish(&self) {
+        self.bar.finish();
+        if self.plain.is_some() {
+            eprintln!("{}", self.line());
+        }
+    }
+
+    fn line(&self) -> String {
+        let b = &self.bar;
+        format!(
+            "{}/{} {} {} {:.0}/s elapsed {:.0} s",
+            b.position(),
+            b.length().unwrap_or(0),
+            self.unit,
+            b.message(),
+            b.per_sec(),
+            b.elapsed().as_secs_f64(),
+        )
+    }
+}
