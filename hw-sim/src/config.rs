@@ -3,23 +3,11 @@
 
 use crate::shapes::PegShape;
 use serde::{Deserialize, Serialize};
-
-/// A configuration value that cannot be used, with the field that holds it.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("invalid hw-sim configuration: `{field}` {reason}")]
-pub struct ConfigError {
-    /// Dotted path of the field, e.g. `task.clearance_m`.
-    pub field: String,
-    /// What is wrong with it.
-    pub reason: String,
-}
-
-fn bad(field: &str, reason: impl Into<String>) -> ConfigError {
-    ConfigError {
-        field: field.to_string(),
-        reason: reason.into(),
-    }
-}
+use shared_mem_schema::config::{
+    ConfigFileError, FieldError, all_finite, at_least, check, ensure, joint_count, non_negative,
+    ordered_pair, parse_toml, per_joint, positive, read_toml, within,
+};
+use std::path::Path;
 
 /// Everything a [`crate::World`] is built from. The same configuration and
 /// seed give bit-identical runs.
@@ -31,9 +19,9 @@ pub struct WorldConfig {
     pub robot: String,
     /// Physics step, s (1 kHz by default, the controller's rate).
     pub dt_s: f64,
-    /// Initial joint positions, rad; empty: the robot's default pose, which
-    /// holds the peg pointing down above the box.
-    pub initial_q: Vec<f64>,
+    /// Initial joint positions, rad, one per joint; absent: the robot's
+    /// default pose, which holds the peg pointing down above the box.
+    pub initial_q: Option<Vec<f64>>,
     /// Viscous joint damping, N·m·s/rad: empty = the URDF's `<dynamics
     /// damping>`, one value = every joint, or one per joint.
     pub joint_damping: Vec<f64>,
@@ -75,7 +63,7 @@ impl Default for WorldConfig {
         Self {
             robot: "iiwa14".into(),
             dt_s: shared_mem_schema::rates::CONTROL_PERIOD_S,
-            initial_q: Vec::new(),
+            initial_q: None,
             joint_damping: Vec::new(),
             joint_friction: Vec::new(),
             clamp_torques: true,
@@ -320,216 +308,197 @@ impl Default for PerturbationConfig {
     }
 }
 
-fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(bad(
-            field,
-            format!("must be a positive finite number, got {v}"),
-        ))
-    }
-}
-
-fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(bad(field, format!("must be finite and ≥ 0, got {v}")))
-    }
-}
-
-fn per_joint(field: &str, values: &[f64], nv: usize) -> Result<(), ConfigError> {
-    if !(values.is_empty() || values.len() == 1 || values.len() == nv) {
-        return Err(bad(
-            field,
-            format!("must hold 0, 1 or {nv} values, got {}", values.len()),
-        ));
-    }
-    for v in values {
-        non_negative(field, *v)?;
-    }
-    Ok(())
-}
-
 impl WorldConfig {
     /// Checks every value that does not need the robot; `nv` is the robot's
-    /// number of joints.
-    pub fn validate(&self, nv: usize) -> Result<(), ConfigError> {
+    /// number of joints. Steps in field order, so the first bad field of the
+    /// document is the one reported.
+    pub fn validate(&self, nv: usize) -> Result<(), FieldError> {
+        self.validate_arm(nv)?;
+        self.task.validate()?;
+        self.camera.validate()?;
+        self.noise.validate()?;
+        self.perturbations.validate(nv)
+    }
+
+    /// The arm and the physics: step, initial pose, joint dynamics, solver.
+    fn validate_arm(&self, nv: usize) -> Result<(), FieldError> {
         positive("dt_s", self.dt_s)?;
-        if !(self.initial_q.is_empty() || self.initial_q.len() == nv) {
-            return Err(bad(
-                "initial_q",
-                format!("must hold {nv} values, got {}", self.initial_q.len()),
-            ));
-        }
-        if self.initial_q.iter().any(|q| !q.is_finite()) {
-            return Err(bad("initial_q", "must be finite"));
+        if let Some(q) = &self.initial_q {
+            joint_count("initial_q", q.len(), nv)?;
+            all_finite("initial_q", q)?;
         }
         per_joint("joint_damping", &self.joint_damping, nv)?;
         per_joint("joint_friction", &self.joint_friction, nv)?;
-        if self.solver_iterations == 0 {
-            return Err(bad("solver_iterations", "must be at least 1"));
-        }
+        at_least("solver_iterations", self.solver_iterations, 1)?;
         positive("length_unit_m", self.length_unit_m)?;
         non_negative(
             "contact_recycle_distance_m",
             self.contact_recycle_distance_m,
-        )?;
-        let t = &self.task;
-        positive("task.peg_width_m", t.peg_width_m)?;
-        non_negative("task.peg_length_m", t.peg_length_m)?;
-        positive("task.peg_density_kg_m3", t.peg_density_kg_m3)?;
-        non_negative("task.clearance_m", t.clearance_m)?;
-        positive("task.hole_depth_m", t.hole_depth_m)?;
-        positive("task.box_side_m", t.box_side_m)?;
-        positive("task.box_height_m", t.box_height_m)?;
-        non_negative("task.friction", t.friction)?;
-        if t.hole_depth_m >= t.box_height_m {
-            return Err(bad(
-                "task.hole_depth_m",
-                "must be less than task.box_height_m",
-            ));
-        }
-        if t.box_side_m < 2.0 * t.peg_width_m + t.clearance_m {
-            return Err(bad(
-                "task.box_side_m",
-                "must be at least twice the peg width",
-            ));
-        }
-        if !t.box_xy_range_m.iter().all(|v| v.is_finite()) {
-            return Err(bad("task.box_xy_range_m", "must be finite"));
-        }
-        if t.box_center_xy_m
-            .is_some_and(|c| !c.iter().all(|v| v.is_finite()))
-        {
-            return Err(bad("task.box_center_xy_m", "must be finite"));
-        }
-        non_negative("task.box_yaw_range_rad", t.box_yaw_range_rad)?;
-        non_negative("task.inserted_depth_m", t.inserted_depth_m)?;
-        non_negative("task.completed_tolerance_m", t.completed_tolerance_m)?;
-        let c = &self.camera;
-        if c.width == 0 || c.height == 0 || c.width > 4096 || c.height > 4096 {
-            return Err(bad("camera.width", "width and height must be in 1..=4096"));
-        }
-        if !(c.vertical_fov_deg > 1.0 && c.vertical_fov_deg < 170.0) {
-            return Err(bad(
-                "camera.vertical_fov_deg",
-                "must be in (1, 170) degrees",
-            ));
-        }
-        let dir: Vec<f64> = (0..3).map(|i| c.target_m[i] - c.eye_m[i]).collect();
-        if dir.iter().any(|d| !d.is_finite()) || dir.iter().all(|d| d.abs() < 1e-9) {
-            return Err(bad(
-                "camera.target_m",
-                "must be finite and differ from camera.eye_m",
-            ));
-        }
-        if dir[0].abs() < 1e-9 && dir[1].abs() < 1e-9 {
-            return Err(bad(
-                "camera.target_m",
-                "the view must not be vertical (up is +z)",
-            ));
-        }
-        if c.period_steps == 0 {
-            return Err(bad("camera.period_steps", "must be at least 1"));
-        }
-        positive("camera.max_depth_m", c.max_depth_m)?;
-        let n = &self.noise;
-        for (f, v) in [
-            ("noise.q_std_rad", n.q_std_rad),
-            ("noise.v_std_rad_s", n.v_std_rad_s),
-            ("noise.force_std_n", n.force_std_n),
-            ("noise.torque_std_nm", n.torque_std_nm),
-            ("noise.depth_std_m", n.depth_std_m),
-            ("noise.rgb_std", n.rgb_std),
-            ("noise.ft_filter_hz", n.ft_filter_hz),
-        ] {
-            non_negative(f, v)?;
-        }
-        if n.ft_bias.iter().any(|b| !b.is_finite()) {
-            return Err(bad("noise.ft_bias", "must be finite"));
-        }
-        let p = &self.perturbations;
-        for (i, push) in p.pushes.iter().enumerate() {
-            let f = format!("perturbations.pushes[{i}]");
-            non_negative(&format!("{f}.start_s"), push.start_s)?;
-            non_negative(&format!("{f}.duration_s"), push.duration_s)?;
-            if push.link == 0 || push.link > nv {
-                return Err(bad(&format!("{f}.link"), format!("must be in 1..={nv}")));
-            }
-            if push.force_n.iter().any(|v| !v.is_finite()) {
-                return Err(bad(&format!("{f}.force_n"), "must be finite"));
-            }
-        }
-        for (i, o) in p.occlusions.iter().enumerate() {
-            let f = format!("perturbations.occlusions[{i}]");
-            if o.start_s.is_nan() || o.end_s.is_nan() || o.end_s < o.start_s {
-                return Err(bad(&format!("{f}.end_s"), "must not be before start_s"));
-            }
-        }
-        let [lo, hi] = p.random_push_force_n;
-        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
-            return Err(bad(
-                "perturbations.random_push_force_n",
-                "must be 0 ≤ min ≤ max",
-            ));
-        }
-        non_negative(
-            "perturbations.random_push_duration_s",
-            p.random_push_duration_s,
-        )?;
-        non_negative(
-            "perturbations.random_occlusion_duration_s",
-            p.random_occlusion_duration_s,
-        )?;
-        let [a, b] = p.random_window_s;
-        if !(a.is_finite() && b.is_finite() && 0.0 <= a && a <= b) {
-            return Err(bad(
-                "perturbations.random_window_s",
-                "must be 0 ≤ start ≤ end",
-            ));
-        }
-        Ok(())
+        )
     }
 
     /// Parses a TOML document (unknown fields are errors, so a typo is not
     /// silently ignored).
-    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
-        toml::from_str(text).map_err(|e| bad("(document)", e.to_string()))
+    pub fn from_toml(text: &str) -> Result<Self, ConfigFileError> {
+        parse_toml(text, Path::new("(text)"))
     }
 
     /// Reads and parses a configuration file (validated against the robot
     /// when a world is built from it).
-    pub fn from_file(path: &std::path::Path) -> Result<Self, ConfigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_toml(&text).map_err(|source| ConfigFileError::Invalid {
-            path: path.to_path_buf(),
-            source,
-        })
+    pub fn from_file(path: &Path) -> Result<Self, ConfigFileError> {
+        read_toml(path)
     }
 }
 
-/// A world configuration file that could not be read or parsed.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigFileError {
-    /// The file could not be read.
-    #[error("reading the world configuration {}: {source}", path.display())]
-    Read {
-        /// The file.
-        path: std::path::PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// The file is not a valid configuration.
-    #[error("in the world configuration {}: {source}", path.display())]
-    Invalid {
-        /// The file.
-        path: std::path::PathBuf,
-        /// What is wrong.
-        source: ConfigError,
-    },
+impl TaskConfig {
+    /// The peg and box dimensions, their consistency and the placement.
+    fn validate(&self) -> Result<(), FieldError> {
+        positive("task.peg_width_m", self.peg_width_m)?;
+        non_negative("task.peg_length_m", self.peg_length_m)?;
+        positive("task.peg_density_kg_m3", self.peg_density_kg_m3)?;
+        non_negative("task.clearance_m", self.clearance_m)?;
+        positive("task.hole_depth_m", self.hole_depth_m)?;
+        positive("task.box_side_m", self.box_side_m)?;
+        positive("task.box_height_m", self.box_height_m)?;
+        non_negative("task.friction", self.friction)?;
+        check(
+            "task.hole_depth_m",
+            self.hole_depth_m,
+            self.hole_depth_m < self.box_height_m,
+            "must be less than task.box_height_m",
+        )?;
+        check(
+            "task.box_side_m",
+            self.box_side_m,
+            self.box_side_m >= 2.0 * self.peg_width_m + self.clearance_m,
+            "must be at least twice task.peg_width_m plus task.clearance_m",
+        )?;
+        all_finite("task.box_xy_range_m", &self.box_xy_range_m)?;
+        if let Some(c) = &self.box_center_xy_m {
+            all_finite("task.box_center_xy_m", c)?;
+        }
+        non_negative("task.box_yaw_range_rad", self.box_yaw_range_rad)?;
+        non_negative("task.inserted_depth_m", self.inserted_depth_m)?;
+        non_negative("task.completed_tolerance_m", self.completed_tolerance_m)
+    }
+}
+
+impl CameraConfig {
+    /// Image size, field of view, a usable view direction, rate and range.
+    fn validate(&self) -> Result<(), FieldError> {
+        within("camera.width", self.width, 1..=4096)?;
+        within("camera.height", self.height, 1..=4096)?;
+        let fov = self.vertical_fov_deg;
+        check(
+            "camera.vertical_fov_deg",
+            fov,
+            fov > 1.0 && fov < 170.0,
+            "must be in (1, 170) degrees",
+        )?;
+        let dir: Vec<f64> = (0..3).map(|i| self.target_m[i] - self.eye_m[i]).collect();
+        let target = format!("{:?}", self.target_m);
+        ensure(
+            dir.iter().all(|d| d.is_finite()) && dir.iter().any(|d| d.abs() >= 1e-9),
+            "camera.target_m",
+            &target,
+            "must be finite and differ from camera.eye_m",
+        )?;
+        // The look-at frame takes +z as up, undefined along a vertical view.
+        ensure(
+            dir[0].abs() >= 1e-9 || dir[1].abs() >= 1e-9,
+            "camera.target_m",
+            &target,
+            "the view must not be vertical (up is +z)",
+        )?;
+        at_least("camera.period_steps", self.period_steps, 1)?;
+        positive("camera.max_depth_m", self.max_depth_m)
+    }
+}
+
+impl NoiseConfig {
+    /// Standard deviations and the filter cut-off are >= 0; the bias finite.
+    fn validate(&self) -> Result<(), FieldError> {
+        for (f, v) in [
+            ("noise.q_std_rad", self.q_std_rad),
+            ("noise.v_std_rad_s", self.v_std_rad_s),
+            ("noise.force_std_n", self.force_std_n),
+            ("noise.torque_std_nm", self.torque_std_nm),
+            ("noise.depth_std_m", self.depth_std_m),
+            ("noise.rgb_std", self.rgb_std),
+            ("noise.ft_filter_hz", self.ft_filter_hz),
+        ] {
+            non_negative(f, v)?;
+        }
+        all_finite("noise.ft_bias", &self.ft_bias)
+    }
+}
+
+impl PerturbationConfig {
+    /// Explicit pushes (on one of the `nv` links) and occlusions, then the
+    /// ranges random ones are drawn from.
+    fn validate(&self, nv: usize) -> Result<(), FieldError> {
+        for (i, push) in self.pushes.iter().enumerate() {
+            let f = format!("perturbations.pushes[{i}]");
+            non_negative(&format!("{f}.start_s"), push.start_s)?;
+            non_negative(&format!("{f}.duration_s"), push.duration_s)?;
+            within(&format!("{f}.link"), push.link, 1..=nv)?;
+            all_finite(&format!("{f}.force_n"), &push.force_n)?;
+        }
+        for (i, o) in self.occlusions.iter().enumerate() {
+            // An infinite end (the default) is allowed: occluded to the end.
+            ensure(
+                !o.start_s.is_nan() && o.end_s >= o.start_s,
+                &format!("perturbations.occlusions[{i}].end_s"),
+                o.end_s,
+                format!("must not be before start_s ({})", o.start_s),
+            )?;
+        }
+        ordered_pair(
+            "perturbations.random_push_force_n",
+            self.random_push_force_n,
+        )?;
+        non_negative(
+            "perturbations.random_push_duration_s",
+            self.random_push_duration_s,
+        )?;
+        non_negative(
+            "perturbations.random_occlusion_duration_s",
+            self.random_occlusion_duration_s,
+        )?;
+        ordered_pair("perturbations.random_window_s", self.random_window_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_the_field_at_fault() {
+        let c = WorldConfig::default();
+        c.validate(7).unwrap();
+        let mut bad = c.clone();
+        bad.initial_q = Some(vec![0.0; 6]);
+        assert_eq!(bad.validate(7).unwrap_err().field, "initial_q");
+        let mut bad = c.clone();
+        bad.camera.height = 0;
+        assert_eq!(bad.validate(7).unwrap_err().field, "camera.height");
+        let mut bad = c.clone();
+        bad.perturbations.random_window_s = [2.0, 1.0];
+        let e = bad.validate(7).unwrap_err();
+        assert_eq!(e.field, "perturbations.random_window_s", "{e}");
+        let mut bad = c;
+        bad.joint_damping = vec![1.0; 3];
+        assert_eq!(bad.validate(7).unwrap_err().field, "joint_damping");
+    }
+
+    #[test]
+    fn initial_q_is_absent_by_default_and_round_trips() {
+        let c = WorldConfig::from_toml("initial_q = [0.0, 0.5]\n").unwrap();
+        assert_eq!(c.initial_q, Some(vec![0.0, 0.5]));
+        let d = WorldConfig::default();
+        assert_eq!(d.initial_q, None);
+        let back = WorldConfig::from_toml(&toml::to_string(&d).unwrap()).unwrap();
+        assert_eq!(back, d);
+    }
 }

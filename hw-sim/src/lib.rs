@@ -30,8 +30,9 @@ pub mod shapes;
 pub mod world;
 
 pub use camera::{CameraFrame, Class};
-pub use config::{ConfigError, ConfigFileError, WorldConfig};
+pub use config::WorldConfig;
 pub use hardware::SimHardware;
 pub use shapes::PegShape;
 pub use shared_mem_schema::Stage;
+pub use shared_mem_schema::config::{ConfigFileError, FieldError};
 pub use world::{SensorReadings, SimError, TaskState, World};

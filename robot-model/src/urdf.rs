@@ -258,6 +258,9 @@ fn limits(
     }
 }
 
+/// Builds the model: links indexed, the tree checked, then a depth-first
+/// walk from the root, children in document order, so that parents get
+/// smaller joint indices than their children.
 fn build(
     robot: &urdf_rs::Robot,
     base_dir: Option<&Path>,
@@ -266,7 +269,30 @@ fn build(
     if robot.links.is_empty() {
         return Err(ModelError::NoLinks);
     }
-    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    let link_index = index_links(robot)?;
+    let tree = link_tree(robot, &link_index)?;
+    let mut model = root_model(robot, tree.root);
+    let mut visited = vec![false; robot.links.len()];
+    // (link, joint carrying it, link frame in that joint's frame)
+    let mut stack: Vec<(usize, usize, Se3)> = vec![(tree.root, 0, Se3::IDENTITY)];
+    while let Some((li, jid, link_in_joint)) = stack.pop() {
+        visited[li] = true;
+        add_link(&mut model, &robot.links[li], jid, &link_in_joint, base_dir)?;
+        // Push in reverse so that the first child is handled first.
+        for &ji in tree.children_of[li].iter().rev() {
+            let j = &robot.joints[ji];
+            let (child_jid, child_in_joint) =
+                add_joint(&mut model, j, jid, &link_in_joint, options)?;
+            stack.push((link_index[j.child.link.as_str()], child_jid, child_in_joint));
+        }
+    }
+    check_reachable(robot, &visited)?;
+    Ok(model)
+}
+
+/// Link name → index in the document; names must be unique.
+fn index_links(robot: &urdf_rs::Robot) -> Result<HashMap<&str, usize>, ModelError> {
+    let mut link_index = HashMap::new();
     for (i, l) in robot.links.iter().enumerate() {
         if link_index.insert(l.name.as_str(), i).is_some() {
             return Err(ModelError::DuplicateName {
@@ -275,6 +301,33 @@ fn build(
             });
         }
     }
+    Ok(link_index)
+}
+
+/// The joints as edges between links, checked to form one tree.
+struct LinkTree {
+    /// For each link, the joints whose parent it is, in document order.
+    children_of: Vec<Vec<usize>>,
+    /// The one link that is no joint's child.
+    root: usize,
+}
+
+/// Connects the links by the joints: unique joint names, existing links,
+/// one parent per link and exactly one root (none means a cycle).
+fn link_tree(
+    robot: &urdf_rs::Robot,
+    link_index: &HashMap<&str, usize>,
+) -> Result<LinkTree, ModelError> {
+    let find_link = |j: &urdf_rs::Joint, role: &'static str, link: &String| {
+        link_index
+            .get(link.as_str())
+            .copied()
+            .ok_or_else(|| ModelError::MissingLink {
+                joint: j.name.clone(),
+                role,
+                link: link.clone(),
+            })
+    };
     let mut joint_names: HashMap<&str, ()> = HashMap::new();
     // For each link, the joint whose child it is.
     let mut parent_joint_of: Vec<Option<usize>> = vec![None; robot.links.len()];
@@ -286,22 +339,8 @@ fn build(
                 name: j.name.clone(),
             });
         }
-        let parent =
-            *link_index
-                .get(j.parent.link.as_str())
-                .ok_or_else(|| ModelError::MissingLink {
-                    joint: j.name.clone(),
-                    role: "parent",
-                    link: j.parent.link.clone(),
-                })?;
-        let child =
-            *link_index
-                .get(j.child.link.as_str())
-                .ok_or_else(|| ModelError::MissingLink {
-                    joint: j.name.clone(),
-                    role: "child",
-                    link: j.child.link.clone(),
-                })?;
+        let parent = find_link(j, "parent", &j.parent.link)?;
+        let child = find_link(j, "child", &j.child.link)?;
         if let Some(prev) = parent_joint_of[child] {
             return Err(ModelError::MultipleParents {
                 link: j.child.link.clone(),
@@ -326,8 +365,12 @@ fn build(
             links: robot.links.iter().map(|l| l.name.clone()).collect(),
         });
     };
+    Ok(LinkTree { children_of, root })
+}
 
-    let mut model = Model {
+/// The model before the walk: the universe joint 0 carrying the root link.
+fn root_model(robot: &urdf_rs::Robot, root: usize) -> Model {
+    Model {
         name: robot.name.clone(),
         joints: vec![Joint {
             name: "universe".to_string(),
@@ -346,110 +389,136 @@ fn build(
         geometries: Vec::new(),
         gravity: Vector3::new(0.0, 0.0, -STANDARD_GRAVITY),
         root_link: robot.links[root].name.clone(),
-    };
-
-    // Depth-first from the root, children in document order: parents get
-    // smaller joint indices than their children.
-    let mut visited = vec![false; robot.links.len()];
-    // (link, joint carrying it, link frame in that joint's frame)
-    let mut stack: Vec<(usize, usize, Se3)> = vec![(root, 0, Se3::IDENTITY)];
-    while let Some((li, jid, link_in_joint)) = stack.pop() {
-        visited[li] = true;
-        let link = &robot.links[li];
-        let inertia = link_inertia(link)?;
-        model.inertias[jid] += link_in_joint.act_inertia(&inertia);
-        let frame_id = model.frames.len();
-        model.frames.push(Frame {
-            name: link.name.clone(),
-            parent_joint: jid,
-            placement: link_in_joint,
-            kind: FrameKind::Link,
-        });
-        add_geometries(&mut model, link, frame_id, jid, &link_in_joint, base_dir)?;
-
-        // Push in reverse so that the first child is handled first.
-        for &ji in children_of[li].iter().rev() {
-            let j = &robot.joints[ji];
-            let el = format!("joint '{}' <origin>", j.name);
-            let origin = link_in_joint.mul(&pose(&el, &j.origin)?);
-            let child = link_index[j.child.link.as_str()];
-            let kind = match j.joint_type {
-                urdf_rs::JointType::Fixed => None,
-                urdf_rs::JointType::Revolute => Some(JointKind::Revolute),
-                urdf_rs::JointType::Continuous => Some(JointKind::Continuous),
-                urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
-                ref other => {
-                    return Err(ModelError::UnsupportedJoint {
-                        joint: j.name.clone(),
-                        kind: format!("{other:?}").to_lowercase(),
-                    });
-                }
-            };
-            match kind {
-                None => {
-                    model.frames.push(Frame {
-                        name: j.name.clone(),
-                        parent_joint: jid,
-                        placement: origin,
-                        kind: FrameKind::FixedJoint,
-                    });
-                    stack.push((child, jid, origin));
-                }
-                Some(kind) => {
-                    let axis = Vector3::from(j.axis.xyz.0);
-                    check_finite(&format!("joint '{}' <axis>", j.name), "xyz", &j.axis.xyz.0)?;
-                    let norm = axis.norm();
-                    if norm < 1e-9 {
-                        return Err(ModelError::InvalidValue {
-                            element: format!("joint '{}' <axis>", j.name),
-                            field: "xyz",
-                            value: j.axis.xyz.0.to_vec(),
-                            reason: "must be a non-zero vector",
-                        });
-                    }
-                    let new_id = model.joints.len();
-                    let (damping, friction) = j
-                        .dynamics
-                        .as_ref()
-                        .map(|d| (d.damping, d.friction))
-                        .unwrap_or((0.0, 0.0));
-                    check_finite(
-                        &format!("joint '{}' <dynamics>", j.name),
-                        "damping/friction",
-                        &[damping, friction],
-                    )?;
-                    model.joints.push(Joint {
-                        name: j.name.clone(),
-                        parent: jid,
-                        placement: origin,
-                        kind,
-                        axis: axis / norm,
-                        idx_v: new_id - 1,
-                        limits: limits(j, kind, options)?,
-                        damping,
-                        friction,
-                        child_link: j.child.link.clone(),
-                    });
-                    model.inertias.push(Inertia::ZERO);
-                    model.frames.push(Frame {
-                        name: j.name.clone(),
-                        parent_joint: new_id,
-                        placement: Se3::IDENTITY,
-                        kind: FrameKind::Joint,
-                    });
-                    stack.push((child, new_id, Se3::IDENTITY));
-                }
-            }
-        }
     }
+}
+
+/// Adds a link carried by joint `jid`: its inertia (summed into the joint's
+/// body), its frame and its geometries.
+fn add_link(
+    model: &mut Model,
+    link: &urdf_rs::Link,
+    jid: usize,
+    link_in_joint: &Se3,
+    base_dir: Option<&Path>,
+) -> Result<(), ModelError> {
+    let inertia = link_inertia(link)?;
+    model.inertias[jid] += link_in_joint.act_inertia(&inertia);
+    let frame_id = model.frames.len();
+    model.frames.push(Frame {
+        name: link.name.clone(),
+        parent_joint: jid,
+        placement: *link_in_joint,
+        kind: FrameKind::Link,
+    });
+    add_geometries(model, link, frame_id, jid, link_in_joint, base_dir)
+}
+
+/// Adds URDF joint `j`, whose parent link is carried by joint `jid` at
+/// `link_in_joint`. Returns the joint that carries the child link and the
+/// child link's frame in it: a fixed joint only adds a frame, so its child
+/// rides on `jid`; a moving joint becomes a new model joint.
+fn add_joint(
+    model: &mut Model,
+    j: &urdf_rs::Joint,
+    jid: usize,
+    link_in_joint: &Se3,
+    options: &LoadOptions,
+) -> Result<(usize, Se3), ModelError> {
+    let el = format!("joint '{}' <origin>", j.name);
+    let origin = link_in_joint.mul(&pose(&el, &j.origin)?);
+    let Some(kind) = joint_kind(j)? else {
+        model.frames.push(Frame {
+            name: j.name.clone(),
+            parent_joint: jid,
+            placement: origin,
+            kind: FrameKind::FixedJoint,
+        });
+        return Ok((jid, origin));
+    };
+    let axis = joint_axis(j)?;
+    let (damping, friction) = joint_dynamics(j)?;
+    let new_id = model.joints.len();
+    model.joints.push(Joint {
+        name: j.name.clone(),
+        parent: jid,
+        placement: origin,
+        kind,
+        axis,
+        idx_v: new_id - 1,
+        limits: limits(j, kind, options)?,
+        damping,
+        friction,
+        child_link: j.child.link.clone(),
+    });
+    model.inertias.push(Inertia::ZERO);
+    model.frames.push(Frame {
+        name: j.name.clone(),
+        parent_joint: new_id,
+        placement: Se3::IDENTITY,
+        kind: FrameKind::Joint,
+    });
+    Ok((new_id, Se3::IDENTITY))
+}
+
+/// The joint's kind; `None` for a fixed joint.
+fn joint_kind(j: &urdf_rs::Joint) -> Result<Option<JointKind>, ModelError> {
+    match j.joint_type {
+        urdf_rs::JointType::Fixed => Ok(None),
+        urdf_rs::JointType::Revolute => Ok(Some(JointKind::Revolute)),
+        urdf_rs::JointType::Continuous => Ok(Some(JointKind::Continuous)),
+        urdf_rs::JointType::Prismatic => Ok(Some(JointKind::Prismatic)),
+        ref other => Err(ModelError::UnsupportedJoint {
+            joint: j.name.clone(),
+            kind: format!("{other:?}").to_lowercase(),
+        }),
+    }
+}
+
+/// The joint's unit axis; `<axis>` must be finite and non-zero.
+fn joint_axis(j: &urdf_rs::Joint) -> Result<Vector3<f64>, ModelError> {
+    let el = format!("joint '{}' <axis>", j.name);
+    check_finite(&el, "xyz", &j.axis.xyz.0)?;
+    let axis = Vector3::from(j.axis.xyz.0);
+    let norm = axis.norm();
+    if norm < 1e-9 {
+        return Err(ModelError::InvalidValue {
+            element: el,
+            field: "xyz",
+            value: j.axis.xyz.0.to_vec(),
+            reason: "must be a non-zero vector",
+        });
+    }
+    Ok(axis / norm)
+}
+
+/// The joint's `<dynamics>` (damping, friction); absent: no damping or
+/// friction.
+fn joint_dynamics(j: &urdf_rs::Joint) -> Result<(f64, f64), ModelError> {
+    let (damping, friction) = j
+        .dynamics
+        .as_ref()
+        .map(|d| (d.damping, d.friction))
+        .unwrap_or((0.0, 0.0));
+    check_finite(
+        &format!("joint '{}' <dynamics>", j.name),
+        "damping/friction",
+        &[damping, friction],
+    )?;
+    Ok((damping, friction))
+}
+
+/// Every link must hang from the root: one the walk did not reach sits on a
+/// cycle detached from the tree.
+fn check_reachable(robot: &urdf_rs::Robot, visited: &[bool]) -> Result<(), ModelError> {
     let unreachable: Vec<String> = (0..robot.links.len())
         .filter(|&i| !visited[i])
         .map(|i| robot.links[i].name.clone())
         .collect();
-    if !unreachable.is_empty() {
-        return Err(ModelError::Loop { links: unreachable });
+    if unreachable.is_empty() {
+        Ok(())
+    } else {
+        Err(ModelError::Loop { links: unreachable })
     }
-    Ok(model)
 }
 
 fn add_geometries(

@@ -3,21 +3,15 @@
 
 use robot_model::Model;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::{FieldError, at_least, check, finite, non_negative, positive};
 use thiserror::Error;
 
 /// A configuration value the controller cannot run with; names the field.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ConfigError {
     /// A number is NaN, infinite, or outside its allowed range.
-    #[error("controller config: `{field}` = {value} is invalid: {reason}")]
-    BadValue {
-        /// Dotted path of the field, e.g. `impedance.kp[2]`.
-        field: String,
-        /// The offending value.
-        value: f64,
-        /// What the field must satisfy.
-        reason: &'static str,
-    },
+    #[error("controller config: {0}")]
+    BadValue(#[from] FieldError),
     /// A list has the wrong number of entries for this robot.
     #[error("controller config: `{field}` has {got} entries, the robot has {expected} joints")]
     WrongLength {
@@ -282,26 +276,6 @@ impl Default for SafetyConfig {
     }
 }
 
-fn check(field: &str, value: f64, ok: bool, reason: &'static str) -> Result<(), ConfigError> {
-    if value.is_finite() && ok {
-        Ok(())
-    } else {
-        Err(ConfigError::BadValue {
-            field: field.to_string(),
-            value,
-            reason,
-        })
-    }
-}
-
-fn positive(field: &str, value: f64) -> Result<(), ConfigError> {
-    check(field, value, value > 0.0, "must be finite and > 0")
-}
-
-fn non_negative(field: &str, value: f64) -> Result<(), ConfigError> {
-    check(field, value, value >= 0.0, "must be finite and >= 0")
-}
-
 impl ControllerConfig {
     /// Checks every value against its range and against the robot.
     pub fn validate(&self, model: &Model) -> Result<(), ConfigError> {
@@ -324,12 +298,7 @@ impl ControllerConfig {
                 hi.is_finite() && lo < hi,
                 "must be finite and below workspace_max_m",
             )?;
-            check(
-                &format!("trajectory.workspace_max_m[{i}]"),
-                hi,
-                true,
-                "must be finite",
-            )?;
+            finite(&format!("trajectory.workspace_max_m[{i}]"), hi)?;
         }
         for (i, &k) in self.impedance.kp.iter().enumerate() {
             positive(&format!("impedance.kp[{i}]"), k)?;
@@ -349,7 +318,7 @@ impl ControllerConfig {
                 });
             }
             for (i, &x) in rest.iter().enumerate() {
-                check(&format!("osc.rest_q[{i}]"), x, true, "must be finite")?;
+                finite(&format!("osc.rest_q[{i}]"), x)?;
             }
         }
         let q = &self.qp;
@@ -370,12 +339,7 @@ impl ControllerConfig {
         )?;
         positive("qp.velocity_horizon_s", q.velocity_horizon_s)?;
         positive("qp.limit_slack_weight", q.limit_slack_weight)?;
-        check(
-            "qp.max_iter",
-            f64::from(q.max_iter),
-            q.max_iter > 0,
-            "must be > 0",
-        )?;
+        at_least("qp.max_iter", q.max_iter, 1)?;
         if let Some(t) = q.time_limit_s {
             positive("qp.time_limit_s", t)?;
         }
@@ -408,13 +372,12 @@ impl ControllerConfig {
         non_negative("safety.fault_damping_nms", s.fault_damping_nms)?;
         for (i, j) in model.joints.iter().enumerate().skip(1) {
             let l = &j.limits;
-            if !(l.effort.is_finite() && l.effort > 0.0) {
-                return Err(ConfigError::BadValue {
-                    field: format!("robot joint {:?} (#{i}) effort limit", j.name),
-                    value: l.effort,
-                    reason: "the torque filter needs a finite positive effort limit per joint",
-                });
-            }
+            check(
+                &format!("robot joint {:?} (#{i}) effort limit", j.name),
+                l.effort,
+                l.effort > 0.0,
+                "the torque filter needs a finite positive effort limit per joint",
+            )?;
         }
         Ok(())
     }

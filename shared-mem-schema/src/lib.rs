@@ -12,11 +12,13 @@
 //! from different schema versions refuse to talk, with an error that names
 //! both versions. Besides the handshake, the crate holds only what every
 //! node shares: the process plumbing ([`process`]: monotonic clock, absolute
-//! sleeps, termination signals), the hardware-time stamping, and the
-//! conversions of its own types (an action to and from the policy's vector,
-//! a [`Stage`] to and from its wire code). It must not depend on any other
-//! crate of this workspace.
+//! sleeps, termination signals), configuration checks and files
+//! ([`config`]: the field-naming error every node's validation returns), the
+//! hardware-time stamping, and the conversions of its own types (an action
+//! to and from the policy's vector, a [`Stage`] to and from its wire code).
+//! It must not depend on any other crate of this workspace.
 
+pub mod config;
 pub mod process;
 pub mod transport;
 

@@ -9,13 +9,14 @@
 //! `task` (the peg, the contact and the stages).
 
 use crate::camera::{Camera, CameraFrame, CameraShot};
-use crate::config::{ConfigError, WorldConfig};
+use crate::config::WorldConfig;
 use crate::convert::{from_glam, pose_from_glam, to_glam};
 use crate::rng::{self, SimRng};
 use crate::shapes::BoxWithHole;
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rapier3d_f64::prelude::{MultibodyJointHandle, PhysicsWorld, RigidBodyHandle};
 use robot_model::{JointKind, Model, ModelError};
+use shared_mem_schema::config::FieldError;
 
 mod build;
 mod perturb;
@@ -35,8 +36,8 @@ pub enum SimError {
     #[error("robot description: {0}")]
     Model(#[from] ModelError),
     /// A configuration value is unusable.
-    #[error(transparent)]
-    Config(#[from] ConfigError),
+    #[error("invalid hw-sim configuration: {0}")]
+    Config(#[from] FieldError),
     /// The robot has a joint the simulator cannot build.
     #[error("joint '{joint}': {reason}")]
     UnsupportedJoint {
@@ -202,11 +203,10 @@ impl World {
         let mut perturb_rng = rng::seeded(seed, 2);
         self.reset_sensors(seed);
 
-        let q0 = if cfg.initial_q.is_empty() {
-            default_initial_q(&self.model)
-        } else {
-            cfg.initial_q.clone()
-        };
+        let q0 = cfg
+            .initial_q
+            .clone()
+            .unwrap_or_else(|| default_initial_q(&self.model));
         self.physics = physics;
         self.set_joint_state(&q0, &vec![0.0; nv])?;
         self.box_state = None;

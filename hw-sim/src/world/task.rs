@@ -83,10 +83,11 @@ pub fn peg_info(model: &Model, task: &TaskConfig) -> Result<PegInfo, SimError> {
         0.08
     };
     if length <= 0.0 {
-        return Err(ConfigError {
-            field: "task.peg_length_m".into(),
-            reason: "the peg_tip frame coincides with the sensor; set a length".into(),
-        }
+        return Err(FieldError::new(
+            "task.peg_length_m",
+            t.peg_length_m,
+            "the peg_tip frame coincides with the sensor; set a length",
+        )
         .into());
     }
     let prism = ConvexPrism {

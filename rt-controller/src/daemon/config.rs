@@ -4,36 +4,22 @@
 
 use crate::config::ControllerConfig;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::{
+    ConfigFileError, FieldError, at_least, ensure, non_negative, parse_toml, positive, read_toml,
+    within,
+};
+use std::path::Path;
 
-/// A daemon configuration value it cannot run with.
+/// A daemon configuration the daemon cannot run with.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonConfigError {
-    /// The file could not be read.
-    #[error("cannot read the configuration {path}: {source}")]
-    Read {
-        /// The file.
-        path: String,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The TOML is malformed, has an unknown field or a wrong type.
-    #[error("configuration {path}: {message}")]
-    Parse {
-        /// The file (or "(text)").
-        path: String,
-        /// The parser's message (names the field).
-        message: String,
-    },
+    /// The file could not be read, or its TOML is malformed, has an unknown
+    /// field or a wrong type.
+    #[error(transparent)]
+    File(#[from] ConfigFileError),
     /// A value is out of range.
-    #[error("configuration: `{field}` = {value} is invalid: {reason}")]
-    BadValue {
-        /// Dotted field name.
-        field: &'static str,
-        /// The value, as text.
-        value: String,
-        /// What it must satisfy.
-        reason: &'static str,
-    },
+    #[error("configuration: {0}")]
+    BadValue(#[from] FieldError),
 }
 
 /// What drives the loop's cycles.
@@ -173,36 +159,19 @@ impl Default for DaemonConfig {
     }
 }
 
-fn positive(field: &'static str, v: f64) -> Result<(), DaemonConfigError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(DaemonConfigError::BadValue {
-            field,
-            value: v.to_string(),
-            reason: "must be finite and > 0",
-        })
-    }
-}
-
 impl DaemonConfig {
     /// Parses TOML text; `origin` names it in errors.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, DaemonConfigError> {
-        let c: Self = toml::from_str(text).map_err(|e| DaemonConfigError::Parse {
-            path: origin.into(),
-            message: e.to_string(),
-        })?;
+        let c: Self = parse_toml(text, Path::new(origin))?;
         c.validate()?;
         Ok(c)
     }
 
-    /// Reads and parses a file.
-    pub fn from_file(path: &std::path::Path) -> Result<Self, DaemonConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DaemonConfigError::Read {
-            path: path.display().to_string(),
-            source,
-        })?;
-        Self::from_toml(&text, &path.display().to_string())
+    /// Reads, parses and validates a file.
+    pub fn from_file(path: &Path) -> Result<Self, DaemonConfigError> {
+        let c: Self = read_toml(path)?;
+        c.validate()?;
+        Ok(c)
     }
 
     /// The configuration as TOML (what the daemon prints at start).
@@ -213,13 +182,12 @@ impl DaemonConfig {
     /// Checks the daemon's own values (the control law is checked against
     /// the robot model when the controller is built).
     pub fn validate(&self) -> Result<(), DaemonConfigError> {
-        if self.robot.is_empty() {
-            return Err(DaemonConfigError::BadValue {
-                field: "robot",
-                value: "\"\"".into(),
-                reason: "must name a built-in robot or a URDF file",
-            });
-        }
+        ensure(
+            !self.robot.is_empty(),
+            "robot",
+            "\"\"",
+            "must name a built-in robot or a URDF file",
+        )?;
         let t = &self.timing;
         positive("timing.hardware_timeout_ms", t.hardware_timeout_ms)?;
         positive("timing.startup_timeout_s", t.startup_timeout_s)?;
@@ -228,36 +196,17 @@ impl DaemonConfig {
             "timing.lockstep_action_timeout_s",
             t.lockstep_action_timeout_s,
         )?;
-        if !(t.shutdown_hold_s.is_finite() && t.shutdown_hold_s >= 0.0) {
-            return Err(DaemonConfigError::BadValue {
-                field: "timing.shutdown_hold_s",
-                value: t.shutdown_hold_s.to_string(),
-                reason: "must be finite and >= 0",
-            });
-        }
-        if t.action_period_steps == 0 {
-            return Err(DaemonConfigError::BadValue {
-                field: "timing.action_period_steps",
-                value: "0".into(),
-                reason: "must be >= 1",
-            });
-        }
-        let r = &self.realtime;
-        if !(1..=99).contains(&r.priority) {
-            return Err(DaemonConfigError::BadValue {
-                field: "realtime.priority",
-                value: r.priority.to_string(),
-                reason: "SCHED_FIFO priorities are 1 to 99",
-            });
-        }
-        if self.backend.namespace.is_empty() || self.backend.namespace.contains(char::is_whitespace)
-        {
-            return Err(DaemonConfigError::BadValue {
-                field: "backend.namespace",
-                value: format!("{:?}", self.backend.namespace),
-                reason: "must be non-empty, without spaces",
-            });
-        }
+        non_negative("timing.shutdown_hold_s", t.shutdown_hold_s)?;
+        at_least("timing.action_period_steps", t.action_period_steps, 1)?;
+        // SCHED_FIFO priorities are 1 to 99.
+        within("realtime.priority", self.realtime.priority, 1..=99)?;
+        let ns = &self.backend.namespace;
+        ensure(
+            !ns.is_empty() && !ns.contains(char::is_whitespace),
+            "backend.namespace",
+            format_args!("{ns:?}"),
+            "must be non-empty, without spaces",
+        )?;
         Ok(())
     }
 }
