@@ -481,7 +481,7 @@ impl Server {
             m.peg = peg_code(world);
             if let Some(t) = world.task() {
                 m.stage_now = t.stage_now.code();
-                m.stage_best = t.best_stage.code();
+                m.best_stage = t.best_stage.code();
                 m.in_contact = t.in_contact as u32;
                 m.s_m = [t.s_m.x, t.s_m.y, t.s_m.z];
                 m.s_psi_rad = t.s_psi_rad;

@@ -9,7 +9,7 @@
 //! is `learner run` with the same mix through the real-time stack. Both
 //! write the same log format, so the dataset builder reads either.
 
-use crate::env::{ACTION_PERIOD, EnvError, FastEnv};
+use crate::env::{EnvError, FastEnv};
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{
@@ -18,6 +18,7 @@ use crate::policy::{
 use crate::progress::Progress;
 use hw_sim::{PegShape, WorldConfig, rng};
 use rt_controller::ControllerConfig;
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{Message, Stage, hw_time_ns};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -250,7 +251,7 @@ pub fn run_episode(
     for _ in 0..actions {
         // The first cycle has no observation yet: it holds the start pose.
         let action = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
-        for c in 0..ACTION_PERIOD {
+        for c in 0..ACTION_PERIOD_STEPS {
             // The message the controller got, as the stack logs it.
             if let Some(m) = env.cycle(if c == 0 { action.as_ref() } else { None })? {
                 log.action(&m)?;

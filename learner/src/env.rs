@@ -6,13 +6,14 @@
 //!
 //! One cycle k: the hardware state after k physics steps → the control step
 //! (with the action addressed to step k, if any) → the physics step. The
-//! policy acts every [`ACTION_PERIOD`] cycles on the observation of the
+//! policy acts every [`ACTION_PERIOD_STEPS`] cycles on the observation of the
 //! cycle before the one its action is applied in.
 
 use crate::policy::{Action4, Observation, WrenchHistory};
 use hw_sim::{SimError, SimHardware, World, WorldConfig};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{
     HardwareState, Header, Message, PolicyAction, SensorFrame, TorqueCommand, hw_time_ns,
 };
@@ -27,9 +28,6 @@ pub enum EnvError {
     #[error(transparent)]
     Controller(#[from] rt_controller::ConfigError),
 }
-
-/// Control cycles per policy action (20 Hz at 1 kHz).
-pub const ACTION_PERIOD: u64 = shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 
 /// One environment of the fast path.
 pub struct FastEnv {
@@ -175,7 +173,7 @@ impl FastEnv {
     /// its observation; `action` (if any) is applied in the first cycle.
     pub fn step(&mut self, action: Option<&Action4>) -> Result<Observation, EnvError> {
         self.cycle(action)?;
-        while !self.world.step_index().is_multiple_of(ACTION_PERIOD) {
+        while !self.world.step_index().is_multiple_of(ACTION_PERIOD_STEPS) {
             self.cycle(None)?;
         }
         Ok(Observation::from_frame(&self.frame))

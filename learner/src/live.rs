@@ -8,7 +8,6 @@
 //! addressed to step 50m, so runs are deterministic.
 
 use crate::collect::{EpisodePolicy, Mix, MixedPolicy};
-use crate::env::ACTION_PERIOD;
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::{LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
@@ -18,6 +17,7 @@ use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::rates::ACTION_PERIOD_NS;
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
     CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
@@ -338,7 +338,7 @@ impl PolicyNode {
             if lockstep {
                 let mut pending = None;
                 transport::drain(&self.sensor, |f| {
-                    if (f.step + 1).is_multiple_of(ACTION_PERIOD) {
+                    if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
                         pending = Some((f.header.episode, f.header.t_hw_ns, f.step + 1));
                     }
                 })?;
@@ -423,6 +423,15 @@ struct LiveEpisode {
     mixed: Option<MixedPolicy>,
     heuristic: HeuristicPolicy,
     seen: Seen,
+    /// Actions sent this episode.
+    actions: u64,
+    /// Wall time of the next action (real-time mode).
+    next_tick: u64,
+    /// The frame step last acted on (lockstep mode).
+    acted_for_step: u64,
+    best_stage: Stage,
+    /// Hardware time the peg completed the insertion.
+    completed_at: Option<u64>,
 }
 
 impl LiveEpisode {
@@ -480,6 +489,11 @@ impl LiveEpisode {
                 frames: 0,
                 last_frame_wall_ns: mono_now_ns(),
             },
+            actions: 0,
+            next_tick: mono_now_ns(),
+            acted_for_step: u64::MAX,
+            best_stage: Stage::Failed,
+            completed_at: None,
         })
     }
 
@@ -494,25 +508,9 @@ impl LiveEpisode {
         total_actions: &mut u64,
         mut on_action: impl FnMut(u64),
     ) -> Result<EpisodeOutcome, StackError> {
-        let (episode, first) = (self.episode, self.first);
-        let mut actions = 0u64;
-        let mut next_tick = mono_now_ns();
-        let mut acted_for_step = u64::MAX;
-        let mut best_stage = Stage::Failed;
-        let mut completed_at: Option<u64> = None;
-        let mut t_end;
-        loop {
-            node.pump(episode, &mut self.seen, Some(&mut self.log))?;
-            if let Some(r) = &self.seen.report
-                && r.best_stage() > best_stage
-            {
-                best_stage = r.best_stage();
-                self.log
-                    .event(r.header.t_hw_ns, &Event::Stage { stage: best_stage })?;
-                if best_stage == Stage::Completed && completed_at.is_none() {
-                    completed_at = Some(r.header.t_hw_ns);
-                }
-            }
+        let t_end = loop {
+            node.pump(self.episode, &mut self.seen, Some(&mut self.log))?;
+            self.note_stage()?;
             let Some(frame) = self.seen.frame else {
                 if mono_now_ns() - self.seen.last_frame_wall_ns > 10_000_000_000 {
                     return Err(StackError::NoSensorFrames);
@@ -520,28 +518,13 @@ impl LiveEpisode {
                 std::thread::sleep(Duration::from_micros(200));
                 continue;
             };
-            t_end = frame.header.t_hw_ns;
-            let t_ep = hw_time_s(frame.header.t_hw_ns.saturating_sub(first.header.t_hw_ns));
-            // Collection runs its episodes to their length; insertion
-            // episodes end once the peg has settled at the bottom.
-            let settled = cfg.max_actions.is_none()
-                && completed_at.is_some_and(|t| {
-                    hw_time_s(frame.header.t_hw_ns.saturating_sub(t)) >= cfg.settle_s
-                });
-            let enough = cfg.max_actions.is_some_and(|n| actions >= n as u64)
-                || cfg.target_states.is_some_and(|t| *total_actions >= t);
-            if settled || enough || t_ep >= cfg.episode_timeout_s || termination_requested() {
-                break;
+            if self.over(cfg, &frame, *total_actions) {
+                break frame.header.t_hw_ns;
             }
             if mono_now_ns() - self.seen.last_frame_wall_ns > 2_000_000_000 {
-                return Err(StackError::FramesStopped(episode));
+                return Err(StackError::FramesStopped(self.episode));
             }
-            let due = if cfg.lockstep {
-                (frame.step + 1).is_multiple_of(ACTION_PERIOD) && acted_for_step != frame.step
-            } else {
-                mono_now_ns() >= next_tick
-            };
-            if !due {
+            if !self.due(cfg, &frame) {
                 if cfg.lockstep {
                     std::thread::yield_now();
                 } else {
@@ -549,42 +532,104 @@ impl LiveEpisode {
                 }
                 continue;
             }
-            let obs = Observation::from_frame(&frame);
-            let a = match self.mixed.as_mut() {
-                Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
-                None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),
-            };
-            let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
-            let m = node.send_action(episode, frame.header.t_hw_ns, apply_at, a)?;
-            self.log.action(&m)?;
-            actions += 1;
+            self.act(node, cfg, &frame)?;
             *total_actions += 1;
             on_action(*total_actions);
-            acted_for_step = frame.step;
-            next_tick += ACTION_PERIOD_NS;
-            if next_tick < mono_now_ns() {
-                next_tick = mono_now_ns() + ACTION_PERIOD_NS;
+        };
+        self.finish(t_end)
+    }
+
+    /// Logs a newly reached stage from the latest report.
+    fn note_stage(&mut self) -> Result<(), StackError> {
+        if let Some(r) = &self.seen.report
+            && r.best_stage() > self.best_stage
+        {
+            self.best_stage = r.best_stage();
+            self.log.event(
+                r.header.t_hw_ns,
+                &Event::Stage {
+                    stage: self.best_stage,
+                },
+            )?;
+            if self.best_stage == Stage::Completed && self.completed_at.is_none() {
+                self.completed_at = Some(r.header.t_hw_ns);
             }
         }
-        let duration_s = hw_time_s(t_end.saturating_sub(first.header.t_hw_ns));
-        self.log.event(
+        Ok(())
+    }
+
+    /// Whether the episode is over at `frame`. Collection runs its episodes
+    /// to their length; insertion episodes end once the peg has settled at
+    /// the bottom.
+    fn over(&self, cfg: &LiveConfig, frame: &SensorFrame, total_actions: u64) -> bool {
+        let t = frame.header.t_hw_ns;
+        let t_ep = hw_time_s(t.saturating_sub(self.first.header.t_hw_ns));
+        let settled = cfg.max_actions.is_none()
+            && self
+                .completed_at
+                .is_some_and(|c| hw_time_s(t.saturating_sub(c)) >= cfg.settle_s);
+        let enough = cfg.max_actions.is_some_and(|n| self.actions >= n as u64)
+            || cfg.target_states.is_some_and(|n| total_actions >= n);
+        settled || enough || t_ep >= cfg.episode_timeout_s || termination_requested()
+    }
+
+    /// Whether an action is due: in lockstep on the frame before each
+    /// action step (once), in real time at 20 Hz of wall time.
+    fn due(&self, cfg: &LiveConfig, frame: &SensorFrame) -> bool {
+        if cfg.lockstep {
+            (frame.step + 1).is_multiple_of(ACTION_PERIOD_STEPS)
+                && self.acted_for_step != frame.step
+        } else {
+            mono_now_ns() >= self.next_tick
+        }
+    }
+
+    /// Computes, sends and logs the policy's action on `frame`.
+    fn act(
+        &mut self,
+        node: &mut PolicyNode,
+        cfg: &LiveConfig,
+        frame: &SensorFrame,
+    ) -> Result<(), StackError> {
+        let obs = Observation::from_frame(frame);
+        let a = match self.mixed.as_mut() {
+            Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
+            None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),
+        };
+        let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
+        let m = node.send_action(self.episode, frame.header.t_hw_ns, apply_at, a)?;
+        self.log.action(&m)?;
+        self.actions += 1;
+        self.acted_for_step = frame.step;
+        self.next_tick += ACTION_PERIOD_NS;
+        if self.next_tick < mono_now_ns() {
+            self.next_tick = mono_now_ns() + ACTION_PERIOD_NS;
+        }
+        Ok(())
+    }
+
+    /// Records the outcome at hardware time `t_end` and closes the log.
+    fn finish(self, t_end: u64) -> Result<EpisodeOutcome, StackError> {
+        let duration_s = hw_time_s(t_end.saturating_sub(self.first.header.t_hw_ns));
+        let mut log = self.log;
+        log.event(
             t_end,
             &Event::Outcome(Outcome {
-                stage: best_stage,
+                stage: self.best_stage,
                 duration_s: Some(duration_s),
-                actions: Some(actions),
+                actions: Some(self.actions),
                 states: None,
                 interrupted: None,
             }),
         )?;
-        let path = self.log.finish()?;
+        let path = log.finish()?;
         Ok(EpisodeOutcome {
-            episode,
+            episode: self.episode,
             seed: self.seed,
-            stage: best_stage,
-            interrupted: termination_requested() && completed_at.is_none(),
+            stage: self.best_stage,
+            interrupted: termination_requested() && self.completed_at.is_none(),
             duration_s,
-            actions,
+            actions: self.actions,
             log: path,
         })
     }

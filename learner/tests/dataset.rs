@@ -4,10 +4,11 @@
 
 use learner::collect::{CollectConfig, Mix, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
-use learner::env::{ACTION_PERIOD, FastEnv};
+use learner::env::FastEnv;
 use learner::labels::FlowLabeler;
 use learner::log::LogOptions;
 use learner::policy::{HeuristicConfig, HeuristicPolicy};
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use std::sync::atomic::AtomicBool;
 
 fn world() -> hw_sim::WorldConfig {
@@ -35,7 +36,7 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
     let (mut compared, mut moving) = (0, 0);
     for _ in 0..40 {
         let a = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
-        for c in 0..ACTION_PERIOD {
+        for c in 0..ACTION_PERIOD_STEPS {
             env.cycle(if c == 0 { a.as_ref() } else { None }).unwrap();
         }
         obs = env.last_observation();

@@ -594,7 +594,7 @@ pub struct EpisodeReport {
     /// inserted, 3 completed.
     pub stage_now: u32,
     /// Best stage reached this episode (same codes).
-    pub stage_best: u32,
+    pub best_stage: u32,
     /// 1 when the peg touches the box.
     pub in_contact: u32,
     /// Used bytes of `message`.
@@ -628,7 +628,7 @@ impl EpisodeReport {
 
     /// The best stage reached this episode so far.
     pub fn best_stage(&self) -> Stage {
-        Stage::from_code(self.stage_best)
+        Stage::from_code(self.best_stage)
     }
 
     /// The message text (lossy UTF-8).

@@ -3,10 +3,11 @@
 //! learner (or a misbehaving peer) where a test needs to see inside.
 
 use hw_sim::WorldConfig;
-use learner::env::{ACTION_PERIOD, FastEnv};
+use learner::env::FastEnv;
 use learner::live::{PolicyNode, task_geometry};
 use learner::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
 use shared_mem_schema::process::mono_now_ns;
+use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::transport::{self, Channel, TransportError};
 use shared_mem_schema::{
     ControllerMode, ControllerStatus, HardwareState, PolicyAction, SCHEMA_VERSION, SensorFrame,
@@ -417,7 +418,7 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
         .unwrap();
         for f in frames {
             wrench.push(f.wrench);
-            if (f.step + 1).is_multiple_of(ACTION_PERIOD) {
+            if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
                 let obs = Observation::from_frame(&f);
                 let a = policy.act(&obs, &wrench, &task);
                 node.send_action(episode, f.header.t_hw_ns, f.step + 1, a)
