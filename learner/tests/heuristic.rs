@@ -19,15 +19,11 @@ fn episode(peg: PegShape, seed: u64) -> (Stage, f64) {
     };
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
     let mut obs = env.step(None).unwrap();
-    let mut after = 0;
-    for _ in 0..400 {
+    // A collection episode's length (5 s): the policy must neither fault the
+    // controller on its way (an impact on the box) nor at the bottom.
+    for _ in 0..100 {
         let a = policy.act(&obs, &env.wrench, &task);
         obs = env.step(Some(&a)).unwrap();
-        if env.world().task().unwrap().best_stage == Stage::Completed {
-            // Keep going for a second: the policy must not push the
-            // controller into a force fault at the bottom.
-            after += 1;
-        }
         if std::env::var_os("HEURISTIC_TRACE").is_some() {
             let t = env.world().task().unwrap();
             println!(
@@ -46,9 +42,6 @@ fn episode(peg: PegShape, seed: u64) -> (Stage, f64) {
                 env.wrench.mean_force(8).norm()
             );
         }
-        if after >= 20 {
-            break;
-        }
     }
     let faults = env.controller_data().supervisor.counters.faults;
     assert_eq!(
@@ -63,15 +56,23 @@ fn episode(peg: PegShape, seed: u64) -> (Stage, f64) {
 
 #[test]
 fn heuristic_completes_all_four_pegs() {
-    for (i, peg) in PegShape::ALL.into_iter().enumerate() {
-        let (stage, t) = episode(peg, 11 + i as u64);
-        println!("{}: {} after {t:.2} s", peg.name(), stage.name());
-        assert_eq!(
-            stage,
-            Stage::Completed,
-            "{} peg: {}",
-            peg.name(),
-            stage.name()
-        );
+    // Two box poses per peg.
+    for k in 0..2u64 {
+        for (i, peg) in PegShape::ALL.into_iter().enumerate() {
+            let seed = 11 + i as u64 + 4 * k;
+            let (stage, t) = episode(peg, seed);
+            println!(
+                "{} (seed {seed}): {} after {t:.2} s",
+                peg.name(),
+                stage.name()
+            );
+            assert_eq!(
+                stage,
+                Stage::Completed,
+                "{} peg, seed {seed}: {}",
+                peg.name(),
+                stage.name()
+            );
+        }
     }
 }
