@@ -1,7 +1,7 @@
 //! Configuration of the simulated world and of an episode, TOML-ready:
 //! every field has a default; `validate` names the field at fault.
 
-use crate::shapes::PegShape;
+use crate::shapes::{PegShape, inset, offset_convex};
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{
     ConfigFileError, FieldError, all_finite, at_least, check, ensure, joint_count, non_negative,
@@ -120,6 +120,13 @@ pub struct TaskConfig {
     /// How close to the hole's bottom the tip must come to count as a
     /// completed insertion, m.
     pub completed_tolerance_m: f64,
+    /// How far inside the hole's outline (in the hole frame's x-y plane) the
+    /// tip must be for inserted and completed, m. The tip is on the peg's
+    /// axis, so a peg in the hole has it far inside (6.3 mm for the 30 mm
+    /// semicircle, the least of the four pegs); the margin keeps a tip
+    /// grazing the outline from counting. Must be less than the distance
+    /// from the hole's centre to its nearest edge.
+    pub in_hole_margin_m: f64,
 }
 
 impl Default for TaskConfig {
@@ -140,6 +147,7 @@ impl Default for TaskConfig {
             box_yaw_range_rad: 0.26,
             inserted_depth_m: 0.003,
             completed_tolerance_m: 0.003,
+            in_hole_margin_m: 0.001,
         }
     }
 }
@@ -379,7 +387,22 @@ impl TaskConfig {
         }
         non_negative("task.box_yaw_range_rad", self.box_yaw_range_rad)?;
         non_negative("task.inserted_depth_m", self.inserted_depth_m)?;
-        non_negative("task.completed_tolerance_m", self.completed_tolerance_m)
+        non_negative("task.completed_tolerance_m", self.completed_tolerance_m)?;
+        non_negative("task.in_hole_margin_m", self.in_hole_margin_m)?;
+        // The hole's outline as the box builds it (mirroring, which the
+        // box applies, does not change distances from the centre).
+        let hole = offset_convex(&self.peg.outline(self.peg_width_m), 0.5 * self.clearance_m);
+        let reach = inset(&hole, [0.0, 0.0]);
+        check(
+            "task.in_hole_margin_m",
+            self.in_hole_margin_m,
+            self.in_hole_margin_m < reach,
+            &format!(
+                "must be less than {:.2} mm, the distance from the hole's centre to its \
+                 nearest edge (no tip would count as in the hole)",
+                1e3 * reach
+            ),
+        )
     }
 }
 
@@ -490,6 +513,21 @@ mod tests {
         let mut bad = c;
         bad.joint_damping = vec![1.0; 3];
         assert_eq!(bad.validate(7).unwrap_err().field, "joint_damping");
+    }
+
+    #[test]
+    fn the_in_hole_margin_must_leave_room_in_the_hole() {
+        let mut c = WorldConfig::default();
+        c.task.peg = PegShape::Semicircle;
+        // The hole's centre is 6.3 + 1 mm from its flat side.
+        c.task.in_hole_margin_m = 0.007;
+        c.validate(7).unwrap();
+        c.task.in_hole_margin_m = 0.008;
+        let e = c.validate(7).unwrap_err();
+        assert_eq!(e.field, "task.in_hole_margin_m", "{e}");
+        assert!(e.to_string().contains("7.33 mm"), "{e}");
+        c.task.in_hole_margin_m = -0.001;
+        assert_eq!(c.validate(7).unwrap_err().field, "task.in_hole_margin_m");
     }
 
     #[test]

@@ -143,6 +143,23 @@ pub fn offset_convex(poly: &[[f64; 2]], d: f64) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// How far `p` lies inside a convex counter-clockwise polygon: the least
+/// distance from `p` to the lines through its edges. Inside, that is the
+/// distance to the outline; outside, it is negative (its size is then only a
+/// lower bound of the distance).
+pub fn inset(poly: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let n = poly.len();
+    (0..n)
+        .map(|i| {
+            let a = poly[i];
+            let b = poly[(i + 1) % n];
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            // Outward normal (dy, −dx) / len, as in `offset_convex`.
+            (dy * (a[0] - p[0]) - dx * (a[1] - p[1])) / dx.hypot(dy)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Keeps the part of a convex polygon where `n·x ≤ c` (Sutherland–Hodgman).
 fn clip(poly: &[[f64; 2]], n: [f64; 2], c: f64) -> Vec<[f64; 2]> {
     let mut out = Vec::with_capacity(poly.len() + 1);
@@ -226,6 +243,12 @@ pub struct BoxWithHole {
 }
 
 impl BoxWithHole {
+    /// How far the point `xy` of the hole frame lies inside the hole's
+    /// outline (negative outside; see [`inset`]).
+    pub fn hole_inset(&self, xy: [f64; 2]) -> f64 {
+        inset(&self.hole, xy)
+    }
+
     /// Builds the box around the hole for `peg` (its outline) with the given
     /// diametral clearance.
     ///
@@ -314,6 +337,32 @@ mod tests {
                 assert!((b.1 - a.1 - 0.001).abs() < 1e-12, "{shape:?}");
             }
         }
+    }
+
+    #[test]
+    fn inset_is_the_distance_inside_and_negative_outside() {
+        let sq = PegShape::Square.outline(0.03);
+        assert!((inset(&sq, [0.0, 0.0]) - 0.015).abs() < 1e-15);
+        assert!((inset(&sq, [0.01, -0.004]) - 0.005).abs() < 1e-15);
+        assert!(inset(&sq, [0.02, 0.0]) < 0.0);
+        assert!(inset(&sq, [0.0, 0.1]) < -0.08);
+        for shape in PegShape::ALL {
+            let p = shape.outline(0.03);
+            // Every vertex is on the outline, and a point just beyond it
+            // (away from the centroid) is outside.
+            for v in &p {
+                assert!(inset(&p, *v).abs() < 1e-12, "{shape:?}");
+                assert!(inset(&p, [1.01 * v[0], 1.01 * v[1]]) < 0.0, "{shape:?}");
+            }
+            // The offset outline is `d` farther from the centroid everywhere.
+            let o = offset_convex(&p, 0.001);
+            assert!((inset(&o, [0.0, 0.0]) - inset(&p, [0.0, 0.0]) - 0.001).abs() < 1e-12);
+        }
+        // The semicircle's centroid is about 4r/3π from its flat side (less
+        // the 12-segment arc's effect, well under 0.1 mm).
+        let semi = PegShape::Semicircle.outline(0.03);
+        let expect = 4.0 * 0.015 / (3.0 * std::f64::consts::PI);
+        assert!((inset(&semi, [0.0, 0.0]) - expect).abs() < 1e-4);
     }
 
     #[test]

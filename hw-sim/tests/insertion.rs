@@ -4,19 +4,9 @@
 
 mod common;
 
-use common::{Rig, fixed_box_config, script};
+use common::{Rig, fixed_box_config, insertion_script, script};
 use hw_sim::Stage;
-use nalgebra::{Isometry3, Vector3};
-
-/// The script: above the hole, then down to 5 mm below its bottom (the
-/// controller's lead limit and impedance turn that into a moderate push).
-fn insertion_script(rig: &Rig, hole: &Isometry3<f64>) -> Vec<common::Action> {
-    let depth = rig.world.box_geometry().unwrap().depth;
-    let start = rig.tip().translation.vector;
-    let above = hole * nalgebra::Point3::new(0.0, 0.0, 0.02);
-    let bottom = hole * nalgebra::Point3::new(0.0, 0.0, -depth - 0.005);
-    script(start, &[(above.coords, 0.005), (bottom.coords, 0.002)])
-}
+use nalgebra::Vector3;
 
 #[test]
 fn scripted_insertion_completes_and_a_moved_hole_fails() {

@@ -17,8 +17,13 @@ pub struct TaskState {
     /// The peg's roll about the hole's z axis relative to the hole, wrapped
     /// into (−π/k, π/k] for a peg with k-fold symmetry: the paper's s_ψ.
     pub s_psi_rad: f64,
-    /// The peg touches the box at this step.
+    /// The peg touches the box at this step (the ground does not count).
     pub in_contact: bool,
+    /// The tip is in the hole: below the box's top face and at least
+    /// `task.in_hole_margin_m` inside the hole's outline. Inserted and
+    /// completed require it; the tip's height alone would also count a peg
+    /// pushed down beside the box.
+    pub in_hole: bool,
     /// The stage reached at this step.
     pub stage_now: Stage,
     /// The best stage reached in the episode so far.
@@ -151,9 +156,10 @@ impl World {
             psi -= period;
         }
         let t = &self.config.task;
-        let stage_now = if s.z <= -(b.geometry.depth - t.completed_tolerance_m) {
+        let in_hole = s.z < 0.0 && b.geometry.hole_inset([s.x, s.y]) >= t.in_hole_margin_m;
+        let stage_now = if in_hole && s.z <= -(b.geometry.depth - t.completed_tolerance_m) {
             Stage::Completed
-        } else if s.z <= -t.inserted_depth_m {
+        } else if in_hole && s.z <= -t.inserted_depth_m {
             Stage::Inserted
         } else if contact {
             Stage::Touched
@@ -169,6 +175,7 @@ impl World {
             s_m: s,
             s_psi_rad: psi,
             in_contact: contact,
+            in_hole,
             stage_now,
             best_stage: best,
         });

@@ -132,6 +132,17 @@ impl Rig {
     }
 }
 
+/// The insertion script: above the hole, then down to 5 mm below its bottom
+/// (the controller's lead limit and impedance turn that into a moderate
+/// push).
+pub fn insertion_script(rig: &Rig, hole: &Isometry3<f64>) -> Vec<Action> {
+    let depth = rig.world.box_geometry().unwrap().depth;
+    let start = rig.tip().translation.vector;
+    let above = hole * nalgebra::Point3::new(0.0, 0.0, 0.02);
+    let bottom = hole * nalgebra::Point3::new(0.0, 0.0, -depth - 0.005);
+    script(start, &[(above.coords, 0.005), (bottom.coords, 0.002)])
+}
+
 /// An open-loop script of 20 Hz actions through waypoints (base frame, m),
 /// moving at most `step_m` per action.
 pub fn script(start: Vector3<f64>, waypoints: &[(Vector3<f64>, f64)]) -> Vec<Action> {
