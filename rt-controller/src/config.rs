@@ -161,6 +161,11 @@ pub struct OscConfig {
     /// Rest configuration the null-space term pulls towards; `None` takes
     /// the configuration at the first step.
     pub rest_q: Option<Vec<f64>>,
+    /// Cap on the QR sweeps of the eigen-decomposition of `Λ⁻¹` (≥ 1):
+    /// nalgebra's uncapped one can loop forever. Running out is a
+    /// `DynamicsFailure` fault. The default is LAPACK's budget (`dsteqr`:
+    /// 30 per eigenvalue).
+    pub eigen_max_iter: u32,
 }
 
 impl Default for OscConfig {
@@ -170,6 +175,7 @@ impl Default for OscConfig {
             null_kp: 25.0,
             null_kv: 10.0,
             rest_q: None,
+            eigen_max_iter: 180,
         }
     }
 }
@@ -309,6 +315,7 @@ impl ControllerConfig {
         positive("osc.singular_eps", self.osc.singular_eps)?;
         non_negative("osc.null_kp", self.osc.null_kp)?;
         non_negative("osc.null_kv", self.osc.null_kv)?;
+        at_least("osc.eigen_max_iter", self.osc.eigen_max_iter, 1)?;
         if let Some(rest) = &self.osc.rest_q {
             if rest.len() != model.nv() {
                 return Err(ConfigError::WrongLength {

@@ -299,15 +299,37 @@ impl ControllerData {
 
 /// Torque box: torque limits intersected with the rate limit around the
 /// previous command. If the previous command was outside the limits (a
-/// measured torque at start), the limit wins over the rate.
+/// measured torque at start), the limit wins over the rate; if it is not
+/// finite (it never should be) there is no rate reference and the box is
+/// the limits. Either way every bound is finite and `lo <= hi`.
 fn torque_box(ctrl: &Controller, d: &mut ControllerData) {
     let r = ctrl.config.qp.torque_rate_limit_nm_s * ctrl.config.period_s;
     for i in 0..d.tau_prev.len() {
         let m = ctrl.tau_max[i];
         let p = d.tau_prev[i];
-        d.tau_lo[i] = (-m).max((p - r).min(m));
-        d.tau_hi[i] = m.min((p + r).max(-m));
+        if p.is_finite() {
+            d.tau_lo[i] = (-m).max((p - r).min(m));
+            d.tau_hi[i] = m.min((p + r).max(-m));
+        } else {
+            (d.tau_lo[i], d.tau_hi[i]) = (-m, m);
+        }
     }
+}
+
+/// `x` limited to `[lo, hi]` without `f64::clamp`'s panic (it asserts
+/// `lo <= hi` and no NaN bound): a box that is not one (a NaN bound or
+/// `lo > hi`) gives 0, a NaN `x` the box's point nearest 0. The result is
+/// finite whenever the bounds are.
+pub(crate) fn clamp_torque(x: f64, lo: f64, hi: f64) -> f64 {
+    if lo.is_nan() || hi.is_nan() || lo > hi {
+        return 0.0;
+    }
+    let x = if x.is_nan() { 0.0 } else { x };
+    x.max(lo).min(hi)
+}
+
+fn all_finite<'a>(xs: impl IntoIterator<Item = &'a f64>) -> bool {
+    xs.into_iter().all(|x| x.is_finite())
 }
 
 /// Joint position and velocity limits as acceleration bounds.
@@ -338,20 +360,64 @@ fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: 
 /// Writes the safe command of Fault (gravity compensation with joint
 /// damping, or the gravity torque at the last finite configuration when the
 /// state is unusable, zero before any), clipped to the torque box. Gravity
-/// is computed here, off the normal path, which never needs it alone.
+/// is computed here, off the normal path, which never needs it alone. A
+/// non-finite gravity torque is not used: the previous command is held.
 fn safe_command(model: &Model, ctrl: &Controller, d: &mut ControllerData, v: Option<&[f64]>) {
     if d.initialised {
         robot_model::gravity(model, &mut d.dynamics, d.q_valid.as_slice());
     } else {
         d.dynamics.g.fill(0.0);
     }
+    if !all_finite(d.dynamics.g.iter()) {
+        d.dynamics.g.copy_from(&d.tau_prev);
+    }
     torque_box(ctrl, d);
     let damping = ctrl.config.safety.fault_damping_nms;
     for i in 0..d.tau_cmd.len() {
         let t = d.dynamics.g[i] - v.map_or(0.0, |v| damping * v[i]);
-        d.tau_cmd[i] = t.clamp(d.tau_lo[i], d.tau_hi[i]);
+        d.tau_cmd[i] = clamp_torque(t, d.tau_lo[i], d.tau_hi[i]);
     }
     d.tau_prev.copy_from(&d.tau_cmd);
+}
+
+/// Whether everything the step derived from the state is finite: a finite
+/// state can still overflow (a huge velocity squares to infinity in `h`).
+fn dynamics_finite(d: &ControllerData) -> bool {
+    let rm = &d.dynamics;
+    all_finite(rm.mass.iter())
+        && all_finite(rm.nle.iter())
+        && all_finite(d.jacobian.iter())
+        && all_finite(d.jdot_v.iter())
+        && all_finite(d.ee.pos.iter())
+        && all_finite(d.ee.rot.iter())
+        && all_finite(d.ee.twist.iter())
+}
+
+/// Starts the rate limiter from what the robot applies now: the measured
+/// torques if they are there and finite, else the torques that hold it
+/// (`h`, or gravity alone) if they are finite and within the effort limits,
+/// else zero. A finite state can give an absurd `h` (a garbage speed of
+/// 1e155 rad/s): started there, the box would pin the command at a limit.
+fn seed_rate_limiter(
+    model: &Model,
+    ctrl: &Controller,
+    d: &mut ControllerData,
+    tau_measured: Option<&[f64]>,
+) {
+    let nv = d.tau_prev.len();
+    let holds = |t: &DVector<f64>| (0..nv).all(|i| t[i].abs() <= ctrl.tau_max[i]);
+    match tau_measured {
+        Some(t) if t.len() == nv && all_finite(t) => d.tau_prev.copy_from_slice(t),
+        _ if holds(&d.dynamics.nle) => d.tau_prev.copy_from(&d.dynamics.nle),
+        _ => {
+            robot_model::gravity(model, &mut d.dynamics, d.q_valid.as_slice());
+            if holds(&d.dynamics.g) {
+                d.tau_prev.copy_from(&d.dynamics.g);
+            } else {
+                d.tau_prev.fill(0.0);
+            }
+        }
+    }
 }
 
 fn finish(d: &mut ControllerData, qp: Option<QpOutcome>, action: ActionStatus) -> StepInfo {
@@ -369,7 +435,10 @@ fn finish(d: &mut ControllerData, qp: Option<QpOutcome>, action: ActionStatus) -
 /// `action` is `Some` only in the cycle a new action arrives; `now` is the
 /// controller's monotonic time in seconds. Lengths of `state.q` and
 /// `state.v` must equal `model.nv()` (checked; a mismatch is a programming
-/// error and panics). Never allocates.
+/// error and panics). Whatever the values (NaN, ±inf, huge, denormal), it
+/// does not panic and the torques are finite and within the torque and
+/// rate box: whatever it derives that is not finite (dynamics, OSC, QP) is
+/// a fault, not an input. Never allocates.
 pub fn step(
     model: &Model,
     ctrl: &Controller,
@@ -415,28 +484,25 @@ pub fn step(
         twist: twist.to_vector(),
     };
 
+    let dynamics_ok = chol_ok && dynamics_finite(d);
+
     if !d.initialised {
-        // Start the rate limiter from what the robot applies now: measured
-        // torques if there are any, else the torques that hold it still.
-        match state.tau_measured {
-            Some(t) if t.len() == nv && t.iter().all(|x| x.is_finite()) => {
-                d.tau_prev.copy_from_slice(t)
-            }
-            _ => d.tau_prev.copy_from(&d.dynamics.nle),
-        }
+        seed_rate_limiter(model, ctrl, d, state.tau_measured);
         if cfg.osc.rest_q.is_none() {
             d.rest_q.copy_from_slice(q);
         }
         d.initialised = true;
     }
-    if d.capture_pending {
+    if d.capture_pending && dynamics_ok {
         d.trajectory.reset(&d.ee.pos, &d.ee.rot, now);
         d.capture_pending = false;
     }
 
+    // The state's reason first: it is the one kept.
     if let Err(reason) = state_check {
         d.supervisor.raise(reason, now);
-    } else if !chol_ok {
+    }
+    if !dynamics_ok {
         d.supervisor.raise(FaultReason::DynamicsFailure, now);
     }
     if d.supervisor.mode() == Mode::Fault {
@@ -477,7 +543,7 @@ pub fn step(
     d.reference = Some(reference);
     d.a_u = impedance::task_acceleration(&reference, &d.ee, &cfg.impedance.kp, &ctrl.kv);
     let rm = &d.dynamics;
-    osc::compute(
+    let osc_result = osc::compute(
         &mut d.osc,
         &OscInputs {
             q,
@@ -490,10 +556,18 @@ pub fn step(
             a_u: &d.a_u,
             rest_q: d.rest_q.as_slice(),
         },
-        cfg.osc.singular_eps,
-        cfg.osc.null_kp,
-        cfg.osc.null_kv,
+        &osc::OscParams {
+            singular_eps: cfg.osc.singular_eps,
+            eigen_max_iter: cfg.osc.eigen_max_iter as usize,
+            null_kp: cfg.osc.null_kp,
+            null_kv: cfg.osc.null_kv,
+        },
     );
+    if osc_result.is_err() {
+        d.supervisor.raise(FaultReason::DynamicsFailure, now);
+        safe_command(model, ctrl, d, Some(v));
+        return finish(d, None, action_status);
+    }
 
     // Limits → QP filter.
     torque_box(ctrl, d);
@@ -501,6 +575,12 @@ pub fn step(
     d.scratch.copy_from(&d.osc.tau);
     d.scratch -= &d.dynamics.nle;
     linalg::mul_into(&d.osc.minv, &d.scratch, &mut d.a_osc);
+    // The QP must never see a NaN (clarabel's answer to one is undefined).
+    if !osc_finite(d) {
+        d.supervisor.raise(FaultReason::NonFiniteTorque, now);
+        safe_command(model, ctrl, d, Some(v));
+        return finish(d, None, action_status);
+    }
     let outcome = d.qp.filter(
         &QpProblem {
             jbar: &d.osc.jbar,
@@ -532,6 +612,20 @@ pub fn step(
     finish(d, Some(outcome), action_status)
 }
 
+/// Whether the OSC results the QP filter reads are finite.
+fn osc_finite(d: &ControllerData) -> bool {
+    let o = &d.osc;
+    all_finite(o.tau.iter())
+        && all_finite(o.force.iter())
+        && all_finite(o.jbar.iter())
+        && all_finite(o.null_t.iter())
+        && all_finite(o.minv.iter())
+        && all_finite(o.lambda_inv.iter())
+        && all_finite(d.a_osc.iter())
+        // Infinite acceleration bounds mean "none" (the filter caps them).
+        && !d.acc_lo.iter().chain(d.acc_hi.iter()).any(|x| x.is_nan())
+}
+
 fn ignored_if_some(d: &mut ControllerData, action: Option<&Action>) -> ActionStatus {
     match action {
         Some(_) => {
@@ -539,5 +633,24 @@ fn ignored_if_some(d: &mut ControllerData, action: Option<&Action>) -> ActionSta
             ActionStatus::Ignored
         }
         None => ActionStatus::None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::clamp_torque;
+
+    #[test]
+    fn clamp_torque_never_panics_and_stays_in_a_finite_box() {
+        assert_eq!(clamp_torque(5.0, -1.0, 2.0), 2.0);
+        assert_eq!(clamp_torque(-5.0, -1.0, 2.0), -1.0);
+        assert_eq!(clamp_torque(0.5, -1.0, 2.0), 0.5);
+        assert_eq!(clamp_torque(f64::NAN, -1.0, 2.0), 0.0, "NaN: nearest 0");
+        assert_eq!(clamp_torque(f64::NAN, 1.0, 2.0), 1.0);
+        assert_eq!(clamp_torque(f64::INFINITY, -1.0, 2.0), 2.0);
+        // Not a box: f64::clamp would panic on each of these.
+        assert_eq!(clamp_torque(0.5, 2.0, -1.0), 0.0);
+        assert_eq!(clamp_torque(0.5, f64::NAN, 1.0), 0.0);
+        assert_eq!(clamp_torque(0.5, -1.0, f64::NAN), 0.0);
     }
 }

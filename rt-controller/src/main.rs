@@ -164,7 +164,8 @@ fn run(args: Args) -> Result<()> {
     let s = &daemon.stats;
     info!(
         "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, wake-up p99 \
-         {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs, {} garbage actions",
+         {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs, {} garbage actions, {} failed \
+         publications, {} failed action receives",
         match termination_signal() {
             0 => String::new(),
             s => format!(" (signal {s})"),
@@ -176,7 +177,9 @@ fn run(args: Args) -> Result<()> {
         s.wakeup.max_ns as f64 / 1e3,
         s.compute.quantile_us(0.99),
         s.compute.max_ns as f64 / 1e3,
-        daemon.shared.garbage_actions.load(Ordering::Relaxed)
+        daemon.shared.garbage_actions.load(Ordering::Relaxed),
+        s.publish_errors,
+        s.receive_errors
     );
     Ok(())
 }
@@ -186,6 +189,7 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
     let mut last_mode = u32::MAX;
     let mut last_garbage = 0;
     let mut last_overruns = 0;
+    let mut last_io_errors = 0;
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
         let beat = shared.heartbeat.load(Ordering::Relaxed);
@@ -211,6 +215,11 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
             "garbage actions ignored",
         );
         warn_on_increase(&shared.overruns, &mut last_overruns, "overruns");
+        warn_on_increase(
+            &shared.learner_io_errors,
+            &mut last_io_errors,
+            "failed publications to or receives from the learner",
+        );
     }
 }
 

@@ -109,6 +109,15 @@ pub fn inverse_from_cholesky(
     }
 }
 
+/// Why OSC could not run this cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum OscError {
+    /// `Λ⁻¹` was not finite, or its eigen-decomposition did not converge
+    /// within the iteration cap.
+    #[error("the task-space inertia could not be decomposed")]
+    Decomposition,
+}
+
 /// Singularity-robust inverse of a symmetric positive semi-definite 6×6
 /// matrix with eigenvalues σ: `V diag(φ(σ)) Vᵀ` with `φ(σ) = 1/σ` for
 /// `σ ≥ ε` and `φ(σ) = σ/ε²` below. This is damped least squares with the
@@ -117,8 +126,17 @@ pub fn inverse_from_cholesky(
 /// continuous, bounded by `1/ε`, and goes to zero at a singularity, so no
 /// force is commanded along a direction the arm cannot move in.
 /// Returns the inverse and the smallest eigenvalue.
-pub fn robust_inverse(m: &Matrix6<f64>, eps: f64) -> (Matrix6<f64>, f64) {
-    let eig = SymmetricEigen::new(*m);
+///
+/// `max_iter` (≥ 1) caps the QR sweeps of the eigen-decomposition:
+/// `SymmetricEigen::new` has no cap and can loop forever (nalgebra issue
+/// 1025), and `try_new` with 0 means no cap either. `None` when `m` is not
+/// finite (nalgebra's 2×2 step unwraps a NaN square root), when the cap is
+/// reached, or when the result is not finite.
+pub fn robust_inverse(m: &Matrix6<f64>, eps: f64, max_iter: usize) -> Option<(Matrix6<f64>, f64)> {
+    if max_iter == 0 || !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let eig = SymmetricEigen::try_new(*m, f64::EPSILON, max_iter)?;
     let mut min_sigma = f64::INFINITY;
     let mut out = Matrix6::zeros();
     for k in 0..6 {
@@ -130,18 +148,25 @@ pub fn robust_inverse(m: &Matrix6<f64>, eps: f64) -> (Matrix6<f64>, f64) {
         let col = eig.eigenvectors.column(k);
         out += w * col * col.transpose();
     }
-    (out, min_sigma)
+    (out.iter().all(|x| x.is_finite()) && min_sigma.is_finite()).then_some((out, min_sigma))
 }
 
-/// Computes `τ_osc` and the quantities the QP filter needs.
-/// `null_kp`, `null_kv`: posture gains; `singular_eps`: see [`robust_inverse`].
-pub fn compute(
-    d: &mut OscData,
-    inp: &OscInputs<'_>,
-    singular_eps: f64,
-    null_kp: f64,
-    null_kv: f64,
-) {
+/// The constants of one OSC evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OscParams {
+    /// Singularity threshold ε, see [`robust_inverse`].
+    pub singular_eps: f64,
+    /// Cap on the eigen-decomposition's QR sweeps, see [`robust_inverse`].
+    pub eigen_max_iter: usize,
+    /// Posture stiffness of the null-space term, 1/s².
+    pub null_kp: f64,
+    /// Posture damping of the null-space term, 1/s.
+    pub null_kv: f64,
+}
+
+/// Computes `τ_osc` and the quantities the QP filter needs. On an error the
+/// results are stale and must not be used.
+pub fn compute(d: &mut OscData, inp: &OscInputs<'_>, p: &OscParams) -> Result<(), OscError> {
     let nv = inp.q.len();
     inverse_from_cholesky(inp.chol, &mut d.scratch, &mut d.minv);
     mul_into(inp.jac, &d.minv, &mut d.j_minv);
@@ -149,7 +174,8 @@ pub fn compute(
     mul_into(inp.jac, &d.minv_jt, &mut d.lambda_inv);
     // Symmetrise: rounding leaves the two triangles a few ulps apart.
     d.lambda_inv = 0.5 * (d.lambda_inv + d.lambda_inv.transpose());
-    let (lambda, min_sigma) = robust_inverse(&d.lambda_inv, singular_eps);
+    let (lambda, min_sigma) = robust_inverse(&d.lambda_inv, p.singular_eps, p.eigen_max_iter)
+        .ok_or(OscError::Decomposition)?;
     d.lambda = lambda;
     d.min_sigma = min_sigma;
     mul_into(&d.minv_jt, &d.lambda, &mut d.jbar);
@@ -162,7 +188,7 @@ pub fn compute(
     }
     // Posture torque τ₀ = M (k_p (q_rest − q) − k_v v), then Nᵀ τ₀.
     for i in 0..nv {
-        d.scratch[i] = null_kp * (inp.rest_q[i] - inp.q[i]) - null_kv * inp.v[i];
+        d.scratch[i] = p.null_kp * (inp.rest_q[i] - inp.q[i]) - p.null_kv * inp.v[i];
     }
     mul_into(inp.mass, &d.scratch, &mut d.tau0);
     mul_into(&d.null_t, &d.tau0, &mut d.tau_null);
@@ -170,6 +196,7 @@ pub fn compute(
     tr_mul_into(inp.jac, &d.force, &mut d.tau);
     d.tau += &d.tau_null;
     d.tau += inp.h;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -180,22 +207,43 @@ mod tests {
     fn robust_inverse_is_exact_when_well_conditioned_and_bounded_when_singular() {
         let a = Matrix6::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 * 0.1);
         let spd = a * a.transpose() + 0.05 * Matrix6::identity();
-        let (inv, min_s) = robust_inverse(&spd, 0.02);
+        let (inv, min_s) = robust_inverse(&spd, 0.02, 180).unwrap();
         assert!(min_s >= 0.05 - 1e-12);
         let err = (inv * spd - Matrix6::identity()).norm();
         assert!(err < 1e-10, "exact above the threshold: {err}");
         // Rank-deficient: bounded by 1/ε, zero along the lost direction.
         let v = Vector6::new(1.0, 2.0, 0.0, 0.0, 1.0, 0.0);
         let rank1 = v * v.transpose() * 1e-3;
-        let (inv, min_s) = robust_inverse(&rank1, 0.02);
+        let (inv, min_s) = robust_inverse(&rank1, 0.02, 180).unwrap();
         assert!(min_s.abs() < 1e-12);
         let e = SymmetricEigen::new(inv).eigenvalues;
         assert!(e.amax() <= 1.0 / 0.02 + 1e-9, "{e}");
         let lost = Vector6::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0);
         assert!((inv * lost).norm() < 1e-9);
         // Continuous at the threshold.
-        let below = robust_inverse(&(Matrix6::identity() * (0.02 - 1e-12)), 0.02).0;
-        let above = robust_inverse(&(Matrix6::identity() * (0.02 + 1e-12)), 0.02).0;
+        let below = robust_inverse(&(Matrix6::identity() * (0.02 - 1e-12)), 0.02, 180)
+            .unwrap()
+            .0;
+        let above = robust_inverse(&(Matrix6::identity() * (0.02 + 1e-12)), 0.02, 180)
+            .unwrap()
+            .0;
         assert!((below - above).norm() < 1e-6);
+    }
+
+    #[test]
+    fn robust_inverse_gives_up_at_its_iteration_cap_and_on_non_finite_input() {
+        // A dense matrix needs several QR sweeps; one is not enough.
+        let a = Matrix6::from_fn(|i, j| ((i * 5 + j * 3) % 7) as f64 * 0.3 - 0.8);
+        let m = a * a.transpose() + 0.1 * Matrix6::identity();
+        assert!(robust_inverse(&m, 0.02, 1).is_none());
+        assert!(robust_inverse(&m, 0.02, 0).is_none(), "0 would be no cap");
+        assert!(robust_inverse(&m, 0.02, 180).is_some());
+        let mut bad = m;
+        bad[(2, 3)] = f64::NAN;
+        bad[(3, 2)] = f64::NAN;
+        assert!(robust_inverse(&bad, 0.02, 180).is_none());
+        bad[(2, 3)] = f64::INFINITY;
+        bad[(3, 2)] = f64::INFINITY;
+        assert!(robust_inverse(&bad, 0.02, 180).is_none());
     }
 }

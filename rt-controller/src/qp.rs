@@ -227,7 +227,9 @@ impl QpFilter {
     }
 
     /// Filters `pb.tau_osc` into `out`. `out` always ends inside the torque
-    /// box `[tau_lo, tau_hi]`, whatever the solver does.
+    /// box `[tau_lo, tau_hi]`, whatever the solver does (and finite when the
+    /// box is: a NaN torque becomes the box's point nearest 0, a box with a
+    /// NaN bound or `lo > hi` gives 0). The caller keeps NaN out of `pb`.
     pub fn filter(&mut self, pb: &QpProblem<'_>, out: &mut DVector<f64>) -> QpOutcome {
         let n = self.nv;
         if Self::is_feasible(pb) {
@@ -293,8 +295,9 @@ impl QpFilter {
                 pb.tau_osc[i]
             };
             // The interior-point answer is feasible to tolerance; the box is
-            // made exact here because torque limits are hard.
-            out[i] = t.clamp(pb.tau_lo[i], pb.tau_hi[i]);
+            // made exact here because torque limits are hard (and without
+            // `f64::clamp`, which panics on a NaN bound).
+            out[i] = crate::clamp_torque(t, pb.tau_lo[i], pb.tau_hi[i]);
         }
         if ok {
             QpOutcome::Solved {

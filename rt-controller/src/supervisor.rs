@@ -253,7 +253,13 @@ impl Supervisor {
         }
     }
 
-    /// Checks the measured state against limits.
+    /// Checks the measured state against limits. Every value of `q`, `v`
+    /// and the wrench is checked for finiteness, and that outranks any
+    /// limit: a limit fault never hides a NaN or an infinity in a later
+    /// joint (with a limit fault the step still computes the dynamics and
+    /// the safe command at this state). Then every joint against its
+    /// position and velocity limits (the first joint at fault is reported),
+    /// then the wrench.
     pub fn check_state(
         cfg: &SafetyConfig,
         model: &Model,
@@ -265,13 +271,14 @@ impl Supervisor {
         if !finite(q) || !finite(v) || wrench.is_some_and(|w| !finite(w)) {
             return Err(FaultReason::NonFiniteState);
         }
-        for (k, j) in model.joints[1..].iter().enumerate() {
-            let tol = cfg.position_limit_tolerance_rad;
-            if q[k] < j.limits.lower - tol || q[k] > j.limits.upper + tol {
-                return Err(FaultReason::JointPositionLimit { joint: k, q: q[k] });
+        let tol = cfg.position_limit_tolerance_rad;
+        let joints = model.joints[1..].iter().zip(q.iter().zip(v));
+        for (k, (j, (&q, &v))) in joints.enumerate() {
+            if q < j.limits.lower - tol || q > j.limits.upper + tol {
+                return Err(FaultReason::JointPositionLimit { joint: k, q });
             }
-            if v[k].abs() > j.limits.velocity * cfg.velocity_fault_scale {
-                return Err(FaultReason::JointVelocityLimit { joint: k, v: v[k] });
+            if v.abs() > j.limits.velocity * cfg.velocity_fault_scale {
+                return Err(FaultReason::JointVelocityLimit { joint: k, v });
             }
         }
         if let Some(w) = wrench {
@@ -355,5 +362,43 @@ mod tests {
         assert_eq!(ok([0.0, 0.2, 0.0, 0.0]), Err(Rejection::OutOfRange));
         assert_eq!(ok([0.0, 0.0, 0.0, -1.0]), Err(Rejection::OutOfRange));
         assert_eq!(ok([1e300, 0.0, 0.0, 0.0]), Err(Rejection::OutOfRange));
+    }
+
+    #[test]
+    fn a_limit_fault_never_hides_a_non_finite_value_in_a_later_joint() {
+        let cfg = SafetyConfig::default();
+        let model = robot_model::descriptions::builtin("panda").unwrap();
+        let ok_q = robot_model::descriptions::PANDA_READY_Q;
+        let check = |q: &[f64], v: &[f64], w: Option<&[f64; 6]>| {
+            Supervisor::check_state(&cfg, &model, q, v, w)
+        };
+        let mut q = ok_q;
+        q[0] = 10.0; // joint 0 far past its limit
+        let zero = [0.0; 7];
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for k in 1..7 {
+                let mut v = zero;
+                v[k] = bad;
+                assert_eq!(check(&q, &v, None), Err(FaultReason::NonFiniteState));
+                let mut q2 = q;
+                q2[k] = bad;
+                assert_eq!(check(&q2, &zero, None), Err(FaultReason::NonFiniteState));
+            }
+            let mut w = [0.0; 6];
+            w[5] = bad;
+            assert_eq!(check(&q, &zero, Some(&w)), Err(FaultReason::NonFiniteState));
+        }
+        // Every joint is checked: the first one at fault is reported.
+        let mut v = zero;
+        v[6] = 100.0;
+        assert_eq!(
+            check(&ok_q, &v, None),
+            Err(FaultReason::JointVelocityLimit { joint: 6, v: 100.0 })
+        );
+        assert_eq!(
+            check(&q, &v, None),
+            Err(FaultReason::JointPositionLimit { joint: 0, q: 10.0 })
+        );
+        assert_eq!(check(&ok_q, &zero, Some(&[0.0; 6])), Ok(()));
     }
 }

@@ -175,7 +175,9 @@ impl TrajectoryGenerator {
     ) -> ActionEffect {
         let mut clamped = false;
         let mut clamp = |x: f64, lo: f64, hi: f64| {
-            let y = x.clamp(lo, hi);
+            // Not `f64::clamp`, which panics on a NaN bound or `lo > hi`
+            // (here a NaN bound is ignored and an empty box gives `hi`).
+            let y = x.max(lo).min(hi);
             // `!=` would call −0.0 vs 0.0 equal anyway; NaN never reaches here.
             if y != x {
                 clamped = true;

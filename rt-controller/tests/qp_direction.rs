@@ -71,7 +71,13 @@ fn saturated_qp_keeps_the_force_direction_far_better_than_clipping() {
                 a_u,
                 rest_q: &rest,
             };
-            osc::compute(od, &inputs, 0.02, 0.0, 0.0);
+            let params = osc::OscParams {
+                singular_eps: 0.02,
+                eigen_max_iter: 180,
+                null_kp: 0.0,
+                null_kv: 0.0,
+            };
+            osc::compute(od, &inputs, &params).expect("OSC at a finite state");
         };
         run(&mut od, &a_u);
         if od.min_sigma < 0.02 {

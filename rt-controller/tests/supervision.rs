@@ -245,3 +245,116 @@ fn bad_configuration_names_the_field() {
         .to_string();
     assert!(e.contains("workspace_min_m[1]"), "{e}");
 }
+
+/// The first state of an episode with NaN measured torques and a joint so
+/// far past its speed limit that `h(q, v)` overflows: the rate limiter must
+/// not start from a non-finite `h` (its box became NaN and `f64::clamp`
+/// panicked in the safe command).
+#[test]
+fn a_first_state_with_nan_torques_and_a_runaway_joint_faults_without_panicking() {
+    let model = panda();
+    let ctrl = rt_controller::Controller::new(&model, ControllerConfig::default()).unwrap();
+    let limits = model.effort_limits();
+    let nan = [f64::NAN; 7];
+    for speed in [1e155, 1e200, f64::MAX, -f64::MAX] {
+        for joint in [0, 3, 6] {
+            let mut d = ctrl.create_data(&model);
+            let mut v = [0.0; 7];
+            v[joint] = speed;
+            let mut q = PANDA_READY;
+            q[(joint + 1) % 7] = 100.0; // and another joint out of its range
+            let state = RobotState {
+                q: &q,
+                v: &v,
+                tau_measured: Some(&nan),
+                wrench: None,
+            };
+            let info = step(&model, &ctrl, &mut d, &state, None, 0.0);
+            assert_eq!(info.mode, Mode::Fault);
+            assert!(
+                matches!(
+                    d.supervisor.fault(),
+                    Some(
+                        FaultReason::JointPositionLimit { .. }
+                            | FaultReason::JointVelocityLimit { .. }
+                    )
+                ),
+                "the state's reason is kept: {:?}",
+                d.supervisor.fault()
+            );
+            // With neither the measured torques nor h usable, the rate
+            // limiter starts from the gravity torque at this pose.
+            let mut rm = model.create_data();
+            let g = robot_model::gravity(&model, &mut rm, &q).clone();
+            let first = d.torques().to_vec();
+            for (i, t) in first.iter().enumerate() {
+                assert!(
+                    t.is_finite() && t.abs() <= limits[i],
+                    "{speed} {joint}: {first:?}"
+                );
+                assert!(
+                    (t - g[i]).abs() <= 1.0 + 1e-9,
+                    "{speed} {joint}: {first:?} vs {g}"
+                );
+            }
+            // The next command stays within the rate limit of this one.
+            let zero = [0.0; 7];
+            let calm = RobotState {
+                q: &PANDA_READY,
+                v: &zero,
+                tau_measured: None,
+                wrench: None,
+            };
+            step(&model, &ctrl, &mut d, &calm, None, 0.001);
+            for (i, t) in d.torques().iter().enumerate() {
+                assert!(t.is_finite() && (t - first[i]).abs() <= 1.0 + 1e-9);
+            }
+        }
+    }
+}
+
+/// An eigen-decomposition of `Λ⁻¹` that does not converge within its cap
+/// (nalgebra's uncapped one can loop forever) is a dynamics failure: Fault,
+/// finite torques within the limits and the rate limit.
+#[test]
+fn an_eigen_decomposition_out_of_iterations_is_a_dynamics_failure() {
+    let model = panda();
+    let mut config = ControllerConfig::default();
+    config.osc.eigen_max_iter = 1;
+    let ctrl = rt_controller::Controller::new(&model, config).unwrap();
+    let mut d = ctrl.create_data(&model);
+    let zero = [0.0; 7];
+    let state = RobotState {
+        q: &PANDA_READY,
+        v: &zero,
+        tau_measured: None,
+        wrench: None,
+    };
+    let info = step(&model, &ctrl, &mut d, &state, None, 0.0);
+    assert_eq!(info.mode, Mode::Fault);
+    assert_eq!(d.supervisor.fault(), Some(FaultReason::DynamicsFailure));
+    let limits = model.effort_limits();
+    let mut before = d.torques().to_vec();
+    for k in 1..50 {
+        step(&model, &ctrl, &mut d, &state, None, k as f64 * 0.001);
+        for (i, t) in d.torques().iter().enumerate() {
+            assert!(t.is_finite() && t.abs() <= limits[i]);
+            assert!((t - before[i]).abs() <= 1.0 + 1e-9);
+        }
+        before = d.torques().to_vec();
+    }
+    // Gravity compensation in Fault: the held arm's torques are h(q, 0).
+    let mut rm = model.create_data();
+    let g = robot_model::gravity(&model, &mut rm, &PANDA_READY).clone();
+    for (t, g) in d.torques().iter().zip(g.iter()) {
+        assert!((t - g).abs() < 1e-6, "{t} vs {g}");
+    }
+    let cfg = ControllerConfig::default();
+    assert_eq!(cfg.osc.eigen_max_iter, 180);
+    let mut bad = cfg.clone();
+    bad.osc.eigen_max_iter = 0;
+    let e = rt_controller::Controller::new(&model, bad)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("osc.eigen_max_iter"), "{e}");
+}

@@ -254,16 +254,59 @@ pub fn subscriber<T: Message>(node: &StackNode, namespace: &str) -> Result<Sub<T
     Channel::<T>::open(node, namespace)?.subscriber()
 }
 
-/// Publishes a copy of `msg` (for the small messages). Never allocates.
+/// What failed in a publication or a receive, without iceoryx2's details:
+/// the `try_` functions return it because building [`TransportError`]'s
+/// text allocates, and the real-time loop must not, even when it fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// No sample could be loaned (`LoanError`).
+    Loan,
+    /// The loaned sample could not be sent (`SendError`).
+    Send,
+    /// A receive failed (`ReceiveError`).
+    Receive,
+}
+
+impl Failure {
+    /// What was being done, as [`TransportError::Ipc`] words it.
+    pub fn what(self) -> &'static str {
+        match self {
+            Failure::Loan => "loaning sample",
+            Failure::Send => "sending",
+            Failure::Receive => "receiving",
+        }
+    }
+}
+
+fn detailed<T: Message>(f: Failure, e: &dyn core::fmt::Debug) -> TransportError {
+    ipc_err(T::TOPIC, f.what(), e)
+}
+
+/// Publishes a copy of `msg` (for the small messages). Never allocates
+/// unless it fails.
 pub fn send<T: Message>(publisher: &Pub<T>, msg: &T) -> Result<(), TransportError> {
-    let sample = publisher
-        .loan_uninit()
-        .map_err(|e| ipc_err(T::TOPIC, "loaning sample", e))?;
+    copy_out(publisher, msg, detailed::<T>)
+}
+
+/// As [`send`], and never allocates, even when it fails.
+pub fn try_send<T: Message>(publisher: &Pub<T>, msg: &T) -> Result<(), Failure> {
+    copy_out(publisher, msg, |f, _| f)
+}
+
+fn copy_out<T: Message, E>(
+    publisher: &Pub<T>,
+    msg: &T,
+    err: impl FnOnce(Failure, &dyn core::fmt::Debug) -> E,
+) -> Result<(), E> {
+    let sample = match publisher.loan_uninit() {
+        Ok(s) => s,
+        Err(e) => return Err(err(Failure::Loan, &e)),
+    };
     sample
         .write_payload(*msg)
         .send()
         .map(|_| ())
-        .map_err(|e| ipc_err(T::TOPIC, "sending", e))
+        .map_err(|e| err(Failure::Send, &e))
 }
 
 /// Builds a message in place in shared memory (zeroed first) and publishes
@@ -272,9 +315,26 @@ pub fn send_with<T: Message>(
     publisher: &Pub<T>,
     fill: impl FnOnce(&mut T),
 ) -> Result<(), TransportError> {
-    let mut sample = publisher
-        .loan_uninit()
-        .map_err(|e| ipc_err(T::TOPIC, "loaning sample", e))?;
+    fill_out(publisher, fill, detailed::<T>)
+}
+
+/// As [`send_with`], and never allocates, even when it fails.
+pub fn try_send_with<T: Message>(
+    publisher: &Pub<T>,
+    fill: impl FnOnce(&mut T),
+) -> Result<(), Failure> {
+    fill_out(publisher, fill, |f, _| f)
+}
+
+fn fill_out<T: Message, E>(
+    publisher: &Pub<T>,
+    fill: impl FnOnce(&mut T),
+    err: impl FnOnce(Failure, &dyn core::fmt::Debug) -> E,
+) -> Result<(), E> {
+    let mut sample = match publisher.loan_uninit() {
+        Ok(s) => s,
+        Err(e) => return Err(err(Failure::Loan, &e)),
+    };
     let slot = sample.payload_mut();
     // SAFETY: messages are `Zeroable`, so all-zero bytes are a valid value;
     // they are written in place (`T::zeroed()` would build the value on the
@@ -287,14 +347,24 @@ pub fn send_with<T: Message>(
     sample
         .send()
         .map(|_| ())
-        .map_err(|e| ipc_err(T::TOPIC, "sending", e))
+        .map_err(|e| err(Failure::Send, &e))
 }
 
 /// Receives every queued sample, calling `f` on each; returns how many.
-pub fn drain<T: Message>(
+pub fn drain<T: Message>(subscriber: &Sub<T>, f: impl FnMut(&T)) -> Result<usize, TransportError> {
+    drain_into(subscriber, f, detailed::<T>)
+}
+
+/// As [`drain`], and never allocates, even when a receive fails.
+pub fn try_drain<T: Message>(subscriber: &Sub<T>, f: impl FnMut(&T)) -> Result<usize, Failure> {
+    drain_into(subscriber, f, |f, _| f)
+}
+
+fn drain_into<T: Message, E>(
     subscriber: &Sub<T>,
     mut f: impl FnMut(&T),
-) -> Result<usize, TransportError> {
+    err: impl FnOnce(Failure, &dyn core::fmt::Debug) -> E,
+) -> Result<usize, E> {
     let mut n = 0;
     loop {
         match subscriber.receive() {
@@ -303,7 +373,7 @@ pub fn drain<T: Message>(
                 n += 1;
             }
             Ok(None) => return Ok(n),
-            Err(e) => return Err(ipc_err(T::TOPIC, "receiving", e)),
+            Err(e) => return Err(err(Failure::Receive, &e)),
         }
     }
 }

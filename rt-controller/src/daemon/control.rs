@@ -174,11 +174,12 @@ impl<H: Hardware> Daemon<H> {
 
     /// Takes every queued action message into the queue; garbage (another
     /// schema) is counted and dropped. The control law validates the
-    /// values (NaN, out of range) itself.
-    fn take_actions(&mut self) -> Result<(), HardwareError> {
+    /// values (NaN, out of range) itself. A failed receive is counted and
+    /// the cycle goes on: without actions the control law holds.
+    fn take_actions(&mut self) {
         let (queue, stats) = (&mut self.queue, &mut self.stats);
         let episode = self.control.episode();
-        transport::drain(&self.actions, |a| {
+        let drained = transport::try_drain(&self.actions, |a| {
             stats.actions_received += 1;
             if !for_episode(a, episode) {
                 // Sent for the episode before a reset, arriving after it: in
@@ -190,23 +191,25 @@ impl<H: Hardware> Daemon<H> {
                 // queue.
                 stats.actions_garbage += 1;
             }
-        })?;
-        Ok(())
+        });
+        if drained.is_err() {
+            self.stats.receive_errors += 1;
+        }
     }
 
     /// Lockstep: waits (bounded) for the action addressed to `step`.
-    fn wait_for_addressed_action(&mut self, step: u64) -> Result<(), HardwareError> {
+    fn wait_for_addressed_action(&mut self, step: u64) {
         let limit = (self.cfg.timing.lockstep_action_timeout_s * 1e9) as u64;
         let start = mono_now_ns();
         let mut spins = 0u32;
         loop {
-            self.take_actions()?;
+            self.take_actions();
             self.queue.drop_before(step);
             if self.queue.front().is_some_and(|a| a.apply_at_step == step)
                 || shared_mem_schema::process::termination_requested()
                 || mono_now_ns() - start > limit
             {
-                return Ok(());
+                return;
             }
             spins += 1;
             if spins > 200 {
@@ -217,6 +220,9 @@ impl<H: Hardware> Daemon<H> {
 
     /// One control cycle at `now_ns` (`CLOCK_MONOTONIC`), after the
     /// hardware was polled (`fresh`: a new state arrived). Never allocates.
+    /// Only a failure to send the torques is an error: failed publications
+    /// to the learner (sensor frame, status) and failed action receives are
+    /// counted in [`Stats`] and the arm stays under control.
     pub fn cycle(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
         self.stats.cycles += 1;
         self.shared
@@ -227,7 +233,7 @@ impl<H: Hardware> Daemon<H> {
         }
         let outcome = self.control(now_ns, fresh)?;
         if now_ns >= self.next_status_ns {
-            self.publish_status(now_ns)?;
+            self.publish_status(now_ns);
             let period = (self.cfg.timing.status_period_ms * 1e6) as u64;
             self.next_status_ns = now_ns + period;
         }
@@ -239,6 +245,10 @@ impl<H: Hardware> Daemon<H> {
         self.shared
             .garbage_actions
             .store(self.garbage(), Ordering::Relaxed);
+        let io_errors = self.stats.publish_errors + self.stats.receive_errors;
+        self.shared
+            .learner_io_errors
+            .store(io_errors, Ordering::Relaxed);
         Ok(outcome)
     }
 
@@ -248,7 +258,7 @@ impl<H: Hardware> Daemon<H> {
 
     fn control(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
         if !self.have_state {
-            self.take_actions()?;
+            self.take_actions();
             self.queue.clear();
             return Ok(CycleOutcome::WaitingForHardware);
         }
@@ -258,7 +268,7 @@ impl<H: Hardware> Daemon<H> {
         }
         if self.hardware_lost {
             // Latched until the hardware comes back with a new episode.
-            self.take_actions()?;
+            self.take_actions();
             self.queue.clear();
             return Ok(CycleOutcome::HardwareLost);
         }
@@ -272,9 +282,9 @@ impl<H: Hardware> Daemon<H> {
             && step > 0
             && step.is_multiple_of(t.action_period_steps)
         {
-            self.wait_for_addressed_action(step)?;
+            self.wait_for_addressed_action(step);
         } else {
-            self.take_actions()?;
+            self.take_actions();
         }
         let action = self.queue.next_for(step);
         let info = self.control.cycle(
@@ -301,12 +311,17 @@ impl<H: Hardware> Daemon<H> {
                 .record(sent.saturating_sub(a.header.t_mono_ns));
         }
         self.sensor.header.t_mono_ns = mono_now_ns();
-        transport::send(&self.sensor_pub, &self.sensor)?;
+        // The learner's loss, not the arm's: counted, the loop goes on
+        // (`try_send` builds no error text: no allocation when it fails).
+        if transport::try_send(&self.sensor_pub, &self.sensor).is_err() {
+            self.stats.publish_errors += 1;
+        }
         Ok(CycleOutcome::Sent)
     }
 
     /// Publishes the status now (also called at ~10 Hz by [`Daemon::cycle`]).
-    pub fn publish_status(&mut self, now_ns: u64) -> Result<(), HardwareError> {
+    /// A failure is counted in [`Stats::publish_errors`], never fatal.
+    pub fn publish_status(&mut self, now_ns: u64) {
         self.status_seq += 1;
         let c = self.control.data.supervisor.counters;
         let s = &self.stats;
@@ -318,7 +333,7 @@ impl<H: Hardware> Daemon<H> {
         );
         let (mode, fault, garbage) = (self.mode() as u32, self.fault_code(), self.garbage());
         let (last_action, realtime) = (self.control.last_action_seq(), self.realtime as u32);
-        transport::send_with(&self.status_pub, |m| {
+        let sent = transport::try_send_with(&self.status_pub, |m| {
             m.header = header;
             m.cycles = s.cycles;
             m.overruns = s.overruns;
@@ -336,12 +351,107 @@ impl<H: Hardware> Daemon<H> {
             m.wakeup_latency = s.wakeup;
             m.compute = s.compute;
             m.action_latency = s.action_latency;
-        })?;
-        Ok(())
+        });
+        if sent.is_err() {
+            self.stats.publish_errors += 1;
+        }
     }
 
     /// Asks the control law to hold the current target (shutdown).
     pub fn request_hold(&mut self) {
         self.control.request_hold(&self.state);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::SimBackend;
+    use robot_model::descriptions::{IIWA14_HOME_Q, builtin};
+    use shared_mem_schema::rates::CONTROL_PERIOD_NS;
+
+    /// Holds every sample `publisher` will lend (iceoryx2 lends
+    /// `publisher_max_loaned_samples`, 2 by default): its next publication
+    /// fails with `ExceedsMaxLoans`, a real transport error.
+    fn exhaust<T: Message>(publisher: &Pub<T>) -> Vec<impl Sized + use<T>> {
+        let mut held = Vec::new();
+        while let Ok(s) = publisher.loan_uninit() {
+            held.push(s);
+            assert!(held.len() < 64, "iceoryx2 kept lending");
+        }
+        held
+    }
+
+    #[test]
+    fn failed_publications_to_the_learner_are_counted_and_the_torques_keep_going() {
+        transport::quiet_logs();
+        let ns = format!("pub-fail-{}", std::process::id());
+        let mut cfg = DaemonConfig::default();
+        cfg.backend.namespace = ns.clone();
+        cfg.timing.clock = Clock::Hardware;
+        cfg.realtime.enabled = false;
+        let model = builtin("iiwa14").unwrap();
+        let nv = model.nv();
+        let peer = transport::create_node("pub-fail-peer").unwrap();
+        let hw = transport::publisher::<HardwareState>(&peer, &ns).unwrap();
+        let torques = transport::subscriber::<TorqueCommand>(&peer, &ns).unwrap();
+        let sensor = transport::subscriber::<SensorFrame>(&peer, &ns).unwrap();
+        let node = transport::create_node("pub-fail-daemon").unwrap();
+        let backend = SimBackend::open(&node, &ns).unwrap();
+        let mut daemon = Daemon::new(cfg, model, backend, &node).unwrap();
+        let mut state = HardwareState::empty(nv);
+        state.header.episode = 1;
+        state.q[..nv].copy_from_slice(&IIWA14_HOME_Q);
+        let mut run = |daemon: &mut Daemon<SimBackend>, k: u64| {
+            state.header.seq = k + 1;
+            state.header.t_hw_ns = k * CONTROL_PERIOD_NS;
+            state.step = k;
+            transport::send(&hw, &state).unwrap();
+            let now = mono_now_ns();
+            let fresh = daemon.poll_hardware(now).unwrap();
+            assert!(fresh, "step {k}");
+            let outcome = daemon
+                .cycle(now, fresh)
+                .expect("publication failures are not fatal");
+            assert_eq!(outcome, CycleOutcome::Sent, "step {k}");
+            let mut commands = 0;
+            transport::drain(&torques, |c| {
+                assert_eq!(c.state_step, k);
+                assert!(c.tau[..nv].iter().all(|t| t.is_finite()));
+                commands += 1;
+            })
+            .unwrap();
+            assert_eq!(commands, 1, "step {k}: the hardware got its command");
+        };
+
+        let held_sensor = exhaust(&daemon.sensor_pub);
+        let held_status = exhaust(&daemon.status_pub);
+        for k in 0..20 {
+            run(&mut daemon, k);
+        }
+        // 20 sensor frames and at least the first status.
+        assert!(
+            daemon.stats.publish_errors >= 21,
+            "{}",
+            daemon.stats.publish_errors
+        );
+        assert_eq!(daemon.mode(), ControllerMode::Idle);
+        assert_eq!(daemon.control.fault_code(), 0);
+        assert_eq!(
+            daemon.shared.learner_io_errors.load(Ordering::Relaxed),
+            daemon.stats.publish_errors
+        );
+        assert_eq!(transport::drain(&sensor, |_| {}).unwrap(), 0);
+
+        // The loans back: publications work again, nothing more is counted.
+        drop((held_sensor, held_status));
+        let errors = daemon.stats.publish_errors;
+        for k in 20..25 {
+            run(&mut daemon, k);
+        }
+        assert_eq!(daemon.stats.publish_errors, errors);
+        assert_eq!(transport::drain(&sensor, |_| {}).unwrap(), 5);
+        daemon.publish_status(mono_now_ns());
+        assert_eq!(daemon.stats.publish_errors, errors);
     }
 }

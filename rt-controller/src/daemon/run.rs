@@ -113,7 +113,7 @@ impl<H: Hardware> Daemon<H> {
         }
         rt_alloc::leave_realtime();
         let now = mono_now_ns();
-        self.publish_status(now)?;
+        self.publish_status(now);
         Ok(RunSummary {
             cycles: self.stats.cycles,
             overruns: self.stats.overruns,

@@ -20,4 +20,7 @@ pub struct Shared {
     pub garbage_actions: AtomicU64,
     /// Overruns so far.
     pub overruns: AtomicU64,
+    /// Failed publications to and receives from the learner so far
+    /// ([`crate::daemon::Stats`]' `publish_errors` + `receive_errors`).
+    pub learner_io_errors: AtomicU64,
 }

@@ -17,6 +17,12 @@ pub struct Stats {
     pub actions_garbage: u64,
     /// Actions dropped as answers to an earlier episode.
     pub actions_stale: u64,
+    /// Sensor frames and status messages that could not be published (the
+    /// loop goes on: only the torque command is the arm's).
+    pub publish_errors: u64,
+    /// Failed receives of the action stream (the loop goes on; without
+    /// actions the control law holds).
+    pub receive_errors: u64,
     /// Wake-up latency past the deadline.
     pub wakeup: LatencyHistogram,
     /// Compute time per cycle.
@@ -34,6 +40,8 @@ impl Stats {
         actions_received: 0,
         actions_garbage: 0,
         actions_stale: 0,
+        publish_errors: 0,
+        receive_errors: 0,
         wakeup: LatencyHistogram::EMPTY,
         compute: LatencyHistogram::EMPTY,
         action_latency: LatencyHistogram::EMPTY,
