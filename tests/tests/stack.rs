@@ -66,12 +66,27 @@ fn heuristic_policy_completes_insertion_through_the_stack() {
             stdout.contains(": completed after"),
             "{mode} {peg}: not completed:\n{stdout}\n{stderr}"
         );
+        // The user's episodes count from 1 (hw-sim's idle start is not one).
+        let numbers: Vec<&str> = stdout
+            .lines()
+            .filter_map(|l| l.strip_prefix("episode "))
+            .filter_map(|l| l.split_whitespace().next())
+            .collect();
+        assert_eq!(numbers, ["1"], "{mode}: episodes printed:\n{stdout}");
         let logs: Vec<_> = std::fs::read_dir(&dir)
             .unwrap()
             .filter_map(|e| e.ok())
             .filter(|e| e.path().extension().is_some_and(|x| x == "mcap"))
             .collect();
         assert_eq!(logs.len(), 1, "{mode}: one MCAP log per episode");
+        assert!(
+            logs[0]
+                .file_name()
+                .to_string_lossy()
+                .starts_with("episode-0001-"),
+            "{mode}: log {:?}",
+            logs[0].file_name()
+        );
         assert!(logs[0].metadata().unwrap().len() > 10_000);
         let ctl = std::fs::read_to_string(dir.join("rt-controller.log")).unwrap();
         assert!(
