@@ -206,6 +206,55 @@ fn silent_hardware_is_a_fault_with_no_further_torques() {
     );
 }
 
+/// The lines of `log` longer than `max` characters, or iceoryx2's
+/// config-file warning.
+fn noisy_lines(log: &str, max: usize) -> Vec<String> {
+    log.lines()
+        .filter(|l| l.chars().count() > max || l.contains("No config file"))
+        .map(|l| l.chars().take(400).collect())
+        .collect()
+}
+
+#[test]
+fn a_killed_peer_costs_the_others_no_long_log_lines() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("quiet");
+    let dir = test_support::scratch_dir("quiet");
+    let (_sim, mut ctl) = start_sim_and_controller(&ns, &dir.join("first"));
+    let node = transport::create_node("e2e-observer").unwrap();
+    let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    assert!(
+        wait_for(&torques, Duration::from_secs(20), |_| true).is_some(),
+        "no torque commands at all"
+    );
+    // A controller killed: its node is dead, its ports stay behind; the
+    // next one removes them at its start, while hw-sim keeps serving.
+    ctl.signal(libc::SIGKILL);
+    ctl.wait_timeout(Duration::from_secs(5)).expect("killed");
+    std::thread::sleep(Duration::from_millis(300));
+    let mut ctl = tests::start(
+        "rt-controller",
+        &["--namespace", &ns, "--no-realtime"],
+        &dir.join("second"),
+    );
+    transport::drain(&torques, |_| {}).unwrap();
+    assert!(
+        wait_for(&torques, Duration::from_secs(20), |_| true).is_some(),
+        "the second controller sent no torques"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    ctl.stop(Duration::from_secs(5));
+    for log in [
+        "first/hw-sim.log",
+        "first/rt-controller.log",
+        "second/rt-controller.log",
+    ] {
+        let text = std::fs::read_to_string(dir.join(log)).unwrap();
+        let noisy = noisy_lines(&text, 300);
+        assert!(noisy.is_empty(), "{log}: {noisy:#?}");
+    }
+}
+
 #[test]
 fn processes_of_another_schema_version_are_refused() {
     let _g = tests::exclusive();
