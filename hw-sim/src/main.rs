@@ -127,6 +127,9 @@ struct Server {
     args: Args,
     world: World,
     namespace: String,
+    /// Resets so far: 0 is the idle start (the schema's "before any"), so
+    /// the first reset a user asks for is episode 1. Every reset changes
+    /// it, which is what restarts the controller's law.
     episode: u64,
     seed: u64,
     state_pub: Pub<HardwareState>,
@@ -186,7 +189,7 @@ fn run(args: Args) -> Result<()> {
         args,
         world,
         namespace: ns,
-        episode: 1,
+        episode: 0,
         state_pub,
         report_pub,
         torque_sub,

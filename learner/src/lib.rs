@@ -4,8 +4,8 @@
 //! reading ([`log`]), data collection ([`collect`]), the self-supervised
 //! dataset and its labels ([`dataset`], [`labels`]), the scripted and random
 //! policies ([`policy`]), the fast-path environment ([`env`]), the live
-//! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]) and
-//! the command-line interface. Not written yet, each to get its own folder:
+//! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]),
+//! charts for people ([`plot`]) and the command-line interface. Not written yet, each to get its own folder:
 //! the multimodal representation with its baselines and ablations
 //! (`models/`), its training loops (`train/`), the RL environment with TRPO
 //! (`rl/`) and the paper's experiments (`eval/`); see docs/architecture.md.
@@ -19,6 +19,7 @@ pub mod env;
 pub mod labels;
 pub mod live;
 pub mod log;
+pub mod plot;
 pub mod policy;
 pub mod progress;
 pub mod stack;

@@ -153,7 +153,8 @@ pub fn collect_live(c: &LiveCollect) -> Result<(), StackError> {
 /// How an episode ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeOutcome {
-    /// Episode number (the simulator's).
+    /// Episode number: the simulator's reset count (1 for the first reset
+    /// after hw-sim starts).
     pub episode: u64,
     /// Its seed.
     pub seed: u64,

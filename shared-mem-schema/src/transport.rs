@@ -16,6 +16,7 @@ use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
 };
+use iceoryx2_log::Log;
 
 /// The service attribute that carries the schema version.
 pub const SCHEMA_ATTRIBUTE: &str = "vision_touch.schema_version";
@@ -95,10 +96,70 @@ fn ipc_err(service: &str, what: &'static str, e: impl core::fmt::Debug) -> Trans
     }
 }
 
-/// Lowers iceoryx2's own logging to errors (its warnings, such as "no
-/// config file", are noise for users).
+/// The longest line an iceoryx2 message becomes, in characters.
+pub const MAX_LOG_LINE: usize = 200;
+
+/// iceoryx2's messages as one short line each on stderr. Its own console
+/// logger prints the `Debug` form of the object that logged above each
+/// message: on a dead node's clean-up, kilobytes of service configuration.
+struct OneLineLogger;
+
+impl Log for OneLineLogger {
+    fn log(&self, level: LogLevel, _origin: core::fmt::Arguments, message: core::fmt::Arguments) {
+        use std::io::Write;
+        // A closed stderr is no reason to stop.
+        let _ = writeln!(
+            std::io::stderr().lock(),
+            "{}",
+            log_line(level, &message.to_string())
+        );
+    }
+}
+
+/// The line an iceoryx2 message becomes: its level and text, whitespace
+/// runs (newlines included) collapsed to one space, cut to
+/// [`MAX_LOG_LINE`] characters.
+pub fn log_line(level: LogLevel, message: &str) -> String {
+    let level = match level {
+        LogLevel::Trace => "trace",
+        LogLevel::Debug => "debug",
+        LogLevel::Info => "info",
+        LogLevel::Warn => "warning",
+        LogLevel::Error => "error",
+        LogLevel::Fatal => "fatal",
+    };
+    let mut line = format!("iceoryx2 {level}:");
+    for word in message.split_whitespace() {
+        line.push(' ');
+        line.push_str(word);
+    }
+    if line.chars().count() > MAX_LOG_LINE {
+        line = line.chars().take(MAX_LOG_LINE - 1).collect();
+        line.push('…');
+    }
+    line
+}
+
+/// Makes iceoryx2's logging fit for users: errors only, one short line
+/// each ([`log_line`]); its warnings ("No config file was loaded") and
+/// debug dumps are noise to them. With `IOX2_LOG_LEVEL` set, iceoryx2's
+/// own logger prints in full at that level instead (to debug the
+/// transport). Processes call it first thing; the transport's functions
+/// call it too, so tests and tools get it without asking. Only the first
+/// call acts.
 pub fn quiet_logs() {
-    set_log_level(LogLevel::Error);
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("IOX2_LOG_LEVEL").is_some() {
+            set_log_level_from_env_or(LogLevel::Error);
+        } else {
+            // Refused only if iceoryx2 logged before: then its logger
+            // stays, at the level set here.
+            static LOGGER: OneLineLogger = OneLineLogger;
+            let _ = set_logger(&LOGGER);
+            set_log_level(LogLevel::Error);
+        }
+    });
 }
 
 /// Creates a node named `name`. Signal handling is left to the process
@@ -117,6 +178,7 @@ pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
 /// Removes the shared-memory resources of nodes whose process died; returns
 /// how many dead nodes were found.
 pub fn cleanup_dead_nodes() -> usize {
+    quiet_logs();
     let mut dead = Vec::new();
     let _ = StackNode::list(Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
@@ -142,6 +204,7 @@ fn version_value(version: u32) -> AttributeValue {
 /// The schema version a service was created with; `None` if the service
 /// does not exist, `Some("none")` without the attribute.
 pub fn service_schema_version(name: &str) -> Option<String> {
+    quiet_logs();
     let sn = ServiceName::new(name).ok()?;
     let details = ipc::Service::details(
         &sn,
@@ -374,6 +437,37 @@ fn drain_into<T: Message, E>(
             }
             Ok(None) => return Ok(n),
             Err(e) => return Err(err(Failure::Receive, &e)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn iceoryx2_messages_become_one_short_line() {
+        // What its debug dumps look like: many lines of configuration.
+        let dump = format!(
+            "Unable to remove stale resources.\n{}",
+            "  Config { global: Global { root_path: \"/tmp/iceoryx2/\" } }\n".repeat(100)
+        );
+        let line = log_line(LogLevel::Error, &dump);
+        assert!(!line.contains('\n'), "{line}");
+        assert_eq!(line.chars().count(), MAX_LOG_LINE, "{line}");
+        assert!(line.starts_with("iceoryx2 error: Unable to remove stale resources. Config {"));
+        assert!(line.ends_with('…'));
+        assert_eq!(
+            log_line(LogLevel::Warn, "short  one\n"),
+            "iceoryx2 warning: short one"
+        );
+    }
+
+    #[test]
+    fn quiet_logs_lets_only_errors_through() {
+        quiet_logs();
+        if std::env::var_os("IOX2_LOG_LEVEL").is_none() {
+            assert_eq!(iceoryx2_log::get_log_level(), LogLevel::Error as u8);
         }
     }
 }

@@ -66,12 +66,27 @@ fn heuristic_policy_completes_insertion_through_the_stack() {
             stdout.contains(": completed after"),
             "{mode} {peg}: not completed:\n{stdout}\n{stderr}"
         );
+        // The user's episodes count from 1 (hw-sim's idle start is not one).
+        let numbers: Vec<&str> = stdout
+            .lines()
+            .filter_map(|l| l.strip_prefix("episode "))
+            .filter_map(|l| l.split_whitespace().next())
+            .collect();
+        assert_eq!(numbers, ["1"], "{mode}: episodes printed:\n{stdout}");
         let logs: Vec<_> = std::fs::read_dir(&dir)
             .unwrap()
             .filter_map(|e| e.ok())
             .filter(|e| e.path().extension().is_some_and(|x| x == "mcap"))
             .collect();
         assert_eq!(logs.len(), 1, "{mode}: one MCAP log per episode");
+        assert!(
+            logs[0]
+                .file_name()
+                .to_string_lossy()
+                .starts_with("episode-0001-"),
+            "{mode}: log {:?}",
+            logs[0].file_name()
+        );
         assert!(logs[0].metadata().unwrap().len() > 10_000);
         let ctl = std::fs::read_to_string(dir.join("rt-controller.log")).unwrap();
         assert!(
@@ -189,6 +204,55 @@ fn silent_hardware_is_a_fault_with_no_further_torques() {
         late, 0,
         "{late} torque commands after the hardware went silent"
     );
+}
+
+/// The lines of `log` longer than `max` characters, or iceoryx2's
+/// config-file warning.
+fn noisy_lines(log: &str, max: usize) -> Vec<String> {
+    log.lines()
+        .filter(|l| l.chars().count() > max || l.contains("No config file"))
+        .map(|l| l.chars().take(400).collect())
+        .collect()
+}
+
+#[test]
+fn a_killed_peer_costs_the_others_no_long_log_lines() {
+    let _g = tests::exclusive();
+    let ns = tests::unique_namespace("quiet");
+    let dir = test_support::scratch_dir("quiet");
+    let (_sim, mut ctl) = start_sim_and_controller(&ns, &dir.join("first"));
+    let node = transport::create_node("e2e-observer").unwrap();
+    let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    assert!(
+        wait_for(&torques, Duration::from_secs(20), |_| true).is_some(),
+        "no torque commands at all"
+    );
+    // A controller killed: its node is dead, its ports stay behind; the
+    // next one removes them at its start, while hw-sim keeps serving.
+    ctl.signal(libc::SIGKILL);
+    ctl.wait_timeout(Duration::from_secs(5)).expect("killed");
+    std::thread::sleep(Duration::from_millis(300));
+    let mut ctl = tests::start(
+        "rt-controller",
+        &["--namespace", &ns, "--no-realtime"],
+        &dir.join("second"),
+    );
+    transport::drain(&torques, |_| {}).unwrap();
+    assert!(
+        wait_for(&torques, Duration::from_secs(20), |_| true).is_some(),
+        "the second controller sent no torques"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    ctl.stop(Duration::from_secs(5));
+    for log in [
+        "first/hw-sim.log",
+        "first/rt-controller.log",
+        "second/rt-controller.log",
+    ] {
+        let text = std::fs::read_to_string(dir.join(log)).unwrap();
+        let noisy = noisy_lines(&text, 300);
+        assert!(noisy.is_empty(), "{log}: {noisy:#?}");
+    }
 }
 
 #[test]

@@ -8,10 +8,11 @@
 //! cargo run --release -p tests --bin jitter -- --duration-s 30
 //! ```
 //!
-//! Prints a table, writes `jitter.json` and `jitter.png` (wake-up latency
-//! histograms, log counts) into `--out`.
+//! Prints a table, writes `jitter.json` and `jitter.png` (the wake-up latency
+//! histograms of both, log counts, titled and labelled) into `--out`.
 
 use clap::Parser;
+use learner::plot::{Chart, Series};
 use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
 };
@@ -86,135 +87,30 @@ fn json(h: &LatencyHistogram) -> serde_json::Value {
     })
 }
 
-/// 3×5 digits for tick labels.
-const DIGITS: [[u8; 5]; 10] = [
-    [7, 5, 5, 5, 7],
-    [2, 6, 2, 2, 7],
-    [7, 1, 7, 4, 7],
-    [7, 1, 7, 1, 7],
-    [5, 5, 7, 1, 1],
-    [7, 4, 7, 1, 7],
-    [7, 4, 7, 5, 7],
-    [7, 1, 1, 1, 1],
-    [7, 5, 7, 5, 7],
-    [7, 5, 7, 1, 7],
-];
-
-struct Canvas {
-    w: usize,
-    h: usize,
-    px: Vec<u8>,
-}
-
-impl Canvas {
-    fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
-        if x < self.w && y < self.h {
-            let i = 3 * (y * self.w + x);
-            self.px[i..i + 3].copy_from_slice(&c);
-        }
-    }
-    fn text(&mut self, x: usize, y: usize, s: &str) {
-        for (k, ch) in s.chars().enumerate() {
-            if let Some(d) = ch.to_digit(10) {
-                for (r, bits) in DIGITS[d as usize].iter().enumerate() {
-                    for c in 0..3 {
-                        if bits & (4 >> c) != 0 {
-                            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                                self.set(x + 8 * k + 2 * c + dx, y + 2 * r + dy, [0, 0, 0]);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Histograms of wake-up latency: x in µs (linear, labelled), y log10 of
-/// the count; daemon blue bars, bare timer thin orange bars.
-fn picture(daemon: &LatencyHistogram, bare: &LatencyHistogram) -> (usize, usize, Vec<u8>) {
-    let (w, h) = (900usize, 420usize);
-    let (left, bottom, top) = (40usize, 40usize, 20usize);
-    let mut cv = Canvas {
-        w,
-        h,
-        px: vec![255; w * h * 3],
-    };
+/// The wake-up latency histograms of the daemon and the bare timer, up to
+/// a little past the larger p99.99, as a chart (log counts); the legend
+/// says how many cycles lie beyond the axis.
+fn chart(daemon: &LatencyHistogram, bare: &LatencyHistogram, duration_s: f64) -> Chart {
     let span = (daemon.quantile_us(0.9999).max(bare.quantile_us(0.9999)) * 1.2)
         .clamp(20.0, shared_mem_schema::HISTOGRAM_BINS as f64) as usize;
-    let plot_w = w - left - 10;
-    let plot_h = h - bottom - top;
-    let max_count = daemon
-        .bins
-        .iter()
-        .chain(bare.bins.iter())
-        .copied()
-        .max()
-        .unwrap_or(1)
-        .max(1) as f64;
-    let ymax = max_count.log10().max(1.0);
-    let x_of = |us: f64| left + (us / span as f64 * plot_w as f64) as usize;
-    let y_of = |count: u32| {
-        let v = if count == 0 {
-            0.0
+    let series = |name: &str, h: &LatencyHistogram| {
+        let counts: Vec<f64> = h.bins[..span].iter().map(|&c| f64::from(c)).collect();
+        let beyond = h.count - counts.iter().sum::<f64>() as u64;
+        let name = if beyond > 0 {
+            format!("{name}; {beyond} beyond {span} µs")
         } else {
-            (count as f64).log10() + 0.1
+            name.to_string()
         };
-        h - bottom - ((v / (ymax + 0.1)) * plot_h as f64) as usize
+        Series::histogram(&name, 0.0, 1.0, &counts)
     };
-    // Axes and ticks.
-    for x in left..w - 10 {
-        cv.set(x, h - bottom, [0, 0, 0]);
-    }
-    for y in top..=h - bottom {
-        cv.set(left, y, [0, 0, 0]);
-    }
-    let step = [1usize, 2, 5, 10, 20, 50, 100, 200, 500]
-        .into_iter()
-        .find(|s| span / s <= 12)
-        .unwrap_or(1000);
-    let mut t = 0;
-    while t <= span {
-        let x = x_of(t as f64);
-        for y in top..h - bottom {
-            if y % 4 == 0 {
-                cv.set(x, y, [200, 200, 200]);
-            }
-        }
-        cv.text(x.saturating_sub(4), h - bottom + 8, &t.to_string());
-        t += step;
-    }
-    for decade in 0..=(ymax as u32) {
-        let y = y_of(10u32.pow(decade).max(1));
-        for x in left..w - 10 {
-            if x % 4 == 0 {
-                cv.set(x, y, [220, 220, 220]);
-            }
-        }
-        cv.text(4, y.saturating_sub(5), &10u64.pow(decade).to_string());
-    }
-    // The daemon as filled bars, the bare timer as a thin bar over each.
-    for (hist, color, thin) in [(daemon, [30, 90, 200], false), (bare, [230, 120, 20], true)] {
-        for us in 0..span {
-            let c = hist.bins[us];
-            if c == 0 {
-                continue;
-            }
-            let x0 = x_of(us as f64);
-            let x1 = x_of(us as f64 + 1.0).max(x0 + 1);
-            let (x0, x1) = if thin {
-                (x0 + (x1 - x0) / 2, x0 + (x1 - x0) / 2 + 1)
-            } else {
-                (x0, x1)
-            };
-            for x in x0..x1 {
-                for y in y_of(c)..h - bottom {
-                    cv.set(x, y, color);
-                }
-            }
-        }
-    }
-    (w, h, cv.px)
+    Chart::new(
+        &format!("Wake-up latency of the 1 kHz loop ({duration_s} s)"),
+        "wake-up latency (µs)",
+        "cycles",
+    )
+    .log_y()
+    .with(series("rt-controller daemon", daemon))
+    .with(series("bare timer thread (the machine's floor)", bare))
 }
 
 fn main() -> anyhow::Result<()> {
@@ -352,8 +248,7 @@ fn main() -> anyhow::Result<()> {
         dir.join("jitter.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
-    let (w, h, px) = picture(&wake, &bare);
-    hw_sim::png::write(dir.join("jitter.png"), w as u32, h as u32, 3, &px)?;
+    chart(&wake, &bare, args.duration_s).write_png(dir.join("jitter.png"))?;
     println!(
         "wrote {} and {}",
         dir.join("jitter.json").display(),
