@@ -143,8 +143,11 @@ pub struct HeuristicConfig {
     /// controller faults at its `safety.max_force_n`), N.
     pub max_press_force_n: f64,
     /// Within this of the hole's bottom the insertion is done and the
-    /// policy holds, m.
+    /// policy rests there, m.
     pub bottom_tol_m: f64,
+    /// Resting on the bottom, it presses down until the wrist reads this
+    /// much (above `contact_force_n`, well below the fault), N.
+    pub rest_press_force_n: f64,
     /// Spiral search: growth of the radius per action, m.
     pub search_growth_m: f64,
     /// Spiral search: largest radius, m.
@@ -163,6 +166,7 @@ impl Default for HeuristicConfig {
             contact_force_n: 4.0,
             max_press_force_n: 15.0,
             bottom_tol_m: 0.002,
+            rest_press_force_n: 8.0,
             search_growth_m: 0.0002,
             search_max_m: 0.004,
         }
@@ -282,15 +286,28 @@ impl HeuristicPolicy {
                 if at_bottom {
                     // At the bottom: the task is done. Pushing on (down, or
                     // sideways against the walls) only winds the contact
-                    // force up until the controller faults; hold instead.
-                    Vector3::zeros()
+                    // force up until the controller faults; rest on the
+                    // bottom with a light press instead.
+                    let dz = if pressing < c.rest_press_force_n {
+                        0.0005
+                    } else {
+                        0.0
+                    };
+                    Vector3::new(0.0, 0.0, -dz)
                 } else {
                     let xy = clamp_norm(Vector3::new(-s.x, -s.y, 0.0) * gain, 0.002);
                     // Slow down towards the box's top (above the opening)
                     // and towards the bottom: a rigid surface met at full
                     // speed is an impact spike on the wrist sensor that the
                     // controller faults on (266 N at 8 cm/s measured).
-                    let to_surface = if s.z > 0.0 { s.z } else { to_bottom };
+                    // Over the opening the peg goes in without touching the
+                    // top, so only a misaligned tip slows down for it.
+                    let aligned = s.x.hypot(s.y) < c.align_tol_m;
+                    let to_surface = if s.z > 0.0 && !aligned {
+                        s.z
+                    } else {
+                        to_bottom
+                    };
                     let dz = (0.25 * to_surface).clamp(0.0005, c.descend_step_m);
                     xy + Vector3::new(0.0, 0.0, -dz)
                 }
