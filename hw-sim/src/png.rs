@@ -77,8 +77,7 @@ mod tests {
 
     #[test]
     fn written_images_decode_to_the_same_pixels() {
-        let tmp = tempfile::tempdir().unwrap();
-        let dir = tmp.path();
+        let dir = test_support::scratch_dir("png");
         for (channels, name) in [(1u8, "grey.png"), (3, "rgb.png")] {
             let (w, h) = (5u32, 3u32);
             let px: Vec<u8> = (0..w * h * channels as u32)
