@@ -197,9 +197,41 @@ impl DaemonConfig {
             t.lockstep_action_timeout_s,
         )?;
         non_negative("timing.shutdown_hold_s", t.shutdown_hold_s)?;
+        // Upper bounds: a longer hardware timeout no longer protects the
+        // arm (and huge values saturated the nanosecond conversion, which
+        // turned the check off); the others keep shutdown and start-up
+        // bounded in time.
+        within(
+            "timing.hardware_timeout_ms",
+            t.hardware_timeout_ms,
+            0.0..=1000.0,
+        )?;
+        within(
+            "timing.startup_timeout_s",
+            t.startup_timeout_s,
+            0.0..=3600.0,
+        )?;
+        within(
+            "timing.status_period_ms",
+            t.status_period_ms,
+            0.0..=10_000.0,
+        )?;
+        within(
+            "timing.lockstep_action_timeout_s",
+            t.lockstep_action_timeout_s,
+            0.0..=60.0,
+        )?;
+        within("timing.shutdown_hold_s", t.shutdown_hold_s, 0.0..=60.0)?;
         at_least("timing.action_period_steps", t.action_period_steps, 1)?;
         // SCHED_FIFO priorities are 1 to 99.
         within("realtime.priority", self.realtime.priority, 1..=99)?;
+        // The loop runs on the main thread (8 MiB of stack by default); the
+        // pre-fault recurses in 16 KiB frames and must stay well inside it.
+        within(
+            "realtime.prefault_stack_kib",
+            self.realtime.prefault_stack_kib,
+            0..=2048,
+        )?;
         let ns = &self.backend.namespace;
         ensure(
             !ns.is_empty() && !ns.contains(char::is_whitespace),
@@ -228,6 +260,33 @@ mod tests {
         let c = DaemonConfig::from_file(std::path::Path::new(path)).unwrap();
         assert_eq!(c.robot, "iiwa14");
         assert_eq!(c.timing.clock, Clock::Wall);
+    }
+
+    #[test]
+    fn timing_and_stack_values_are_bounded() {
+        for (toml, field) in [
+            (
+                "[timing]\nhardware_timeout_ms = 1e300\n",
+                "timing.hardware_timeout_ms",
+            ),
+            (
+                "[timing]\nshutdown_hold_s = 1e9\n",
+                "timing.shutdown_hold_s",
+            ),
+            (
+                "[realtime]\nprefault_stack_kib = 65536\n",
+                "realtime.prefault_stack_kib",
+            ),
+        ] {
+            let e = DaemonConfig::from_toml(toml, "x.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{toml}: {e}");
+        }
+        let mut c = DaemonConfig::default();
+        c.timing.hardware_timeout_ms = 1000.0;
+        c.realtime.prefault_stack_kib = 2048;
+        c.validate().unwrap();
     }
 
     #[test]
