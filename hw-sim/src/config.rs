@@ -1,7 +1,7 @@
 //! Configuration of the simulated world and of an episode, TOML-ready:
 //! every field has a default; `validate` names the field at fault.
 
-use crate::shapes::{PegShape, inset, offset_convex};
+use crate::shapes::{PegShape, hole_outline, inset};
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{
     ConfigFileError, FieldError, all_finite, at_least, check, ensure, joint_count, non_negative,
@@ -391,7 +391,7 @@ impl TaskConfig {
         non_negative("task.in_hole_margin_m", self.in_hole_margin_m)?;
         // The hole's outline as the box builds it (mirroring, which the
         // box applies, does not change distances from the centre).
-        let hole = offset_convex(&self.peg.outline(self.peg_width_m), 0.5 * self.clearance_m);
+        let hole = hole_outline(&self.peg.outline(self.peg_width_m), self.clearance_m);
         let reach = inset(&hole, [0.0, 0.0]);
         check(
             "task.in_hole_margin_m",

@@ -143,6 +143,12 @@ pub fn offset_convex(poly: &[[f64; 2]], d: f64) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The outline of the hole for a peg of outline `peg`: the peg's grown by
+/// half the diametral `clearance` on every side.
+pub fn hole_outline(peg: &[[f64; 2]], clearance: f64) -> Vec<[f64; 2]> {
+    offset_convex(peg, 0.5 * clearance)
+}
+
 /// How far `p` lies inside a convex counter-clockwise polygon: the least
 /// distance from `p` to the lines through its edges. Inside, that is the
 /// distance to the outline; outside, it is negative (its size is then only a
@@ -258,7 +264,7 @@ impl BoxWithHole {
     /// an intersection of convex sets, hence convex, and together they tile
     /// the square minus the hole.
     pub fn new(peg: &[[f64; 2]], clearance: f64, side: f64, height: f64, depth: f64) -> Self {
-        let hole = offset_convex(peg, 0.5 * clearance);
+        let hole = hole_outline(peg, clearance);
         let h = 0.5 * side;
         let square = vec![[-h, -h], [h, -h], [h, h], [-h, h]];
         let c = centroid(&hole);

@@ -16,6 +16,7 @@ use learner::plot::{Chart, Series};
 use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
 };
+use shared_mem_schema::rates::CONTROL_PERIOD_NS;
 use shared_mem_schema::transport;
 use shared_mem_schema::{ControllerStatus, LatencyHistogram, PolicyAction};
 use std::path::PathBuf;
@@ -48,8 +49,6 @@ fn set_fifo(priority: i32) -> bool {
 }
 
 /// The bare timer: absolute 1 ms sleeps, nothing else.
-use shared_mem_schema::rates::CONTROL_PERIOD_NS;
-
 fn bare_timer(duration_s: f64, priority: Option<i32>) -> (LatencyHistogram, bool) {
     let fifo = priority.is_some_and(set_fifo);
     let mut h = LatencyHistogram::EMPTY;
