@@ -67,6 +67,15 @@ struct Args {
     /// Do not render or publish camera frames.
     #[arg(long)]
     no_camera: bool,
+    /// Real-time mode: SCHED_FIFO priority of the stepping thread, below
+    /// the controller's (rt-controller's `realtime.priority`, 80), so that
+    /// under load the simulated robot keeps its period as hardware does and
+    /// the controller still comes first.
+    #[arg(long, default_value_t = 70, value_parser = clap::value_parser!(i32).range(1..=99))]
+    realtime_priority: i32,
+    /// Real-time mode: stay at normal priority.
+    #[arg(long)]
+    no_realtime: bool,
 }
 
 /// Work for the render thread.
@@ -146,6 +155,11 @@ struct Server {
     /// The answer to the newest command.
     last_result: Answer,
     rejected_commands: u64,
+    /// Camera frames not rendered because the renderer was behind.
+    camera_dropped: u64,
+    /// Real-time mode: steps that started more than a period after their
+    /// deadline (their states reach the controller late, in a burst).
+    late_steps: u64,
     shutdown: bool,
 }
 
@@ -204,6 +218,8 @@ fn run(args: Args) -> Result<()> {
             outcome: Ok(()),
         },
         rejected_commands: 0,
+        camera_dropped: 0,
+        late_steps: 0,
         shutdown: false,
     };
     info!(
@@ -222,15 +238,31 @@ fn run(args: Args) -> Result<()> {
         server.world.config().dt_s
     );
     server.new_episode_camera();
+    // After the render thread started: it inherits the normal priority, and
+    // only the stepping loop runs ahead of the machine's other work.
+    if server.args.mode == Mode::Realtime && !server.args.no_realtime {
+        let priority = server.args.realtime_priority;
+        match shared_mem_schema::process::set_fifo_priority(priority) {
+            Ok(()) => info!("hw-sim: stepping at SCHED_FIFO priority {priority}"),
+            Err(e) => warn!(
+                "hw-sim: SCHED_FIFO priority {priority} refused ({e}): stepping at normal \
+                 priority, so under load steps run late and the controller misses states; \
+                 grant LimitRTPRIO=99 or CAP_SYS_NICE, or pass --no-realtime to silence this"
+            ),
+        }
+    }
     let result = server.serve();
     drop(server.render_tx.take());
     if let Some(h) = render_thread {
         let _ = h.join();
     }
     info!(
-        "hw-sim: stopped after {} steps ({} torque commands refused)",
+        "hw-sim: stopped after {} steps ({} torque commands refused, {} steps late by more than \
+         a period, {} camera frames dropped)",
         server.world.step_index(),
-        server.rejected_commands
+        server.rejected_commands,
+        server.late_steps,
+        server.camera_dropped
     );
     result
 }
@@ -287,14 +319,28 @@ impl Server {
                         episode: self.episode,
                         seq: self.camera_seq,
                     };
-                    if tx.send(job).is_err() {
-                        bail!("the render thread stopped");
+                    match tx.try_send(job) {
+                        Ok(()) => {}
+                        // The renderer is behind: the frame is dropped (and
+                        // counted) rather than the robot's next step delayed.
+                        Err(mpsc::TrySendError::Full(_)) => {
+                            if self.camera_dropped == 0 {
+                                warn!("hw-sim: the renderer is behind; camera frames dropped");
+                            }
+                            self.camera_dropped += 1;
+                        }
+                        Err(mpsc::TrySendError::Disconnected(_)) => {
+                            bail!("the render thread stopped")
+                        }
                     }
                 }
             }
             if self.args.mode == Mode::Realtime {
                 deadline += dt_ns;
                 let now = mono_now_ns();
+                if now > deadline + dt_ns {
+                    self.late_steps += 1;
+                }
                 if now > deadline + 20 * dt_ns {
                     // Far behind (a stall): restart the schedule instead of
                     // racing through the missed steps.

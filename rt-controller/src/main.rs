@@ -163,9 +163,10 @@ fn run(args: Args) -> Result<()> {
     );
     let s = &daemon.stats;
     info!(
-        "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, wake-up p99 \
-         {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs, {} garbage actions, {} failed \
-         publications, {} failed action receives",
+        "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, {} hardware \
+         states skipped, wake-up p99 {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs, {} \
+         garbage actions, {} actions dropped from the full queue, {} failed publications, {} \
+         failed action receives",
         match termination_signal() {
             0 => String::new(),
             s => format!(" (signal {s})"),
@@ -173,11 +174,13 @@ fn run(args: Args) -> Result<()> {
         summary.cycles,
         summary.overruns,
         s.hardware_misses,
+        s.hardware_states_skipped,
         s.wakeup.quantile_us(0.99),
         s.wakeup.max_ns as f64 / 1e3,
         s.compute.quantile_us(0.99),
         s.compute.max_ns as f64 / 1e3,
         daemon.shared.garbage_actions.load(Ordering::Relaxed),
+        s.actions_overflow,
         s.publish_errors,
         s.receive_errors
     );
@@ -188,6 +191,7 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
     let mut last_beat = 0;
     let mut last_mode = u32::MAX;
     let mut last_garbage = 0;
+    let mut last_overflow = 0;
     let mut last_overruns = 0;
     let mut last_io_errors = 0;
     while !stop.load(Ordering::Relaxed) {
@@ -213,6 +217,11 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
             &shared.garbage_actions,
             &mut last_garbage,
             "garbage actions ignored",
+        );
+        warn_on_increase(
+            &shared.overflow_actions,
+            &mut last_overflow,
+            "actions dropped from the full action queue",
         );
         warn_on_increase(&shared.overruns, &mut last_overruns, "overruns");
         warn_on_increase(

@@ -27,7 +27,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the message layout. Bump it whenever any message's layout or
 /// meaning changes; peers built from different versions refuse to talk.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// Joint arrays hold this many entries; `n_joints` says how many are used.
 pub const MAX_JOINTS: usize = 8;
@@ -520,6 +520,9 @@ pub struct ControllerStatus {
     pub actions_accepted: u64,
     /// Garbage actions (NaN, out of range, wrong schema) counted and ignored.
     pub actions_rejected: u64,
+    /// Actions dropped unread because the controller's action queue was
+    /// full (the oldest goes): a flood, not bad values.
+    pub actions_overflow: u64,
     /// Valid actions ignored (fault or hold).
     pub actions_ignored: u64,
     /// Times the action stream went silent past the timeout.
@@ -528,6 +531,9 @@ pub struct ControllerStatus {
     pub faults: u64,
     /// Cycles without a new hardware state.
     pub hardware_misses: u64,
+    /// Hardware states never controlled: a newer one had arrived by the
+    /// cycle (their steps have no sensor frame).
+    pub hardware_states_skipped: u64,
     /// Sequence number of the newest action applied.
     pub last_action_seq: u64,
     /// Controller mode ([`ControllerMode`] as u32).
@@ -665,7 +671,7 @@ const _: () = assert!(
 );
 const _: () = assert!(size_of::<LatencyHistogram>() == 32 + 4 * HISTOGRAM_BINS);
 const _: () =
-    assert!(size_of::<ControllerStatus>() == H + 80 + 16 + 3 * size_of::<LatencyHistogram>());
+    assert!(size_of::<ControllerStatus>() == H + 96 + 16 + 3 * size_of::<LatencyHistogram>());
 const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
 const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
 

@@ -39,6 +39,22 @@ pub fn sleep_until_ns(deadline_ns: u64) {
     }
 }
 
+/// Puts the calling thread under `SCHED_FIFO` at `priority` (1..=99):
+/// real-time scheduling for the stack's 1 kHz loops. Refused without
+/// `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` of at least `priority`; the error is
+/// the system's.
+pub fn set_fifo_priority(priority: i32) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: plain syscall on the calling thread.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 static TERMINATE: AtomicBool = AtomicBool::new(false);
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 

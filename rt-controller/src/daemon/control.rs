@@ -162,6 +162,15 @@ impl<H: Hardware> Daemon<H> {
             self.hw.send(&cmd)?;
             return Ok(false);
         }
+        if self.have_state
+            && s.header.episode == self.state.header.episode
+            && s.step > self.state.step + 1
+        {
+            // The states between were superseded in the hardware's queue
+            // before a cycle took them: their steps get no command and no
+            // sensor frame.
+            self.stats.hardware_states_skipped += s.step - self.state.step - 1;
+        }
         self.state = *s;
         self.last_state_ns = now_ns;
         if self.control.observe_episode(&self.state) {
@@ -186,10 +195,13 @@ impl<H: Hardware> Daemon<H> {
                 // lockstep it would sit at the queue's front, addressed to a
                 // step of the old episode, and hold back the new one's.
                 stats.actions_stale += 1;
-            } else if a.header.schema_version != SCHEMA_VERSION || queue.push(*a) {
-                // Another schema's bytes, or the oldest of an overflowing
-                // queue.
+            } else if a.header.schema_version != SCHEMA_VERSION {
+                // Another schema's bytes.
                 stats.actions_garbage += 1;
+            } else if queue.push(*a) {
+                // A flood: the oldest queued action went, unread. Counted
+                // apart from garbage, which says something about the values.
+                stats.actions_overflow += 1;
             }
         });
         if drained.is_err() {
@@ -245,6 +257,12 @@ impl<H: Hardware> Daemon<H> {
         self.shared
             .garbage_actions
             .store(self.garbage(), Ordering::Relaxed);
+        self.shared
+            .overflow_actions
+            .store(self.stats.actions_overflow, Ordering::Relaxed);
+        self.shared
+            .skipped_states
+            .store(self.stats.hardware_states_skipped, Ordering::Relaxed);
         let io_errors = self.stats.publish_errors + self.stats.receive_errors;
         self.shared
             .learner_io_errors
@@ -340,10 +358,12 @@ impl<H: Hardware> Daemon<H> {
             m.actions_received = s.actions_received;
             m.actions_accepted = c.actions_accepted;
             m.actions_rejected = garbage;
+            m.actions_overflow = s.actions_overflow;
             m.actions_ignored = c.actions_ignored;
             m.action_timeouts = c.action_timeouts;
             m.faults = c.faults;
             m.hardware_misses = s.hardware_misses;
+            m.hardware_states_skipped = s.hardware_states_skipped;
             m.last_action_seq = last_action;
             m.mode = mode;
             m.fault_code = fault;

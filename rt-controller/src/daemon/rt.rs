@@ -86,19 +86,13 @@ pub fn setup(cfg: &RealtimeConfig) -> RtReport {
             ));
         }
     }
-    let param = libc::sched_param {
-        sched_priority: cfg.priority,
-    };
-    // SAFETY: plain syscall on the calling thread.
-    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0 {
-        r.fifo = true;
-    } else {
-        r.warnings.push(format!(
-            "SCHED_FIFO priority {} refused ({}): the loop runs with normal priority and \
-             its jitter will show it; grant LimitRTPRIO=99 / CAP_SYS_NICE",
-            cfg.priority,
-            errno_text()
-        ));
+    match shared_mem_schema::process::set_fifo_priority(cfg.priority) {
+        Ok(()) => r.fifo = true,
+        Err(e) => r.warnings.push(format!(
+            "SCHED_FIFO priority {} refused ({e}): the loop runs with normal priority and its \
+             jitter will show it; grant LimitRTPRIO=99 / CAP_SYS_NICE",
+            cfg.priority
+        )),
     }
     r
 }

@@ -18,6 +18,10 @@ pub struct Shared {
     pub fault_code: AtomicU32,
     /// Garbage actions counted so far.
     pub garbage_actions: AtomicU64,
+    /// Actions dropped from the full action queue so far.
+    pub overflow_actions: AtomicU64,
+    /// Hardware states skipped (superseded before a cycle) so far.
+    pub skipped_states: AtomicU64,
     /// Overruns so far.
     pub overruns: AtomicU64,
     /// Failed publications to and receives from the learner so far

@@ -10,11 +10,16 @@ pub struct Stats {
     pub overruns: u64,
     /// Cycles without a new hardware state.
     pub hardware_misses: u64,
+    /// Hardware states never controlled because a newer one had arrived by
+    /// the cycle (counted from the gaps in the states' steps).
+    pub hardware_states_skipped: u64,
     /// Actions received.
     pub actions_received: u64,
-    /// Actions refused before the control law saw them (wrong schema
-    /// version, queue overflow).
+    /// Actions refused before the control law saw them (another schema
+    /// version).
     pub actions_garbage: u64,
+    /// Actions dropped from the full action queue (the oldest goes).
+    pub actions_overflow: u64,
     /// Actions dropped as answers to an earlier episode.
     pub actions_stale: u64,
     /// Sensor frames and status messages that could not be published (the
@@ -37,8 +42,10 @@ impl Stats {
         cycles: 0,
         overruns: 0,
         hardware_misses: 0,
+        hardware_states_skipped: 0,
         actions_received: 0,
         actions_garbage: 0,
+        actions_overflow: 0,
         actions_stale: 0,
         publish_errors: 0,
         receive_errors: 0,
