@@ -9,7 +9,8 @@
 
 use crate::collect::{EpisodePolicy, Mix, MixedPolicy};
 use crate::log::events::{Event, Outcome, Reset};
-use crate::log::{LogOptions, LogWriter, RunConfig, RunMode};
+use crate::log::gaps::SensorGapCounter;
+use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use crate::progress::Progress;
 use crate::stack::StackError;
@@ -23,6 +24,7 @@ use shared_mem_schema::{
     CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
     Stage, hw_time_s,
 };
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -168,6 +170,9 @@ pub struct EpisodeOutcome {
     pub actions: u64,
     /// Its log.
     pub log: PathBuf,
+    /// The gaps in its logged sensor frames: hardware steps with no frame,
+    /// and which of those the controller published but the log lacks.
+    pub sensor_gaps: ChannelGaps,
 }
 
 /// The policy node's services: what it reads and what it publishes.
@@ -185,7 +190,14 @@ pub struct PolicyNode {
     command: Pub<SimCommand>,
     action_seq: u64,
     command_seq: u64,
+    /// Sensor frames drained while waiting for a reset's answer (the new
+    /// episode's first frames among them), logged by the next pump.
+    early: VecDeque<SensorFrame>,
 }
+
+/// Sensor frames kept while a reset is answered: 2 s of frames; the new
+/// episode's come last, so dropping the oldest loses the old episode's.
+const EARLY_FRAMES: usize = 2000;
 
 /// What the node has seen of the current episode.
 struct Seen {
@@ -194,6 +206,7 @@ struct Seen {
     wrench: WrenchHistory,
     frames: u64,
     last_frame_wall_ns: u64,
+    gaps: SensorGapCounter,
 }
 
 impl PolicyNode {
@@ -210,6 +223,7 @@ impl PolicyNode {
             _node: node,
             action_seq: 0,
             command_seq: 0,
+            early: VecDeque::new(),
         })
     }
 
@@ -222,12 +236,13 @@ impl PolicyNode {
     ) -> Result<(), StackError> {
         let now = mono_now_ns();
         let mut err = None;
-        transport::drain(&self.sensor, |f| {
+        let mut on_frame = |f: &SensorFrame| {
             if f.header.episode != episode {
                 return;
             }
             seen.wrench.push(f.wrench);
             seen.frames += 1;
+            seen.gaps.push(f);
             seen.last_frame_wall_ns = now;
             if let Some(l) = log.as_deref_mut()
                 && let Err(e) = l.sensor(f)
@@ -235,7 +250,11 @@ impl PolicyNode {
                 err = Some(e);
             }
             seen.frame = Some(*f);
-        })?;
+        };
+        for f in self.early.drain(..) {
+            on_frame(&f);
+        }
+        transport::drain(&self.sensor, &mut on_frame)?;
         transport::drain(&self.report, |r| {
             if r.header.episode == episode {
                 if let Some(l) = log.as_deref_mut()
@@ -265,6 +284,27 @@ impl PolicyNode {
             return Err(e.into());
         }
         Ok(())
+    }
+
+    /// Waits (up to 10 s) until the controller publishes sensor frames.
+    /// hw-sim starts an episode at the reset whether the controller runs or
+    /// not, and a step before the controller's first cycle has no frame: a
+    /// stack started all at once would lose the first episode's first
+    /// steps.
+    pub fn wait_for_controller(&mut self) -> Result<(), StackError> {
+        let start = mono_now_ns();
+        loop {
+            if transport::drain(&self.sensor, |_| {})? > 0 {
+                return Ok(());
+            }
+            if termination_requested() {
+                return Err(StackError::Interrupted);
+            }
+            if mono_now_ns() - start > 10_000_000_000 {
+                return Err(StackError::NoSensorFrames);
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// Publishes an action (`apply_at_step` 0: as soon as it arrives).
@@ -333,19 +373,24 @@ impl PolicyNode {
                 }
                 return Ok(r);
             }
-            // A lockstep stack may be waiting on us for an action: answer
-            // any pending request with a zero action so it can move on to
-            // the reset.
-            if lockstep {
-                let mut pending = None;
-                transport::drain(&self.sensor, |f| {
-                    if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
-                        pending = Some((f.header.episode, f.header.t_hw_ns, f.step + 1));
-                    }
-                })?;
-                if let Some((ep, t, step)) = pending {
-                    self.send_action(ep, t, step, [0.0; 4])?;
+            // The frames keep coming meanwhile, the new episode's first
+            // among them: kept for the log rather than left to overflow
+            // the subscriber's buffer. A lockstep stack may be waiting on us
+            // for an action: answer any pending request with a zero action
+            // so it can move on to the reset.
+            let mut pending = None;
+            let early = &mut self.early;
+            transport::drain(&self.sensor, |f| {
+                if lockstep && (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
+                    pending = Some((f.header.episode, f.header.t_hw_ns, f.step + 1));
                 }
+                if early.len() == EARLY_FRAMES {
+                    early.pop_front();
+                }
+                early.push_back(*f);
+            })?;
+            if let Some((ep, t, step)) = pending {
+                self.send_action(ep, t, step, [0.0; 4])?;
             }
             if termination_requested() {
                 return Err(StackError::Interrupted);
@@ -378,6 +423,7 @@ pub fn run(
 ) -> Result<Vec<EpisodeOutcome>, StackError> {
     transport::quiet_logs();
     let mut node = PolicyNode::open(&cfg.namespace)?;
+    node.wait_for_controller()?;
     let mut outcomes = Vec::new();
     let progress = cfg.target_states.map(|t| Progress::new(t, "states"));
     let mut total_actions = 0u64;
@@ -489,6 +535,7 @@ impl LiveEpisode {
                 wrench: WrenchHistory::default(),
                 frames: 0,
                 last_frame_wall_ns: mono_now_ns(),
+                gaps: SensorGapCounter::default(),
             },
             actions: 0,
             next_tick: mono_now_ns(),
@@ -632,6 +679,7 @@ impl LiveEpisode {
             duration_s,
             actions: self.actions,
             log: path,
+            sensor_gaps: self.seen.gaps.gaps().clone(),
         })
     }
 }

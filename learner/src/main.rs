@@ -351,12 +351,14 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
 
 #[derive(Debug, Subcommand)]
 enum LogCmd {
-    /// Channels, message counts and time span of a complete log.
+    /// Channels, message counts and time span of a complete log, and the
+    /// gaps in its 1 kHz channels.
     Info {
         /// The log.
         file: PathBuf,
     },
-    /// Reads every record and chunk; reports the first damage by byte offset.
+    /// Reads every record and chunk; reports the first damage by byte offset
+    /// (exit status 1), then the gaps in the 1 kHz channels.
     Check {
         /// The log.
         file: PathBuf,
@@ -413,7 +415,7 @@ fn run_log(cmd: LogCmd) -> Result<()> {
                     t.topic, t.messages, t.schema, t.encoding
                 );
             }
-            Ok(())
+            print_gaps(&r)
         }
         LogCmd::Check { file } => {
             let rep = log::scan(&file)?;
@@ -433,7 +435,7 @@ fn run_log(cmd: LogCmd) -> Result<()> {
                     file.display()
                 );
             }
-            Ok(())
+            print_gaps(&log::LogReader::open(&file)?)
         }
         LogCmd::Recover { file, output } => {
             let out = output.unwrap_or_else(|| file.with_extension("recovered.mcap"));
@@ -455,6 +457,19 @@ fn run_log(cmd: LogCmd) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Prints the gaps of every 1 kHz channel of a log (lost messages are
+/// reported, not an error: the file itself is intact).
+fn print_gaps(r: &learner::log::LogReader) -> Result<()> {
+    let gaps = learner::log::log_gaps(r)?;
+    if gaps.is_empty() {
+        println!("1 kHz channels: none");
+    }
+    for line in learner::log::gaps::describe(&gaps) {
+        println!("1 kHz {line}");
+    }
+    Ok(())
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -481,14 +496,23 @@ fn run(cli: Cli) -> Result<()> {
             cfg.log.foxglove = !c.no_foxglove;
             cfg.log.view_rate_hz = c.view_rate_hz;
             let outcomes = live::run(&cfg, |o| {
+                let g = &o.sensor_gaps;
+                let loss = g.sensor.unwrap_or_default();
                 println!(
-                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; log {}",
+                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; sensor frames: {} \
+                     logged, {} missing in {} gaps ({} hardware steps without a controller frame, \
+                     {} published but not recorded); log {}",
                     o.episode,
                     o.seed,
                     o.stage,
                     if o.interrupted { " (interrupted)" } else { "" },
                     o.duration_s,
                     o.actions,
+                    g.messages,
+                    g.missing,
+                    g.gaps,
+                    loss.not_published,
+                    loss.not_recorded,
                     o.log.display()
                 );
             })?;

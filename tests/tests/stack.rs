@@ -88,10 +88,68 @@ fn heuristic_policy_completes_insertion_through_the_stack() {
             logs[0].file_name()
         );
         assert!(logs[0].metadata().unwrap().len() > 10_000);
+        check_sensor_frames_accounted(mode, &stdout, &logs[0].path());
         let ctl = std::fs::read_to_string(dir.join("rt-controller.log")).unwrap();
         assert!(
             !ctl.contains("mode fault"),
             "{mode}: controller faulted:\n{ctl}"
+        );
+    }
+}
+
+/// The counts in `learner run`'s episode line (`sensor frames: N logged, M
+/// missing in G gaps (A hardware steps without a controller frame, B
+/// published but not recorded)`).
+fn episode_frame_counts(stdout: &str) -> [u64; 5] {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("episode "))
+        .unwrap_or_else(|| panic!("no episode line:\n{stdout}"));
+    let (_, rest) = line
+        .split_once("sensor frames: ")
+        .unwrap_or_else(|| panic!("no sensor frame counts: {line}"));
+    let numbers: Vec<u64> = rest
+        .split(|c: char| !c.is_ascii_digit())
+        .filter(|w| !w.is_empty())
+        .take(5)
+        .map(|w| w.parse().unwrap())
+        .collect();
+    numbers
+        .try_into()
+        .unwrap_or_else(|_| panic!("counts: {line}"))
+}
+
+/// Every frame the controller published is in the episode's log, or counted
+/// as lost: the counts the policy node printed are the gaps the log shows.
+/// In lockstep no hardware step goes without a frame, and the log begins at
+/// the episode's first step.
+fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path) {
+    let [logged, missing, gaps, not_published, not_recorded] = episode_frame_counts(stdout);
+    let reader = learner::log::LogReader::open(log).unwrap();
+    let all = learner::log::log_gaps(&reader).unwrap();
+    let g = &all[0];
+    assert_eq!(g.topic, learner::log::topics::SENSOR, "{all:?}");
+    let loss = g.sensor.unwrap();
+    assert_eq!(
+        [
+            g.messages,
+            g.missing,
+            g.gaps,
+            loss.not_published,
+            loss.not_recorded
+        ],
+        [logged, missing, gaps, not_published, not_recorded],
+        "{mode}: the printed counts differ from the log's gaps"
+    );
+    assert_eq!(missing, not_published + not_recorded, "{mode}");
+    if mode == "lockstep" {
+        assert_eq!(missing, 0, "{mode}: {all:?}");
+        let frames = reader
+            .read_raw::<SensorFrame>(learner::log::topics::SENSOR, None)
+            .unwrap();
+        assert_eq!(
+            frames[0].step, 0,
+            "{mode}: the log misses the episode's first frames"
         );
     }
 }
@@ -410,9 +468,12 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     })
     .expect("the status never counted the actions");
     assert_eq!(s.actions_received, N);
+    // One action in flight: the queue never overflows, so every rejection
+    // below is the validation's, not a flood's.
+    assert_eq!(s.actions_overflow, 0, "{s:?}");
     // Every action received is accounted for exactly once.
     assert_eq!(
-        s.actions_accepted + s.actions_rejected + s.actions_ignored,
+        s.actions_accepted + s.actions_rejected + s.actions_ignored + s.actions_overflow,
         N,
         "{s:?}"
     );

@@ -19,10 +19,12 @@
 pub mod config;
 pub mod events;
 pub mod foxglove;
+pub mod gaps;
 mod read;
 
 pub use config::{RunConfig, RunMode};
 pub use events::Event;
+pub use gaps::{ChannelGaps, SensorLoss, log_gaps};
 pub use read::{
     CameraImage, LogMessage, LogReader, ReadError, RecoverReport, ScanReport, TopicInfo, recover,
     scan,
