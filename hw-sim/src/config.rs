@@ -337,7 +337,8 @@ impl WorldConfig {
         }
         per_joint("joint_damping", &self.joint_damping, nv)?;
         per_joint("joint_friction", &self.joint_friction, nv)?;
-        at_least("solver_iterations", self.solver_iterations, 1)?;
+        // Bounded: a reset command must not be able to stall the simulator.
+        within("solver_iterations", self.solver_iterations, 1..=100)?;
         positive("length_unit_m", self.length_unit_m)?;
         non_negative(
             "contact_recycle_distance_m",
@@ -476,6 +477,13 @@ impl PerturbationConfig {
                 format!("must not be before start_s ({})", o.start_s),
             )?;
         }
+        // Bounded: each is drawn and kept for the episode.
+        within("perturbations.random_pushes", self.random_pushes, 0..=1000)?;
+        within(
+            "perturbations.random_occlusions",
+            self.random_occlusions,
+            0..=1000,
+        )?;
         ordered_pair(
             "perturbations.random_push_force_n",
             self.random_push_force_n,

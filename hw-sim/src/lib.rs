@@ -25,6 +25,7 @@ pub mod config;
 pub mod convert;
 pub mod hardware;
 pub mod png;
+pub mod reset;
 pub mod rng;
 pub mod shapes;
 pub mod world;

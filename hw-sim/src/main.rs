@@ -14,7 +14,9 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use hw_sim::camera::{Camera, CameraShot};
+use hw_sim::reset::ResetPolicy;
 use hw_sim::{SimHardware, World, WorldConfig};
+use robot_model::descriptions::RobotCatalog;
 use shared_mem_schema::SCHEMA_VERSION;
 use shared_mem_schema::process::{
     install_termination_handler, mono_now_ns, sleep_until_ns, termination_requested,
@@ -76,6 +78,10 @@ struct Args {
     /// Real-time mode: stay at normal priority.
     #[arg(long)]
     no_realtime: bool,
+    /// Directory of URDF files a reset command may name as its robot (by a
+    /// relative path inside it); without it, only the built-in robots.
+    #[arg(long)]
+    robot_dir: Option<PathBuf>,
 }
 
 /// Work for the render thread.
@@ -152,6 +158,8 @@ struct Server {
     command: Option<TorqueCommand>,
     /// The robot's side of the messages (state out, command in, brakes).
     hardware: SimHardware,
+    /// What a reset command may ask for.
+    resets: ResetPolicy,
     /// The answer to the newest command.
     last_result: Answer,
     rejected_commands: u64,
@@ -171,6 +179,11 @@ fn run(args: Args) -> Result<()> {
         None => WorldConfig::default(),
     };
     config.seed = args.seed;
+    let robots = match &args.robot_dir {
+        Some(dir) => RobotCatalog::with_dir(dir).context("--robot-dir")?,
+        None => RobotCatalog::builtin_only(),
+    };
+    let resets = ResetPolicy::new(config.clone(), robots);
     let world = World::new(config).context("building the simulated world")?;
     let hardware = SimHardware::new(&world);
     let ns = args.namespace.clone();
@@ -213,6 +226,7 @@ fn run(args: Args) -> Result<()> {
         camera_seq: 0,
         command: None,
         hardware,
+        resets,
         last_result: Answer {
             seq: 0,
             outcome: Ok(()),
@@ -470,12 +484,8 @@ impl Server {
     fn reset(&mut self, c: &SimCommand) -> Result<()> {
         let n = (c.config_len as usize).min(c.config_toml.len());
         if n > 0 {
-            let text = std::str::from_utf8(&c.config_toml[..n])
-                .context("the configuration is not UTF-8")?;
-            let mut config = WorldConfig::from_toml(text)?;
-            config.seed = c.seed;
-            // Built aside: a bad configuration leaves the running world.
-            self.world = World::new(config)?;
+            // Built aside: a refused configuration leaves the running world.
+            self.world = self.resets.world(&c.config_toml[..n], c.seed)?;
         } else {
             self.world.reset(c.seed)?;
         }

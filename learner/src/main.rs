@@ -256,6 +256,10 @@ enum DatasetCmd {
         /// Worker threads; default: all cores.
         #[arg(long)]
         workers: Option<usize>,
+        /// Directory of the URDF files logs may name as their robot;
+        /// without it, only the built-in robots.
+        #[arg(long)]
+        robot_dir: Option<PathBuf>,
     },
     /// Counts, label balance and a PNG contact sheet.
     Inspect {
@@ -278,11 +282,13 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             out,
             contact_threshold_n,
             workers,
+            robot_dir,
         } => {
             let files = dataset::find_logs(&logs)?;
             anyhow::ensure!(!files.is_empty(), "no .mcap logs in {logs:?}");
             let cfg = BuildConfig {
                 contact_threshold_n,
+                robot_dir,
                 ..Default::default()
             };
             let workers = workers
@@ -454,6 +460,12 @@ fn run_log(cmd: LogCmd) -> Result<()> {
                 rep.messages,
                 rep.channels
             );
+            if rep.channels_without_schema > 0 {
+                println!(
+                    "  {} channels lost their schema record; kept without a schema",
+                    rep.channels_without_schema
+                );
+            }
             Ok(())
         }
     }

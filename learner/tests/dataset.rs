@@ -260,7 +260,10 @@ fn a_short_collection_builds_the_expected_dataset() {
     let text = std::fs::read_to_string(out.join("meta.json")).unwrap();
     std::fs::write(
         out.join("meta.json"),
-        text.replace("\"format_version\": 1", "\"format_version\": 9"),
+        text.replace(
+            &format!("\"format_version\": {}", dataset::FORMAT_VERSION),
+            "\"format_version\": 9",
+        ),
     )
     .unwrap();
     let e = Dataset::open(&out).err().unwrap().to_string();

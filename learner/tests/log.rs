@@ -313,12 +313,24 @@ fn truncated_files_name_the_offset_and_recover_to_a_prefix() {
     std::fs::remove_file(&path).unwrap();
 }
 
+/// The messages of `topic` in `msgs`, in the order they were written.
+fn of_topic<'a>(msgs: &'a [log::LogMessage], topic: &str) -> Vec<&'a log::LogMessage> {
+    let mut v: Vec<_> = msgs.iter().filter(|m| &*m.topic == topic).collect();
+    v.sort_by_key(|m| m.sequence);
+    v
+}
+
 #[test]
-fn flipped_bytes_give_errors_not_panics() {
+fn flipped_bytes_are_caught_or_harmless_and_recover_to_a_prefix() {
     let path_dir = test_support::scratch_dir("log");
     let path = path_dir.path().join("flip.mcap");
     write_log(&path, small_chunks());
     let full = std::fs::read(&path).unwrap();
+    let all = LogReader::open(&path).unwrap().read(&[], None).unwrap();
+    let topics: std::collections::BTreeSet<String> =
+        all.iter().map(|m| m.topic.to_string()).collect();
+    let flipped = path_dir.path().join("flipped.mcap");
+    let out = path_dir.path().join("flipped-recovered.mcap");
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
     let mut rand = move || {
         state ^= state << 13;
@@ -326,35 +338,135 @@ fn flipped_bytes_give_errors_not_panics() {
         state ^= state << 17;
         state
     };
-    let (mut refused, mut read_errors) = (0, 0);
-    for _ in 0..300 {
+    let mut caught = 0;
+    for case in 0..300 {
         let mut buf = full.clone();
         for _ in 0..1 + rand() % 4 {
             let at = (rand() % buf.len() as u64) as usize;
             buf[at] ^= 1 << (rand() % 8);
         }
-        // Whatever happens, it is an Ok or an error naming the file; a
-        // panic fails the test.
-        match LogReader::from_bytes(&path, buf) {
+        // Detected (an error naming the file or the offset) or harmless
+        // (every message reads back exactly as written); a panic fails.
+        match LogReader::from_bytes(&path, buf.clone()) {
             Err(e) => {
-                refused += 1;
+                caught += 1;
                 assert!(e.to_string().contains("flip.mcap"), "{e}");
             }
             Ok(r) => {
-                for t in [topics::SENSOR, topics::CAMERA, topics::EVENTS] {
-                    if let Err(e) = r.read(&[t], None) {
-                        read_errors += 1;
-                        let text = e.to_string();
-                        assert!(text.contains("offset") || text.contains(t), "{text}");
+                match r.read(&[], None) {
+                    Err(e) => {
+                        caught += 1;
+                        assert!(e.to_string().contains("offset"), "{e}");
                     }
+                    Ok(got) => assert!(
+                        got == all,
+                        "case {case}: an undetected corruption changed what is read"
+                    ),
                 }
                 let _ = r.read_camera(None);
                 let _ = r.read_raw::<SensorFrame>(topics::SENSOR, None);
+                let _ = r.read_events(None);
+            }
+        }
+        // Recovery of the damaged file: no panic, and per channel exactly
+        // the first messages written.
+        std::fs::write(&flipped, &buf).unwrap();
+        match log::recover(&flipped, &out) {
+            Err(e) => assert!(e.to_string().contains("flipped.mcap"), "{e}"),
+            Ok(rep) => {
+                let back = LogReader::open(&out).unwrap().read(&[], None).unwrap();
+                assert_eq!(back.len() as u64, rep.messages);
+                for t in &topics {
+                    let (want, got) = (of_topic(&all, t), of_topic(&back, t));
+                    assert!(
+                        got.len() <= want.len() && got[..] == want[..got.len()],
+                        "case {case}: recovered {t} is not a prefix of what was written"
+                    );
+                }
+                assert!(
+                    back.iter().all(|m| topics.contains(&*m.topic)),
+                    "case {case}: a recovered message is on a channel never written"
+                );
             }
         }
     }
-    assert!(refused + read_errors > 0, "some flips must be caught");
+    // Most of the file is compressed chunks under a CRC.
+    assert!(caught >= 200, "only {caught} of 300 corruptions caught");
     std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
+fn an_oversized_camera_frame_is_refused_and_the_channel_stays_readable() {
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("big-camera.mcap");
+    let mut w = LogWriter::create(&path).unwrap();
+    for i in 0..3 {
+        w.camera(&camera(i, 32, 24)).unwrap();
+    }
+    let mut big = camera(3, 32, 24);
+    big.calibration.width = shared_mem_schema::MAX_IMAGE_WIDTH as u32 + 1;
+    let e = w.camera(&big).unwrap_err().to_string();
+    assert!(
+        e.contains("larger than") && e.contains("big-camera.mcap"),
+        "{e}"
+    );
+    w.camera(&camera(4, 32, 24)).unwrap();
+    w.finish().unwrap();
+    let back = LogReader::open(&path).unwrap().read_camera(None).unwrap();
+    assert_eq!(
+        back.iter().map(|c| c.index).collect::<Vec<_>>(),
+        [0, 1, 2, 4]
+    );
+}
+
+#[test]
+fn recovery_keeps_a_channel_whose_schema_record_is_lost() {
+    let path_dir = test_support::scratch_dir("log");
+    let path = path_dir.path().join("no-schema.mcap");
+    let out = path_dir.path().join("no-schema-recovered.mcap");
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut w = mcap::WriteOptions::new()
+        .use_chunks(false)
+        .compression(None)
+        .create(file)
+        .unwrap();
+    let schema = w.add_schema("Lost", "text", b"lost").unwrap();
+    let channel = w
+        .add_channel(schema, "/kept", "raw", &Default::default())
+        .unwrap();
+    for k in 0..10u32 {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: k,
+            log_time: k as u64,
+            publish_time: k as u64,
+        };
+        w.write_to_known_channel(&header, &k.to_le_bytes()).unwrap();
+    }
+    w.finish().unwrap();
+    // Point the channel at a schema that is not in the file: its id sits
+    // just before the topic's length prefix, in the data section and again
+    // in the summary.
+    let mut bytes = std::fs::read(&path).unwrap();
+    let topic = b"\x05\x00\x00\x00/kept";
+    let mut patched = 0;
+    for at in 0..bytes.len() - topic.len() {
+        if &bytes[at..at + topic.len()] == topic {
+            bytes[at - 2..at].copy_from_slice(&77u16.to_le_bytes());
+            patched += 1;
+        }
+    }
+    assert!(patched >= 1);
+    std::fs::write(&path, &bytes).unwrap();
+    let rep = log::recover(&path, &out).unwrap();
+    assert_eq!((rep.messages, rep.channels), (10, 1));
+    assert_eq!(rep.channels_without_schema, 1);
+    let back = LogReader::open(&out)
+        .unwrap()
+        .read(&["/kept"], None)
+        .unwrap();
+    assert_eq!(back.len(), 10);
+    assert_eq!(back[3].data, 3u32.to_le_bytes());
 }
 
 #[test]

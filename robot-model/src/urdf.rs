@@ -42,7 +42,7 @@ impl Model {
         options: &LoadOptions,
     ) -> Result<Model, ModelError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io {
+        let text = read_urdf_text(path).map_err(|source| ModelError::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -160,6 +160,46 @@ fn shape(el: &str, g: &urdf_rs::Geometry, base_dir: Option<&Path>) -> Result<Sha
             }
         }
     })
+}
+
+/// The largest URDF file read, bytes (the shipped descriptions are 10 kB;
+/// URDFs reference their meshes rather than holding them).
+pub const MAX_URDF_BYTES: u64 = 4 << 20;
+
+/// Reads a URDF file: a regular file of at most [`MAX_URDF_BYTES`], UTF-8.
+/// Opened without blocking and checked on the open descriptor, so a FIFO
+/// cannot hang the caller, `/dev/zero` cannot fill its memory, and the file
+/// cannot be swapped between the check and the read.
+pub(crate) fn read_urdf_text(path: &Path) -> std::io::Result<String> {
+    use std::io::{Error, ErrorKind, Read};
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(Error::new(ErrorKind::InvalidInput, "not a regular file"));
+    }
+    if meta.len() > MAX_URDF_BYTES {
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!(
+                "{} bytes, more than the {MAX_URDF_BYTES} allowed",
+                meta.len()
+            ),
+        ));
+    }
+    let mut text = String::new();
+    // The bound holds even if the file grows after the check.
+    let n = file.take(MAX_URDF_BYTES + 1).read_to_string(&mut text)?;
+    if n as u64 > MAX_URDF_BYTES {
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!("grew past the {MAX_URDF_BYTES} bytes allowed while read"),
+        ));
+    }
+    Ok(text)
 }
 
 /// The mesh's path on disk when it can be found; `package://` URIs need a

@@ -158,8 +158,9 @@ fn run(args: Args) -> Result<()> {
     let summary = result?;
     let a = rt_alloc::stats();
     info!(
-        "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap",
-        a.pool_allocs, a.system_allocs_on_rt_thread
+        "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap; \
+         {} frees to the heap",
+        a.pool_allocs, a.system_allocs_on_rt_thread, a.system_frees_on_rt_thread
     );
     let s = &daemon.stats;
     info!(

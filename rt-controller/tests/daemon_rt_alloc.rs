@@ -59,6 +59,10 @@ fn the_control_loop_never_reaches_the_heap() {
         after.system_allocs_on_rt_thread, before.system_allocs_on_rt_thread,
         "the control loop allocated from the heap"
     );
+    assert_eq!(
+        after.system_frees_on_rt_thread, before.system_frees_on_rt_thread,
+        "the control loop freed heap blocks"
+    );
     assert!(
         after.pool_allocs - before.pool_allocs >= 10_000,
         "the pools served only {} blocks",

@@ -45,6 +45,34 @@ pub enum TransportError {
         /// it has no version attribute).
         theirs: String,
     },
+    /// A topic with one owner already has its publisher: a second process
+    /// claims to be the hardware or the controller.
+    #[error(
+        "service '{service}' already has its publisher (it allows {max}): is another {owner} \
+         running on this namespace?"
+    )]
+    PublisherTaken {
+        /// Service name.
+        service: String,
+        /// Publishers the service allows.
+        max: usize,
+        /// Who owns the topic.
+        owner: &'static str,
+    },
+    /// The service exists with other capacities than this build's (created
+    /// by a process that did not use [`ServiceSettings::of`]).
+    #[error(
+        "service '{service}' allows {found} publishers, this stack requires {expected}: it was \
+         created by a foreign process; stop it and remove the service"
+    )]
+    ForeignSettings {
+        /// Service name.
+        service: String,
+        /// Publishers the existing service allows.
+        found: usize,
+        /// What [`ServiceSettings::of`] asks for.
+        expected: usize,
+    },
     /// Any other iceoryx2 failure.
     #[error("iceoryx2: {what} '{service}': {detail}")]
     Ipc {
@@ -62,7 +90,10 @@ pub enum TransportError {
 pub struct ServiceSettings {
     /// Samples a subscriber may queue.
     pub buffer: usize,
-    /// Publishers allowed at once.
+    /// Publishers allowed at once: one where the topic has one owner (the
+    /// hardware's state and camera, the controller's commands and frames,
+    /// the simulator's reports), so that no other process of the same user
+    /// can speak for the robot or the controller.
     pub publishers: usize,
     /// Subscribers allowed at once.
     pub subscribers: usize,
@@ -82,9 +113,21 @@ impl ServiceSettings {
         };
         Self {
             buffer,
-            publishers: 4,
+            publishers: if owner_of(T::TOPIC).is_some() { 1 } else { 4 },
             subscribers: 8,
         }
+    }
+}
+
+/// The one process that publishes `topic`, for the topics that have one
+/// (`None`: several may, as policy actions and simulator commands from the
+/// learner, tools and tests).
+pub fn owner_of(topic: &str) -> Option<&'static str> {
+    use crate::topics::*;
+    match topic {
+        HARDWARE_STATE | CAMERA | EPISODE => Some("hardware (hw-sim)"),
+        TORQUE_COMMAND | SENSOR | STATUS => Some("rt-controller"),
+        _ => None,
     }
 }
 
@@ -259,7 +302,20 @@ impl<T: Message> Channel<T> {
             .enable_safe_overflow(true)
             .open_or_create_with_attributes(&verifier);
         match opened {
-            Ok(factory) => Ok(Self { name, factory }),
+            Ok(factory) => {
+                // Opening accepts a service that allows more publishers than
+                // asked for; the one-owner rule must not depend on who
+                // created it.
+                let found = factory.static_config().max_publishers();
+                if found != s.publishers {
+                    return Err(TransportError::ForeignSettings {
+                        service: name,
+                        found,
+                        expected: s.publishers,
+                    });
+                }
+                Ok(Self { name, factory })
+            }
             Err(e) => {
                 let mismatch = matches!(
                     e,
@@ -290,10 +346,20 @@ impl<T: Message> Channel<T> {
 
     /// A publisher on this service.
     pub fn publisher(&self) -> Result<Pub<T>, TransportError> {
+        use iceoryx2::port::publisher::PublisherCreateError;
         self.factory
             .publisher_builder()
             .create()
-            .map_err(|e| ipc_err(&self.name, "creating publisher", e))
+            .map_err(|e| match (e, owner_of(T::TOPIC)) {
+                (PublisherCreateError::ExceedsMaxSupportedPublishers, Some(owner)) => {
+                    TransportError::PublisherTaken {
+                        service: self.name.clone(),
+                        max: ServiceSettings::of::<T>().publishers,
+                        owner,
+                    }
+                }
+                (e, _) => ipc_err(&self.name, "creating publisher", e),
+            })
     }
 
     /// A subscriber queueing up to the topic's buffer size (oldest samples

@@ -56,3 +56,31 @@ fn messages_round_trip_in_order() {
     transport::drain(&subscriber, |a| last = a.header.seq).unwrap();
     assert_eq!(last, 9);
 }
+
+#[test]
+fn a_topic_with_one_owner_refuses_a_second_publisher() {
+    use shared_mem_schema::{HardwareState, TorqueCommand};
+    transport::quiet_logs();
+    let ns = namespace("owner");
+    let owner = transport::create_node("schema-test-owner").unwrap();
+    let _state = transport::publisher::<HardwareState>(&owner, &ns).unwrap();
+    let _torque = transport::publisher::<TorqueCommand>(&owner, &ns).unwrap();
+    let intruder = transport::create_node("schema-test-intruder").unwrap();
+    for err in [
+        transport::publisher::<HardwareState>(&intruder, &ns).err(),
+        transport::publisher::<TorqueCommand>(&intruder, &ns).err(),
+    ] {
+        let err = err.expect("a second publisher must be refused");
+        assert!(
+            matches!(err, TransportError::PublisherTaken { .. }),
+            "wrong error: {err}"
+        );
+        let text = err.to_string();
+        assert!(text.contains("already has its publisher"), "{text}");
+    }
+    // Subscribers are not limited to one, and several processes may still
+    // publish actions.
+    let _sub = transport::subscriber::<HardwareState>(&intruder, &ns).unwrap();
+    let _a = transport::publisher::<PolicyAction>(&owner, &ns).unwrap();
+    let _b = transport::publisher::<PolicyAction>(&intruder, &ns).unwrap();
+}

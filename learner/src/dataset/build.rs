@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::policy::WRENCH_WINDOW;
+use robot_model::descriptions::RobotCatalog;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -119,6 +120,7 @@ impl Builder {
             length: z.len() as u64,
             samples: self.pending_n,
             first_id,
+            crc32: crc32fast::hash(&z),
         });
         *offset += z.len() as u64;
         *count += self.pending_n as usize;
@@ -249,8 +251,19 @@ pub fn build(
         contact_next: 0,
         mask_px: 0,
     };
+    // Robots named by the logs: built-in ones, or files in `robot_dir`
+    // (a log is data from elsewhere; it never names a path to read).
+    let robots = match &cfg.robot_dir {
+        Some(dir) => RobotCatalog::with_dir(dir).map_err(|source| DatasetError::Robot {
+            log: dir.clone(),
+            robot: "(robot_dir)".into(),
+            source: Box::new(source),
+        })?,
+        None => RobotCatalog::builtin_only(),
+    };
     // Workers label logs in parallel; results are added in log order so a
     // build is reproducible.
+    let robots = &robots;
     let next = std::sync::atomic::AtomicUsize::new(0);
     let (tx, rx) = std::sync::mpsc::sync_channel::<(usize, Result<EpisodeSamples>)>(workers * 2);
     std::thread::scope(|s| -> Result<()> {
@@ -258,13 +271,26 @@ pub fn build(
             let tx = tx.clone();
             let next = &next;
             s.spawn(move || {
-                let mut models = Models::default();
+                let mut models = Models::new(robots.clone());
                 loop {
                     let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     if i >= logs.len() {
                         return;
                     }
-                    let r = episode_samples(&logs[i], cfg, &mut models);
+                    // A defect that panics on one log must not take the
+                    // build down: the log is skipped and reported.
+                    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        episode_samples(&logs[i], cfg, &mut models)
+                    }))
+                    .unwrap_or_else(|panic| {
+                        // A model half inserted is not possible (one insert),
+                        // but start afresh rather than reason about it.
+                        models = Models::new(robots.clone());
+                        Err(DatasetError::LabelPanic {
+                            log: logs[i].clone(),
+                            message: panic_message(panic.as_ref()),
+                        })
+                    });
                     if tx.send((i, r)).is_err() {
                         return;
                     }
@@ -279,11 +305,16 @@ pub fn build(
             held.insert(i, r);
             while let Some(r) = held.remove(&want) {
                 let path = &logs[want];
+                // A log that cannot join this dataset is skipped; only
+                // the dataset's own I/O ends the build.
+                let r = r.and_then(|ep| {
+                    let n = ep.samples.len();
+                    b.add_episode(path, ep).map(|()| n)
+                });
                 match r {
-                    Ok(ep) => {
-                        let n = ep.samples.len();
-                        b.add_episode(path, ep)?;
-                        on_log(path, Ok(n));
+                    Ok(n) => on_log(path, Ok(n)),
+                    Err(e @ (DatasetError::Io { .. } | DatasetError::Json { .. })) => {
+                        return Err(e);
                     }
                     Err(e) => {
                         let text = e.to_string();
@@ -299,4 +330,13 @@ pub fn build(
         Ok(())
     })?;
     b.finish()
+}
+
+/// The text of a caught panic.
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
 }

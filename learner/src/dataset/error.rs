@@ -148,6 +148,57 @@ pub enum DatasetError {
         #[source]
         source: Box<robot_model::ModelError>,
     },
+    /// A log's sensor frames disagree with its robot's joint count.
+    #[error(
+        "{}: the sensor frame of step {step} reports {n_joints} joints, robot {robot} has {model}",
+        log.display()
+    )]
+    JointCount {
+        /// The log.
+        log: PathBuf,
+        /// The frame's step.
+        step: u64,
+        /// Joints the frame reports.
+        n_joints: u32,
+        /// The robot the log names.
+        robot: String,
+        /// Joints the robot has.
+        model: usize,
+    },
+    /// Labelling a log panicked (a defect, reported and the log skipped
+    /// so that the rest of the build goes on).
+    #[error("{}: labelling failed unexpectedly: {message}", log.display())]
+    LabelPanic {
+        /// The log.
+        log: PathBuf,
+        /// The panic's message.
+        message: String,
+    },
+    /// meta.json describes something this dataset cannot be (tables out of
+    /// range, a foreign sample layout, a path out of the directory).
+    #[error("{}: {what}", path.display())]
+    BadMeta {
+        /// meta.json.
+        path: PathBuf,
+        /// The field and what is wrong with it.
+        what: String,
+    },
+    /// A block's bytes are not those written.
+    #[error(
+        "dataset shard {}: block at byte offset {offset} fails its checksum (crc32 0x{computed:08x}, \
+         meta.json says 0x{stored:08x}): the shard is damaged",
+        path.display()
+    )]
+    BlockChecksum {
+        /// The shard.
+        path: PathBuf,
+        /// Where the block starts.
+        offset: u64,
+        /// The checksum in meta.json.
+        stored: u32,
+        /// The checksum of the bytes read.
+        computed: u32,
+    },
     /// No flow labeler for a log's camera and task.
     #[error("{}: {source}", log.display())]
     Labels {

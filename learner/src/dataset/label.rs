@@ -7,6 +7,7 @@ use crate::labels::{FlowLabeler, in_contact};
 use crate::log::{CameraImage, LogReader, topics};
 use crate::policy::WRENCH_WINDOW;
 use hw_sim::PegShape;
+use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::{PolicyAction, SensorFrame};
 use std::collections::HashMap;
@@ -28,6 +29,10 @@ pub struct BuildConfig {
     pub shard_samples: usize,
     /// zstd level.
     pub zstd_level: i32,
+    /// Directory of the URDF files logs may name as their robot (by a
+    /// relative path inside it); `None`: built-in robots only. A log never
+    /// makes the builder read a file outside it.
+    pub robot_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for BuildConfig {
@@ -39,6 +44,7 @@ impl Default for BuildConfig {
             block_samples: 32,
             shard_samples: 4096,
             zstd_level: 3,
+            robot_dir: None,
         }
     }
 }
@@ -55,20 +61,32 @@ pub struct EpisodeSamples {
     pub size: (usize, usize),
 }
 
-/// Models by robot name, loaded once.
+/// Models by robot name, loaded once, from the robots a catalog allows
+/// (default: the built-in ones).
 #[derive(Default)]
-pub struct Models(HashMap<String, robot_model::Model>);
+pub struct Models {
+    robots: RobotCatalog,
+    loaded: HashMap<String, robot_model::Model>,
+}
 
 impl Models {
+    /// Robots are loaded from `robots`.
+    pub fn new(robots: RobotCatalog) -> Self {
+        Self {
+            robots,
+            loaded: HashMap::new(),
+        }
+    }
+
     pub(super) fn get(
         &mut self,
         robot: &str,
     ) -> Result<robot_model::Model, robot_model::ModelError> {
-        if let Some(m) = self.0.get(robot) {
+        if let Some(m) = self.loaded.get(robot) {
             return Ok(m.clone());
         }
-        let m = robot_model::descriptions::load(robot)?;
-        self.0.insert(robot.into(), m.clone());
+        let m = self.robots.load(robot)?;
+        self.loaded.insert(robot.into(), m.clone());
         Ok(m)
     }
 }
@@ -99,6 +117,21 @@ pub fn episode_samples(
     let cams: Vec<CameraImage> = r.read_camera(None)?;
     if frames.is_empty() {
         return Err(DatasetError::NoSensorFrames(path.to_path_buf()));
+    }
+    // Every frame indexes its joint arrays with its own count: it must be
+    // the robot's, and fit the message.
+    let fits = model.nv() <= shared_mem_schema::MAX_JOINTS;
+    if let Some(f) = frames
+        .iter()
+        .find(|f| !fits || f.n_joints as usize != model.nv())
+    {
+        return Err(DatasetError::JointCount {
+            log: path.to_path_buf(),
+            step: f.step,
+            n_joints: f.n_joints,
+            robot: world.robot.clone(),
+            model: model.nv(),
+        });
     }
     let by_time: HashMap<u64, usize> = frames
         .iter()

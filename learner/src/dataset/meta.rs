@@ -17,6 +17,10 @@ pub struct BlockIndex {
     pub samples: u32,
     /// Dataset-wide id of its first sample.
     pub first_id: u64,
+    /// CRC-32 of its compressed bytes as stored (zstd frames carry no
+    /// checksum of their own here, and a flipped bit in a literal would
+    /// decode silently).
+    pub crc32: u32,
 }
 
 /// An episode's samples.

@@ -37,8 +37,8 @@ use sample::sample_bytes;
 
 /// Shard file magic (start and end).
 pub const SHARD_MAGIC: &[u8; 8] = b"VTDSHRD1";
-/// Dataset format version (meta.json).
-pub const FORMAT_VERSION: u32 = 1;
+/// Dataset format version (meta.json). 2: blocks carry a CRC-32.
+pub const FORMAT_VERSION: u32 = 2;
 /// Proprioception: position (3), orientation quaternion x, y, z, w (4),
 /// linear and angular velocity (6).
 pub const PROPRIO: usize = 13;

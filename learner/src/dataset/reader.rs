@@ -1,6 +1,7 @@
 //! An opened dataset: its tables and block reads.
 
 use super::*;
+use crate::policy::WRENCH_WINDOW;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
@@ -38,11 +39,24 @@ impl Dataset {
                 expected: FORMAT_VERSION,
             });
         }
+        let bad = |what: String| DatasetError::BadMeta {
+            path: dir.join("meta.json"),
+            what,
+        };
+        validate_meta(dir, &meta).map_err(bad)?;
         let stats: Stats =
             serde_json::from_slice(&read("stats.json")?).map_err(parse_err("stats.json"))?;
+        validate_stats(&stats).map_err(|what| DatasetError::BadMeta {
+            path: dir.join("stats.json"),
+            what,
+        })?;
         let raw = read("wrench.bin")?;
         let per = meta.wrench_window * 6;
-        let need = meta.samples * per as u64 * 4;
+        // Checked: a huge sample count must not wrap to the table's size.
+        let need = meta
+            .samples
+            .checked_mul(per as u64 * 4)
+            .ok_or_else(|| bad(format!("samples = {} is absurd", meta.samples)))?;
         if raw.len() as u64 != need {
             return Err(DatasetError::WrenchTable {
                 path: dir.join("wrench.bin"),
@@ -142,15 +156,142 @@ impl Dataset {
     }
 }
 
-/// Reads and decodes one block of the dataset in `dir` described by `meta`.
+/// The largest image side a dataset holds, px (the camera's limit).
+pub const MAX_IMAGE_SIDE: usize = 4096;
+/// The most samples in one block.
+pub const MAX_BLOCK_SAMPLES: u32 = 1 << 16;
+/// The most bytes one block decompresses to.
+pub const MAX_BLOCK_BYTES: u64 = 1 << 30;
+
+/// Checks meta.json against itself and the shard files before anything is
+/// indexed or allocated from it; the error names the field.
+fn validate_meta(dir: &Path, meta: &Meta) -> std::result::Result<(), String> {
+    if meta.wrench_window != WRENCH_WINDOW {
+        return Err(format!(
+            "wrench_window = {}, this build's samples hold {WRENCH_WINDOW} readings",
+            meta.wrench_window
+        ));
+    }
+    let empty = meta.width == 0 || meta.height == 0;
+    if meta.width > MAX_IMAGE_SIDE || meta.height > MAX_IMAGE_SIDE || (meta.samples > 0 && empty) {
+        return Err(format!(
+            "image size {}×{} (each side must be 1..={MAX_IMAGE_SIDE})",
+            meta.width, meta.height
+        ));
+    }
+    let block_samples = meta.build.block_samples;
+    if !(1..=MAX_BLOCK_SAMPLES as usize).contains(&block_samples) {
+        return Err(format!(
+            "build.block_samples = {block_samples} (must be 1..={MAX_BLOCK_SAMPLES})"
+        ));
+    }
+    let sample = sample_bytes(meta.width, meta.height) as u64;
+    let mut next_id = 0u64;
+    for (s, (name, blocks)) in meta.shards.iter().enumerate() {
+        // A bare file name: meta.json must not send the reader elsewhere.
+        let plain = Path::new(name).components().count() == 1
+            && matches!(
+                Path::new(name).components().next(),
+                Some(std::path::Component::Normal(_))
+            );
+        if !plain {
+            return Err(format!(
+                "shards[{s}] = {name:?} is not a file name in the dataset directory"
+            ));
+        }
+        let len = std::fs::metadata(dir.join(name))
+            .map_err(|e| format!("shards[{s}] {name}: {e}"))?
+            .len();
+        for (k, b) in blocks.iter().enumerate() {
+            let at = format!("shards[{s}] ({name}) block {k}");
+            let end = b.offset.checked_add(b.length);
+            if b.offset < SHARD_MAGIC.len() as u64 || end.is_none_or(|e| e > len) {
+                return Err(format!(
+                    "{at}: bytes {}..+{} lie outside the {len}-byte shard",
+                    b.offset, b.length
+                ));
+            }
+            if b.samples == 0 || b.samples as usize > block_samples {
+                return Err(format!(
+                    "{at}: {} samples (build.block_samples = {block_samples})",
+                    b.samples
+                ));
+            }
+            if sample * b.samples as u64 > MAX_BLOCK_BYTES {
+                return Err(format!(
+                    "{at}: {} samples of {sample} bytes exceed the {MAX_BLOCK_BYTES} bytes a \
+                     block may hold",
+                    b.samples
+                ));
+            }
+            if b.first_id != next_id {
+                return Err(format!(
+                    "{at}: first_id = {}, the blocks before it end at sample {next_id}",
+                    b.first_id
+                ));
+            }
+            next_id += b.samples as u64;
+        }
+    }
+    if next_id != meta.samples {
+        return Err(format!(
+            "samples = {}, the blocks hold {next_id}",
+            meta.samples
+        ));
+    }
+    for (i, e) in meta.episodes.iter().enumerate() {
+        if e.episode as usize != i {
+            return Err(format!("episodes[{i}].episode = {}", e.episode));
+        }
+        if e.first_id
+            .checked_add(e.samples)
+            .is_none_or(|end| end > meta.samples)
+        {
+            return Err(format!(
+                "episodes[{i}]: samples {}..+{} lie outside the {} samples",
+                e.first_id, e.samples, meta.samples
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The normalisation constants have the dimensions of what they normalise.
+fn validate_stats(stats: &Stats) -> std::result::Result<(), String> {
+    for (name, m, dim) in [
+        ("wrench", &stats.wrench, 6),
+        ("proprio", &stats.proprio, PROPRIO),
+        ("action", &stats.action, 4),
+        ("depth", &stats.depth, 1),
+        ("rgb", &stats.rgb, 3),
+        ("ee_delta", &stats.ee_delta, 3),
+    ] {
+        if m.mean.len() != dim || m.std.len() != dim {
+            return Err(format!(
+                "{name}: {} means and {} standard deviations, {dim} expected",
+                m.mean.len(),
+                m.std.len()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Reads and decodes one block of the dataset in `dir` described by `meta`
+/// (checked by [`Dataset::open`]).
 pub(super) fn read_block(
     dir: &Path,
     meta: &Meta,
     shard: usize,
     block: usize,
 ) -> Result<Vec<Sample>> {
-    let (name, blocks) = &meta.shards[shard];
-    let b = &blocks[block];
+    let Some(b) = meta.shards.get(shard).and_then(|s| s.1.get(block)) else {
+        return Err(DatasetError::BadMeta {
+            path: dir.join("meta.json"),
+            what: format!("no block {block} in shard {shard}"),
+        });
+    };
+    let name = &meta.shards[shard].0;
     let path = dir.join(name);
     let io_err = |source| DatasetError::Io {
         path: path.clone(),
@@ -165,6 +306,15 @@ pub(super) fn read_block(
             offset: b.offset,
             source,
         })?;
+    let computed = crc32fast::hash(&z);
+    if computed != b.crc32 {
+        return Err(DatasetError::BlockChecksum {
+            path,
+            offset: b.offset,
+            stored: b.crc32,
+            computed,
+        });
+    }
     let (w, h) = (meta.width, meta.height);
     let size = sample_bytes(w, h);
     let mut plain = vec![0u8; size * b.samples as usize];

@@ -426,11 +426,23 @@ impl LogWriter {
     }
 
     /// Logs a camera frame: compact raw, and the view images and calibration.
+    /// A frame claiming a larger image than a message holds is refused
+    /// (nothing written): stored, its size would disagree with its pixels
+    /// and the reader would refuse the whole camera channel.
     pub fn camera(&mut self, m: &CameraFrame) -> Result<(), LogError> {
-        let (w, h) = (
-            (m.calibration.width as usize).min(shared_mem_schema::MAX_IMAGE_WIDTH),
-            (m.calibration.height as usize).min(shared_mem_schema::MAX_IMAGE_HEIGHT),
-        );
+        let (w, h) = (m.calibration.width as usize, m.calibration.height as usize);
+        if w > shared_mem_schema::MAX_IMAGE_WIDTH || h > shared_mem_schema::MAX_IMAGE_HEIGHT {
+            return Err(self.err(mcap::McapError::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!(
+                    "camera frame {} claims a {w}×{h} image, larger than the {}×{} a message \
+                     holds; not logged",
+                    m.index,
+                    shared_mem_schema::MAX_IMAGE_WIDTH,
+                    shared_mem_schema::MAX_IMAGE_HEIGHT
+                ),
+            ))));
+        }
         let n = w * h;
         let head = &m.as_bytes()[..std::mem::offset_of!(CameraFrame, rgb)];
         let mut buf = std::mem::take(&mut self.buf);

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 const OP_FOOTER: u8 = 0x02;
+const OP_DATA_END: u8 = 0x0F;
 const OP_CHUNK: u8 = 0x06;
 /// Largest chunk the reader will decompress: a corrupted size field must
 /// not make it allocate without bound.
@@ -373,15 +374,20 @@ fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
                 s.profile = h.profile;
             }
         }
+        // The first record of an id is the one its messages were written
+        // under; a later one with the same id (damaged) must not replace it.
         Record::Schema { header, data } => {
             if let Some(s) = salvage.as_deref_mut() {
-                s.schemas
-                    .insert(header.id, (header.name, header.encoding, data.into_owned()));
+                s.schemas.entry(header.id).or_insert((
+                    header.name,
+                    header.encoding,
+                    data.into_owned(),
+                ));
             }
         }
         Record::Channel(c) => {
             if let Some(s) = salvage.as_deref_mut() {
-                s.channels.insert(c.id, c);
+                s.channels.entry(c.id).or_insert(c);
             }
         }
         Record::Message { header, data } => {
@@ -392,6 +398,10 @@ fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
         }
         _ => {}
     };
+    // After the data end comes the summary: copies of the schemas and
+    // channels, not covered by any chunk CRC; parsed (a scan reports its
+    // damage) but never salvaged.
+    let mut in_summary = false;
     for item in Walker::new(buf) {
         match item {
             Walk::End => {
@@ -415,8 +425,10 @@ fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
                         }
                     }
                 } else {
+                    in_summary |= op == OP_DATA_END;
                     match mcap::read::parse_record(op, body) {
-                        Ok(r) => keep(r, &mut rep),
+                        Ok(r) if !in_summary => keep(r, &mut rep),
+                        Ok(_) => {}
                         Err(e) => {
                             rep.problem = Some((offset, format!("record 0x{op:02x}: {e}")));
                             break;
@@ -444,6 +456,41 @@ pub fn scan(path: &Path) -> Result<ScanReport, ReadError> {
     Ok(walk_all(&buf, None))
 }
 
+/// Checks the summary section against the footer's CRC (the mcap crate's
+/// summary reader does not): the reader takes every channel and chunk
+/// location from the summary, so a flipped bit there would otherwise drop
+/// or misname messages silently.
+fn check_summary_crc(buf: &[u8]) -> Result<(), (u64, String)> {
+    // Footer record: opcode, length 20, summary start, summary offset
+    // start, summary CRC; then the closing magic.
+    const FOOTER: usize = 1 + 8 + 20;
+    let magic = mcap::MAGIC.len();
+    let Some(at) = buf.len().checked_sub(magic + FOOTER) else {
+        return Err((0, "too short for a footer".into()));
+    };
+    let f = &buf[at..at + FOOTER];
+    let u64_at = |o: usize| u64::from_le_bytes(f[o..o + 8].try_into().expect("8 bytes"));
+    let start = u64_at(9);
+    let crc = u32::from_le_bytes(f[25..29].try_into().expect("4 bytes"));
+    if f[0] != OP_FOOTER || u64_at(1) != 20 {
+        return Err((at as u64, "the footer record is damaged".into()));
+    }
+    if start == 0 || crc == 0 {
+        return Ok(()); // no summary, or no CRC written for it
+    }
+    if start > at as u64 {
+        return Err((
+            at as u64,
+            format!("the footer's summary start {start} lies past it"),
+        ));
+    }
+    // The CRC covers the summary up to the footer's CRC field.
+    if crc32fast::hash(&buf[start as usize..at + 25]) != crc {
+        return Err((start, "summary CRC mismatch".into()));
+    }
+    Ok(())
+}
+
 /// What [`recover`] wrote.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecoverReport {
@@ -451,6 +498,9 @@ pub struct RecoverReport {
     pub messages: u64,
     /// Channels written.
     pub channels: usize,
+    /// Of those, channels whose schema record was lost (written without a
+    /// schema, their messages kept).
+    pub channels_without_schema: usize,
     /// Bytes of the input kept (intact records).
     pub readable_bytes: u64,
     /// Where the damage began and what it was, if anywhere.
@@ -497,19 +547,19 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, ReadError> 
     for (id, (name, enc, data)) in &salvage.schemas {
         w.add_schema_with_id(*id, name, enc, data).map_err(err)?;
     }
-    let mut channels = 0;
+    let (mut channels, mut without_schema) = (0, 0);
     for c in salvage.channels.values() {
-        if c.schema_id != 0 && !salvage.schemas.contains_key(&c.schema_id) {
-            continue;
-        }
-        w.add_channel_with_id(
-            c.id,
-            c.schema_id,
-            &c.topic,
-            &c.message_encoding,
-            &c.metadata,
-        )
-        .map_err(err)?;
+        // A channel whose schema record is lost keeps its messages: it is
+        // written without a schema (its message encoding still says how to
+        // read them).
+        let schema_id = if c.schema_id != 0 && !salvage.schemas.contains_key(&c.schema_id) {
+            without_schema += 1;
+            0
+        } else {
+            c.schema_id
+        };
+        w.add_channel_with_id(c.id, schema_id, &c.topic, &c.message_encoding, &c.metadata)
+            .map_err(err)?;
         channels += 1;
     }
     let mut messages = 0;
@@ -524,6 +574,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, ReadError> 
     Ok(RecoverReport {
         messages,
         channels,
+        channels_without_schema: without_schema,
         readable_bytes: rep.readable_bytes,
         damage: rep.problem,
     })
@@ -575,6 +626,9 @@ impl LogReader {
                 }
             });
         };
+        if let Err((offset, what)) = check_summary_crc(&buf) {
+            return Err(ReadError::Corrupt { path, offset, what });
+        }
         for ci in &summary.chunk_indexes {
             let end = ci.chunk_start_offset.checked_add(ci.chunk_length);
             if end.is_none_or(|e| e > buf.len() as u64) || ci.chunk_length < 9 {

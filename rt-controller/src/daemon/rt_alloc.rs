@@ -9,11 +9,15 @@
 //! O(1), no locks, no system calls, no page faults (`mlockall` locks the
 //! pools with the rest of the image). Blocks freed on any thread go back to
 //! their pool. Every other allocation goes to the system allocator; the ones
-//! the control thread still makes there are counted ([`stats`]) and reported
-//! at exit, and the allocation test requires zero.
+//! the control thread still makes there, and its frees of system blocks,
+//! are counted ([`stats`]) and reported at exit, and the allocation test
+//! requires zero of both.
 //!
-//! Only the real-time thread pops blocks, other threads only push them back,
-//! so the free lists (Treiber stacks) are free of the ABA problem.
+//! The free lists are Treiber stacks whose head carries a generation that
+//! every push and pop advances, so a compare-and-swap against a head that
+//! was popped and pushed back in between fails (the ABA problem) however
+//! many threads pop: correctness does not rest on only one thread calling
+//! [`enter_realtime`].
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::{Cell, UnsafeCell};
@@ -33,8 +37,9 @@ struct Blocks<const N: usize, const K: usize>(UnsafeCell<[[u8; N]; K]>);
 
 struct Pool<const N: usize, const K: usize> {
     blocks: Blocks<N, K>,
-    /// 1-based index of the first free block; 0: empty.
-    head: AtomicUsize,
+    /// Low 32 bits: 1-based index of the first free block (0: empty); high
+    /// 32 bits: the generation, advanced by every change of the head.
+    head: AtomicU64,
     next: [AtomicUsize; K],
     ready: AtomicBool,
     in_use: AtomicUsize,
@@ -47,7 +52,7 @@ impl<const N: usize, const K: usize> Pool<N, K> {
     const fn new() -> Self {
         Self {
             blocks: Blocks(UnsafeCell::new([[0; N]; K])),
-            head: AtomicUsize::new(0),
+            head: AtomicU64::new(0),
             next: [const { AtomicUsize::new(0) }; K],
             ready: AtomicBool::new(false),
             in_use: AtomicUsize::new(0),
@@ -74,23 +79,36 @@ impl<const N: usize, const K: usize> Pool<N, K> {
             unsafe { std::ptr::write_volatile((self.base() + i * N) as *mut u8, 0) };
             self.next[i].store(if i + 1 < K { i + 2 } else { 0 }, Ordering::Relaxed);
         }
-        self.head.store(1, Ordering::Release);
+        self.head.store(tagged(1, 0), Ordering::Release);
     }
 
     fn pop(&self) -> Option<*mut u8> {
+        self.pop_with(|| {})
+    }
+
+    /// [`Pool::pop`] with `between` run after reading the head and its
+    /// successor and before the compare-and-swap (tests play other
+    /// threads there).
+    #[inline(always)]
+    fn pop_with(&self, between: impl Fn()) -> Option<*mut u8> {
         loop {
             let h = self.head.load(Ordering::Acquire);
-            if h == 0 {
+            let (index, generation) = untag(h);
+            if index == 0 {
                 return None;
             }
-            let n = self.next[h - 1].load(Ordering::Relaxed);
+            // May be stale if another thread popped this block meanwhile;
+            // the generation then makes the exchange below fail.
+            let n = self.next[index - 1].load(Ordering::Relaxed);
+            between();
+            let new = tagged(n, generation.wrapping_add(1));
             if self
                 .head
-                .compare_exchange_weak(h, n, Ordering::AcqRel, Ordering::Acquire)
+                .compare_exchange_weak(h, new, Ordering::AcqRel, Ordering::Acquire)
                 .is_ok()
             {
                 self.in_use.fetch_add(1, Ordering::Relaxed);
-                return Some((self.base() + (h - 1) * N) as *mut u8);
+                return Some((self.base() + (index - 1) * N) as *mut u8);
             }
         }
     }
@@ -99,10 +117,12 @@ impl<const N: usize, const K: usize> Pool<N, K> {
         let i = (p as usize - self.base()) / N;
         loop {
             let h = self.head.load(Ordering::Acquire);
-            self.next[i].store(h, Ordering::Relaxed);
+            let (index, generation) = untag(h);
+            self.next[i].store(index, Ordering::Relaxed);
+            let new = tagged(i + 1, generation.wrapping_add(1));
             if self
                 .head
-                .compare_exchange_weak(h, i + 1, Ordering::AcqRel, Ordering::Acquire)
+                .compare_exchange_weak(h, new, Ordering::AcqRel, Ordering::Acquire)
                 .is_ok()
             {
                 self.in_use.fetch_sub(1, Ordering::Relaxed);
@@ -112,10 +132,21 @@ impl<const N: usize, const K: usize> Pool<N, K> {
     }
 }
 
+/// A head word: 1-based block index and generation.
+fn tagged(index: usize, generation: u32) -> u64 {
+    (u64::from(generation) << 32) | index as u64
+}
+
+/// The block index and generation of a head word.
+fn untag(h: u64) -> (usize, u32) {
+    ((h & 0xffff_ffff) as usize, (h >> 32) as u32)
+}
+
 static SMALL: Pool<SMALL_BLOCK, SMALL_COUNT> = Pool::new();
 static LARGE: Pool<LARGE_BLOCK, LARGE_COUNT> = Pool::new();
 static POOL_ALLOCS: AtomicU64 = AtomicU64::new(0);
 static SYSTEM_ALLOCS_RT: AtomicU64 = AtomicU64::new(0);
+static SYSTEM_FREES_RT: AtomicU64 = AtomicU64::new(0);
 
 thread_local! {
     static REALTIME: Cell<bool> = const { Cell::new(false) };
@@ -144,6 +175,10 @@ pub struct RtAllocStats {
     /// Allocations a real-time thread made from the system allocator (too
     /// large, over-aligned, or a pool ran out).
     pub system_allocs_on_rt_thread: u64,
+    /// Blocks of the system allocator a real-time thread freed (an object
+    /// made before the loop, or on another thread, dropped in it): `free`
+    /// can take the allocator's lock and return memory to the kernel.
+    pub system_frees_on_rt_thread: u64,
 }
 
 /// The counters so far.
@@ -152,6 +187,7 @@ pub fn stats() -> RtAllocStats {
         pool_allocs: POOL_ALLOCS.load(Ordering::Relaxed),
         pool_in_use: SMALL.in_use.load(Ordering::Relaxed) + LARGE.in_use.load(Ordering::Relaxed),
         system_allocs_on_rt_thread: SYSTEM_ALLOCS_RT.load(Ordering::Relaxed),
+        system_frees_on_rt_thread: SYSTEM_FREES_RT.load(Ordering::Relaxed),
     }
 }
 
@@ -192,6 +228,9 @@ unsafe impl GlobalAlloc for RtAllocator {
         } else if LARGE.contains(ptr) {
             LARGE.push(ptr);
         } else {
+            if realtime() {
+                SYSTEM_FREES_RT.fetch_add(1, Ordering::Relaxed);
+            }
             // SAFETY: it came from System.
             unsafe { System.dealloc(ptr, layout) }
         }
@@ -214,5 +253,43 @@ unsafe impl GlobalAlloc for RtAllocator {
             }
             new
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+
+    /// The ABA interleaving, played out deterministically: a popper reads
+    /// head A and its successor B, then (before its compare-and-swap) other
+    /// threads pop A, pop B and push A back. A bare index head compares
+    /// equal again and the pop would install B, a block in use, as the
+    /// head; the generation makes the compare-and-swap fail and retry.
+    #[test]
+    fn a_pop_interleaved_with_pop_pop_push_hands_out_no_block_twice() {
+        static POOL: Pool<64, 8> = Pool::new();
+        POOL.init();
+        let held = std::cell::RefCell::new(Vec::new());
+        let once = Cell::new(true);
+        let mine = POOL
+            .pop_with(|| {
+                if once.replace(false) {
+                    let a = POOL.pop().unwrap();
+                    let b = POOL.pop().unwrap();
+                    POOL.push(a);
+                    held.borrow_mut().push(b);
+                }
+            })
+            .unwrap();
+        let mut in_use: HashSet<usize> = held.borrow().iter().map(|&p| p as usize).collect();
+        assert!(
+            in_use.insert(mine as usize),
+            "the pop returned a block in use"
+        );
+        while let Some(p) = POOL.pop() {
+            assert!(in_use.insert(p as usize), "block {p:?} handed out twice");
+        }
+        assert_eq!(in_use.len(), 8, "every block handed out exactly once");
     }
 }
