@@ -112,16 +112,19 @@ impl FastEnv {
 
     /// Starts an episode: as hw-sim's reset with a configuration (a world
     /// built afresh with `seed`); the controller restarts when it sees the
-    /// new episode, as the daemon does.
+    /// new episode, as the daemon does, after a fault once reset.
     pub fn reset(&mut self, seed: u64) -> Result<(), EnvError> {
         let cfg = self.world.config().clone();
         self.reset_with(cfg, seed)
     }
 
-    /// Starts an episode in another world configuration (same robot).
+    /// Starts an episode in another world configuration (same robot). A
+    /// fault latched in the episode before is cleared by the explicit reset
+    /// the live node sends at this point (`ControlCycle::reset`).
     pub fn reset_with(&mut self, mut cfg: WorldConfig, seed: u64) -> Result<(), EnvError> {
         cfg.seed = seed;
         self.world = World::with_model(self.model.clone(), cfg)?;
+        self.control.reset(hw_time_ns(self.world.time_s()));
         self.hardware.reset();
         self.episodes += 1;
         self.wrench.clear();

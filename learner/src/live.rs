@@ -21,8 +21,8 @@ use shared_mem_schema::rates::ACTION_PERIOD_NS;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
-    CameraFrame, ControllerStatus, EpisodeReport, Header, PolicyAction, SensorFrame, SimCommand,
-    Stage, hw_time_s,
+    CameraFrame, ControllerCommand, ControllerMode, ControllerStatus, EpisodeReport, Header,
+    PolicyAction, SensorFrame, SimCommand, Stage, hw_time_s,
 };
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -188,6 +188,7 @@ pub struct PolicyNode {
     pub report: Sub<EpisodeReport>,
     action: Pub<PolicyAction>,
     command: Pub<SimCommand>,
+    controller: Pub<ControllerCommand>,
     action_seq: u64,
     command_seq: u64,
     /// Sensor frames drained while waiting for a reset's answer (the new
@@ -220,6 +221,7 @@ impl PolicyNode {
             report: transport::subscriber(&node, ns)?,
             action: transport::publisher(&node, ns)?,
             command: transport::publisher(&node, ns)?,
+            controller: transport::publisher(&node, ns)?,
             _node: node,
             action_seq: 0,
             command_seq: 0,
@@ -322,6 +324,79 @@ impl PolicyNode {
         m.apply_at_step = apply_at_step;
         transport::send(&self.action, &m)?;
         Ok(m)
+    }
+
+    /// Where a new episode legitimately starts (the simulator has just put
+    /// the arm at its start pose for `episode`): if the controller has a
+    /// fault latched (Fault, or a silent hardware's), clears it with a
+    /// reset command and returns the fault code cleared. A fault never
+    /// clears by itself, an episode change included. Reads the first status
+    /// published from now on (10 Hz); none within 2 s: nothing is done
+    /// (no controller answers; the episode then reports its missing
+    /// frames).
+    pub fn clear_controller_fault(&mut self, episode: u64) -> Result<Option<u32>, StackError> {
+        let since = mono_now_ns();
+        let Some(status) = self.next_status(since, 2_000_000_000, |_| true)? else {
+            return Ok(None);
+        };
+        let faulted = [ControllerMode::Fault, ControllerMode::HardwareLost]
+            .map(|m| m as u32)
+            .contains(&status.mode);
+        if !faulted {
+            return Ok(None);
+        }
+        // Resent under a fresh id until answered with anything but "the
+        // hardware is silent": that fault clears only once states come again.
+        let start = mono_now_ns();
+        let mut last = 0;
+        while mono_now_ns() - start < 10_000_000_000 {
+            self.command_seq += 1;
+            let seq = (u64::from(std::process::id()) << 32) | self.command_seq;
+            let sent = mono_now_ns();
+            let cmd = ControllerCommand::reset(seq, sent, episode);
+            transport::send(&self.controller, &cmd)?;
+            // Matched by id alone: the daemon stamps a status with the
+            // start of its cycle, which may precede `sent`.
+            if let Some(s) = self.next_status(0, 500_000_000, |s| s.command_seq == seq)? {
+                if s.command_result != ControllerCommand::RESULT_HARDWARE_SILENT {
+                    return Ok(Some(status.fault_code));
+                }
+                last = s.command_result;
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            if termination_requested() {
+                return Err(StackError::Interrupted);
+            }
+        }
+        Err(StackError::ControllerReset(ControllerCommand::result_name(
+            last,
+        )))
+    }
+
+    /// The first controller status published at or after `since_ns` that
+    /// satisfies `pred`, waiting at most `timeout_ns`.
+    fn next_status(
+        &mut self,
+        since_ns: u64,
+        timeout_ns: u64,
+        mut pred: impl FnMut(&ControllerStatus) -> bool,
+    ) -> Result<Option<ControllerStatus>, StackError> {
+        let start = mono_now_ns();
+        loop {
+            let mut hit = None;
+            transport::drain(&self.status, |s| {
+                if hit.is_none() && s.header.t_mono_ns >= since_ns && pred(s) {
+                    hit = Some(*s);
+                }
+            })?;
+            if hit.is_some() {
+                return Ok(hit);
+            }
+            if mono_now_ns() - start > timeout_ns || termination_requested() {
+                return Ok(None);
+            }
+            std::thread::sleep(Duration::from_micros(500));
+        }
     }
 
     /// Resets the simulator with `world` (TOML) and `seed` and waits for
@@ -493,6 +568,12 @@ impl LiveEpisode {
         let world_toml = toml::to_string(&world)?;
         let first = node.reset(seed, &world_toml, cfg.lockstep)?;
         let episode = first.header.episode;
+        if let Some(code) = node.clear_controller_fault(episode)? {
+            eprintln!(
+                "learner: the controller had fault code {code} latched; reset for episode \
+                 {episode}"
+            );
+        }
         let path = cfg
             .log_dir
             .join(format!("episode-{episode:04}-seed-{seed}.mcap"));

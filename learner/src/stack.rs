@@ -79,6 +79,9 @@ pub enum StackError {
     /// A termination request came while waiting for the simulator.
     #[error("interrupted while waiting for the simulator")]
     Interrupted,
+    /// The controller kept its fault through 10 s of reset commands.
+    #[error("the controller did not clear its fault on reset ({0})")]
+    ControllerReset(&'static str),
     /// No sensor frames arrived for 10 s at the start of an episode.
     #[error("no sensor frames from rt-controller for 10 s (is it running?)")]
     NoSensorFrames,

@@ -385,6 +385,15 @@ impl ControllerConfig {
                 l.effort > 0.0,
                 "the torque filter needs a finite positive effort limit per joint",
             )?;
+            // robot-model reads a zero or absent velocity limit as
+            // unlimited: the velocity fault could then never fire.
+            check(
+                &format!("robot joint {:?} (#{i}) velocity limit", j.name),
+                l.velocity,
+                l.velocity > 0.0,
+                "the velocity fault and the torque filter need a finite positive velocity \
+                 limit per joint (a zero or absent URDF velocity reads as unlimited)",
+            )?;
         }
         Ok(())
     }

@@ -66,6 +66,7 @@ pub struct ControlCycle {
     episode: Option<u64>,
     seq: u64,
     last_action_seq: u64,
+    resets: u64,
 }
 
 impl ControlCycle {
@@ -89,6 +90,7 @@ impl ControlCycle {
             episode: None,
             seq: 0,
             last_action_seq: 0,
+            resets: 0,
         })
     }
 
@@ -118,20 +120,51 @@ impl ControlCycle {
         fault_code(self.data.supervisor.fault())
     }
 
+    /// Faults cleared by [`ControlCycle::reset`] so far.
+    pub fn resets(&self) -> u64 {
+        self.resets
+    }
+
     /// Notes the episode of `state`: a state of another episode than the
     /// last (the robot was reset) restarts the control law at it, with no
-    /// action of the new episode applied yet. Returns true then.
-    /// [`ControlCycle::cycle`] calls it; transports call it when a state
-    /// arrives, to drop what they queued for the old episode.
+    /// action of the new episode applied yet, unless a fault is latched: a
+    /// fault outlives the episode and only [`ControlCycle::reset`] clears
+    /// it. Returns true on a new episode. [`ControlCycle::cycle`] calls
+    /// it; transports call it when a state arrives, to drop what they
+    /// queued for the old episode.
     pub fn observe_episode(&mut self, state: &HardwareState) -> bool {
         let e = state.header.episode;
         if self.episode == Some(e) {
             return false;
         }
-        self.data.restart(hw_time_s(state.header.t_hw_ns));
+        if self.data.mode() != Mode::Fault {
+            self.data.restart(hw_time_s(state.header.t_hw_ns));
+        }
         self.episode = Some(e);
         self.last_action_seq = 0;
         true
+    }
+
+    /// The explicit reset (an operator's or the learner's command): leaves
+    /// a latched Fault for Idle, restarting the control law at the state
+    /// the next cycle sees (its pose held, the torque-rate limiter started
+    /// from the measured torques), at hardware time `t_hw_ns`. Counted;
+    /// returns false, changing nothing, when no fault is latched.
+    pub fn reset(&mut self, t_hw_ns: u64) -> bool {
+        if self.data.mode() != Mode::Fault {
+            return false;
+        }
+        self.restart(t_hw_ns);
+        true
+    }
+
+    /// Restarts the control law whatever its mode (the daemon's reset after
+    /// a silent hardware came back: the arm may have moved meanwhile), at
+    /// hardware time `t_hw_ns`. Counted as a reset.
+    pub fn restart(&mut self, t_hw_ns: u64) {
+        self.data.restart(hw_time_s(t_hw_ns));
+        self.last_action_seq = 0;
+        self.resets += 1;
     }
 
     /// Asks the control law to hold its target (shutdown), at the time of

@@ -2,12 +2,13 @@
 //! docs/operation.md).
 
 use anyhow::{Context, Result, bail};
-use clap::{Parser, ValueEnum};
+use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller::daemon::config::{BackendKind, Clock, DaemonConfig};
 use rt_controller::daemon::rt::{self, Notifier};
 use rt_controller::daemon::rt_alloc::{self, RtAllocator};
 use rt_controller::daemon::{Daemon, FAULT_HARDWARE_SILENT, Shared, SimBackend};
-use shared_mem_schema::ControllerMode;
+use shared_mem_schema::process::mono_now_ns;
+use shared_mem_schema::{ControllerCommand, ControllerMode, ControllerStatus};
 use shared_mem_schema::process::{
     install_termination_handler, termination_requested, termination_signal,
 };
@@ -51,6 +52,22 @@ struct Args {
     /// Prints the effective configuration and exits.
     #[arg(long)]
     print_config: bool,
+    /// Instead of running the loop: a command to the running daemon.
+    #[command(subcommand)]
+    command: Option<Cmd>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Clears a latched fault of the daemon running in the namespace (the
+    /// configuration's, or `--namespace`): sends a reset and prints the
+    /// daemon's answer. Exits non-zero when the daemon refuses (hardware
+    /// still silent) or does not answer.
+    Reset {
+        /// How long to wait for the daemon's answer, s.
+        #[arg(long, default_value_t = 5.0)]
+        timeout_s: f64,
+    },
 }
 
 fn main() {
@@ -93,6 +110,9 @@ fn run(args: Args) -> Result<()> {
     if args.print_config {
         print!("{}", cfg.to_toml());
         return Ok(());
+    }
+    if let Some(Cmd::Reset { timeout_s }) = args.command {
+        return send_reset(&cfg.backend.namespace, timeout_s);
     }
     install_termination_handler();
     transport::quiet_logs();
@@ -166,8 +186,9 @@ fn run(args: Args) -> Result<()> {
     info!(
         "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, {} hardware \
          states skipped, wake-up p99 {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs, {} \
-         garbage actions, {} actions dropped from the full queue, {} failed publications, {} \
-         failed action receives",
+         garbage actions, {} actions dropped from the full queue, {} stale actions ({} too old, \
+         {} from the future, {} of another episode, {} replayed), {} resets, {} refused \
+         commands, {} failed publications, {} failed action receives",
         match termination_signal() {
             0 => String::new(),
             s => format!(" (signal {s})"),
@@ -182,15 +203,72 @@ fn run(args: Args) -> Result<()> {
         s.compute.max_ns as f64 / 1e3,
         daemon.shared.garbage_actions.load(Ordering::Relaxed),
         s.actions_overflow,
+        s.actions_stale(),
+        s.actions_too_old,
+        s.actions_from_future,
+        s.actions_other_episode,
+        s.actions_replayed,
+        daemon.control.resets(),
+        s.commands_refused,
         s.publish_errors,
         s.receive_errors
     );
     Ok(())
 }
 
+/// `rt-controller reset`: one reset command to the daemon of `namespace`,
+/// and its answer from the status.
+fn send_reset(namespace: &str, timeout_s: f64) -> Result<()> {
+    transport::quiet_logs();
+    let node = transport::create_node("rt-controller-reset")?;
+    let commands = transport::publisher::<ControllerCommand>(&node, namespace)?;
+    let status = transport::subscriber::<ControllerStatus>(&node, namespace)?;
+    // Unique across senders: this process's id and the time.
+    let seq = (u64::from(std::process::id()) << 32) | (mono_now_ns() & 0xffff_ffff);
+    let start = std::time::Instant::now();
+    let mut next_send = start;
+    let mut before: Option<ControllerStatus> = None;
+    while start.elapsed().as_secs_f64() < timeout_s {
+        if std::time::Instant::now() >= next_send {
+            // Resent until answered: a daemon starting may miss the first.
+            let episode = before.map_or(0, |s| s.header.episode);
+            transport::send(
+                &commands,
+                &ControllerCommand::reset(seq, mono_now_ns(), episode),
+            )?;
+            next_send += Duration::from_millis(500);
+        }
+        let mut answer = None;
+        transport::drain(&status, |s| {
+            if s.command_seq == seq {
+                answer = Some(*s);
+            } else if before.is_none() {
+                before = Some(*s);
+            }
+        })?;
+        if let Some(s) = answer {
+            let mode = ControllerMode::from_u32(s.mode).map_or("?", |m| m.name());
+            println!(
+                "rt-controller reset: {}; mode {mode}, fault code {}, {} resets in all",
+                ControllerCommand::result_name(s.command_result),
+                s.fault_code,
+                s.resets
+            );
+            return match s.command_result {
+                ControllerCommand::RESULT_CLEARED | ControllerCommand::RESULT_NO_FAULT => Ok(()),
+                r => bail!("the daemon refused the reset: {}", ControllerCommand::result_name(r)),
+            };
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    bail!("no answer from an rt-controller in namespace '{namespace}' within {timeout_s} s")
+}
+
 fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
     let mut last_beat = 0;
     let mut last_mode = u32::MAX;
+    let mut last_command = 0;
+    let mut last_stale = 0;
     let mut last_garbage = 0;
     let mut last_overflow = 0;
     let mut last_overruns = 0;
@@ -205,15 +283,40 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
         let mode = shared.mode.load(Ordering::Relaxed);
         if mode != last_mode && beat > 0 {
             let name = ControllerMode::from_u32(mode).map_or("?", |m| m.name());
-            match shared.fault_code.load(Ordering::Relaxed) {
+            let code = shared.fault_code.load(Ordering::Relaxed);
+            match code {
                 0 => info!("rt-controller: mode {name}"),
-                FAULT_HARDWARE_SILENT => {
-                    error!("rt-controller: hardware silent: fault, no torques are sent")
-                }
-                code => error!("rt-controller: mode {name} (fault code {code})"),
+                FAULT_HARDWARE_SILENT => error!(
+                    "rt-controller: hardware silent: fault, no torques are sent; latched until \
+                     `rt-controller reset` once the hardware streams again"
+                ),
+                code => error!(
+                    "rt-controller: mode {name} (fault code {code}); latched until \
+                     `rt-controller reset`"
+                ),
             }
+            // systemd shows it in `systemctl status`.
+            notifier.notify(&format!("STATUS={name} (fault code {code})"));
             last_mode = mode;
         }
+        let command = shared.command_seq.load(Ordering::Relaxed);
+        if command != last_command {
+            let result = shared.command_result.load(Ordering::Relaxed);
+            let text = ControllerCommand::result_name(result);
+            let resets = shared.resets.load(Ordering::Relaxed);
+            let refused = shared.commands_refused.load(Ordering::Relaxed);
+            if result == ControllerCommand::RESULT_CLEARED {
+                warn!("rt-controller: reset command {command:#x}: fault {text} ({resets} resets)");
+            } else {
+                warn!("rt-controller: reset command {command:#x}: {text} ({refused} refused)");
+            }
+            last_command = command;
+        }
+        warn_on_increase(
+            &shared.stale_actions,
+            &mut last_stale,
+            "stale actions dropped (too old, another episode or replayed)",
+        );
         warn_on_increase(
             &shared.garbage_actions,
             &mut last_garbage,

@@ -27,8 +27,8 @@ use test_support::alloc::{Counting, TRACE, count, live_bytes};
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
-    let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
+fn action(rig: &DaemonRig, seq: u64, dx: f64, version: u32) -> PolicyAction {
+    let mut a = rig.action(seq, [dx, 0.0, 0.0, 0.0]);
     a.header.schema_version = version;
     a
 }
@@ -59,11 +59,15 @@ fn daemon_cycles_allocate_only_iceoryx2s_block_per_publication() {
         rig.publish_state(k);
         if k % 50 == 0 {
             // Small motions, garbage values and another schema's bytes.
+            let seq = k + 1;
             let a = match (k / 50) % 10 {
-                3 => action(k, f64::NAN, SCHEMA_VERSION),
-                6 => action(k, 1e9, SCHEMA_VERSION),
-                8 => action(k, 0.0005, SCHEMA_VERSION + 1),
-                n => action(k, if n % 2 == 0 { 0.0005 } else { -0.0005 }, SCHEMA_VERSION),
+                3 => action(&rig, seq, f64::NAN, SCHEMA_VERSION),
+                6 => action(&rig, seq, 1e9, SCHEMA_VERSION),
+                8 => action(&rig, seq, 0.0005, SCHEMA_VERSION + 1),
+                n => {
+                    let dx = if n % 2 == 0 { 0.0005 } else { -0.0005 };
+                    action(&rig, seq, dx, SCHEMA_VERSION)
+                }
             };
             transport::send(&rig.actions, &a).unwrap();
         }

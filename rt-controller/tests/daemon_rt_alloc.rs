@@ -10,7 +10,6 @@ mod daemon_rig;
 use daemon_rig::DaemonRig;
 use rt_controller::daemon::CycleOutcome;
 use rt_controller::daemon::rt_alloc::{self, RtAllocator};
-use shared_mem_schema::PolicyAction;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
 
@@ -29,7 +28,7 @@ fn the_control_loop_never_reaches_the_heap() {
             } else {
                 -0.01
             };
-            let a = PolicyAction::new(k + 1, mono_now_ns(), [s, s, 0.0, 0.05]);
+            let a = rig.action(k + 1, [s, s, 0.0, 0.05]);
             transport::send(&rig.actions, &a).unwrap();
         }
         rt_alloc::enter_realtime();

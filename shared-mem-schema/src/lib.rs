@@ -75,6 +75,8 @@ pub mod topics {
     pub const SENSOR: &str = "ctrl/sensor";
     /// rt-controller → anyone, ~10 Hz: [`crate::ControllerStatus`].
     pub const STATUS: &str = "ctrl/status";
+    /// operator or learner → rt-controller: [`crate::ControllerCommand`].
+    pub const CONTROLLER_COMMAND: &str = "ctrl/command";
     /// learner → rt-controller, 20 Hz: [`crate::PolicyAction`].
     pub const ACTION: &str = "policy/action";
 }
@@ -536,14 +538,32 @@ pub struct ControllerStatus {
     pub hardware_states_skipped: u64,
     /// Sequence number of the newest action applied.
     pub last_action_seq: u64,
+    /// Actions dropped as stale because the observation they answer is
+    /// older than the controller's `safety.max_action_age_s` (hardware
+    /// time), or their sender stamped none.
+    pub actions_too_old: u64,
+    /// Actions dropped as stale because they answer an observation the
+    /// hardware has not made yet (a hardware time after the current state's).
+    pub actions_from_future: u64,
+    /// Actions dropped as stale because they answer another episode.
+    pub actions_other_episode: u64,
+    /// Actions dropped as stale because their sequence number is not above
+    /// the newest one applied this episode (a replay).
+    pub actions_replayed: u64,
+    /// Faults (the control law's, or a silent hardware) cleared by a
+    /// [`ControllerCommand::RESET`].
+    pub resets: u64,
+    /// `header.seq` of the last [`ControllerCommand`] handled (0: none).
+    pub command_seq: u64,
     /// Controller mode ([`ControllerMode`] as u32).
     pub mode: u32,
     /// Fault reason code (0: none; see rt-controller's docs).
     pub fault_code: u32,
     /// 1 when the real-time set-up (memory lock, SCHED_FIFO) succeeded.
     pub realtime: u32,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// Result of the command `command_seq`: a `ControllerCommand::RESULT_*`
+    /// (0 before any).
+    pub command_result: u32,
     /// Wake-up latency of each cycle past its absolute deadline.
     pub wakeup_latency: LatencyHistogram,
     /// Compute time of each cycle (read state → torques sent → frame
@@ -552,6 +572,59 @@ pub struct ControllerStatus {
     /// From an action's publication to the first torque command that
     /// reflects it.
     pub action_latency: LatencyHistogram,
+}
+
+/// Operator or learner → controller: leaving a latched fault. The daemon
+/// answers in [`ControllerStatus`] (`command_seq`, `command_result`,
+/// `resets`), published at once.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
+pub struct ControllerCommand {
+    /// Header (`seq`: the request id echoed in
+    /// [`ControllerStatus::command_seq`]; `episode`: the hardware episode
+    /// the sender saw, for the log).
+    pub header: Header,
+    /// What to do ([`ControllerCommand::RESET`]).
+    pub command: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+
+impl ControllerCommand {
+    /// Leave Fault (or a silent hardware's fault) for Idle, holding the
+    /// pose the arm then has.
+    pub const RESET: u32 = 1;
+    /// Result: a fault was latched and is cleared.
+    pub const RESULT_CLEARED: u32 = 1;
+    /// Result: there was no fault to clear (nothing changed).
+    pub const RESULT_NO_FAULT: u32 = 2;
+    /// Result: refused, the hardware is still silent (no state within
+    /// `hardware_timeout_ms`); the fault stays latched.
+    pub const RESULT_HARDWARE_SILENT: u32 = 3;
+    /// Result: refused, not a known command.
+    pub const RESULT_UNKNOWN: u32 = 4;
+
+    /// A reset request with id `seq`, sent at `t_mono_ns` by a sender that
+    /// saw hardware episode `episode`.
+    pub fn reset(seq: u64, t_mono_ns: u64, episode: u64) -> Self {
+        Self {
+            header: Header::new(seq, t_mono_ns, 0, episode),
+            command: Self::RESET,
+            reserved: 0,
+        }
+    }
+
+    /// Text of a `RESULT_*` code.
+    pub fn result_name(result: u32) -> &'static str {
+        match result {
+            0 => "none",
+            Self::RESULT_CLEARED => "cleared",
+            Self::RESULT_NO_FAULT => "no fault to clear",
+            Self::RESULT_HARDWARE_SILENT => "refused: the hardware is silent",
+            Self::RESULT_UNKNOWN => "refused: unknown command",
+            _ => "?",
+        }
+    }
 }
 
 /// Learner → hw-sim: episode control.
@@ -671,7 +744,8 @@ const _: () = assert!(
 );
 const _: () = assert!(size_of::<LatencyHistogram>() == 32 + 4 * HISTOGRAM_BINS);
 const _: () =
-    assert!(size_of::<ControllerStatus>() == H + 96 + 16 + 3 * size_of::<LatencyHistogram>());
+    assert!(size_of::<ControllerStatus>() == H + 144 + 16 + 3 * size_of::<LatencyHistogram>());
+const _: () = assert!(size_of::<ControllerCommand>() == H + 8);
 const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
 const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
 
@@ -726,6 +800,11 @@ message!(SensorFrame, topics::SENSOR, "SensorFrame");
 message!(PolicyAction, topics::ACTION, "PolicyAction");
 message!(CameraFrame, topics::CAMERA, "CameraFrame");
 message!(ControllerStatus, topics::STATUS, "ControllerStatus");
+message!(
+    ControllerCommand,
+    topics::CONTROLLER_COMMAND,
+    "ControllerCommand"
+);
 message!(SimCommand, topics::SIM_COMMAND, "SimCommand");
 message!(EpisodeReport, topics::EPISODE, "EpisodeReport");
 

@@ -163,10 +163,22 @@ fn start_sim_and_controller(
     (sim, ctl)
 }
 
-fn action(seq: u64, dx: f64, version: u32) -> PolicyAction {
+/// An action answering `frame` (its episode and hardware time), as a
+/// policy node stamps it: the daemon drops actions answering no frame of
+/// the current episode, or one older than two policy periods.
+fn action(seq: u64, dx: f64, version: u32, frame: &SensorFrame) -> PolicyAction {
     let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
     a.header.schema_version = version;
+    a.header.episode = frame.header.episode;
+    a.header.t_hw_ns = frame.header.t_hw_ns;
     a
+}
+
+/// The newest sensor frame, waiting up to 5 s for one.
+fn latest(frames: &transport::Sub<SensorFrame>) -> SensorFrame {
+    let mut newest = wait_for(frames, Duration::from_secs(5), |_| true).expect("sensor frames");
+    transport::drain(frames, |f| newest = *f).unwrap();
+    newest
 }
 
 #[test]
@@ -192,18 +204,25 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         ],
         &dir,
     );
+    // The hardware time at which the applied action last changed, followed
+    // in every frame from the start: the first frame after the kill may
+    // come up to 50 ms after the last action was applied.
+    let mut last_action = (0u64, 0u64);
+    let mut follow = |f: &SensorFrame| {
+        if f.action_seq != last_action.0 {
+            last_action = (f.action_seq, f.header.t_hw_ns);
+        }
+    };
     let running = wait_for(&frames, Duration::from_secs(30), |f| {
+        follow(f);
         f.mode == ControllerMode::Running as u32 && f.action_seq > 10
     });
     assert!(running.is_some(), "the policy never drove the controller");
     policy.signal(libc::SIGKILL);
     policy.wait_timeout(Duration::from_secs(5)).expect("killed");
     // The last action applied, then the first frame in Holding.
-    let mut last_action = (0u64, 0u64);
     let holding = wait_for(&frames, Duration::from_secs(5), |f| {
-        if f.action_seq != last_action.0 {
-            last_action = (f.action_seq, f.header.t_hw_ns);
-        }
+        follow(f);
         f.mode == ControllerMode::Holding as u32
     })
     .expect("the controller never held");
@@ -220,7 +239,8 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         let mut seq = 1_000_000;
         while hit.is_none() && start.elapsed() < Duration::from_secs(5) {
             seq += 1;
-            transport::send(&back, &action(seq, 0.0, SCHEMA_VERSION)).unwrap();
+            let a = action(seq, 0.0, SCHEMA_VERSION, &latest(&frames));
+            transport::send(&back, &a).unwrap();
             hit = wait_for(&frames, Duration::from_millis(50), |f| {
                 f.mode == ControllerMode::Running as u32
             });
@@ -228,6 +248,28 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         hit
     };
     assert!(resumed.is_some(), "actions did not resume the run");
+    // A frozen policy: the same message again and again at 20 Hz. It was
+    // applied once; its repetitions are replays (and soon too old): the
+    // controller holds.
+    let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
+    let frozen = action(seq + 1, 0.0, SCHEMA_VERSION, &latest(&frames));
+    let held = {
+        let start = Instant::now();
+        let mut hit = None;
+        let mut applied = false;
+        while hit.is_none() && start.elapsed() < Duration::from_secs(10) {
+            transport::send(&back, &frozen).unwrap();
+            hit = wait_for(&frames, Duration::from_millis(50), |f| {
+                applied |= f.action_seq == frozen.header.seq;
+                applied && f.mode == ControllerMode::Holding as u32
+            });
+        }
+        hit
+    };
+    assert!(held.is_some(), "a frozen policy kept the controller running");
+    let s = wait_for(&status, Duration::from_secs(2), |s| s.actions_replayed > 0)
+        .expect("the replays were not counted");
+    assert_eq!(s.mode, ControllerMode::Holding as u32, "{s:?}");
 }
 
 #[test]
@@ -415,8 +457,9 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     };
     const N: u64 = 4000;
     let (mut bad_schema, mut bad_value) = (0u64, 0u64);
+    let mut newest = latest(&frames);
     for k in 0..N {
-        let mut a = action(k + 1, 0.0, SCHEMA_VERSION);
+        let mut a = action(k + 1, 0.0, SCHEMA_VERSION, &newest);
         let pick = |rng: &mut test_support::Rng| match rng.random_range(0..3) {
             0 => specials[rng.random_range(0..specials.len())],
             1 => rng.uniform(-0.01, 0.01), // plausible steps
@@ -446,7 +489,11 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
                 Instant::now() < deadline,
                 "no sensor frames after action {k}"
             );
-            transport::drain(&frames, |f| after += (f.header.t_mono_ns > sent) as u32).unwrap();
+            transport::drain(&frames, |f| {
+                after += (f.header.t_mono_ns > sent) as u32;
+                newest = *f;
+            })
+            .unwrap();
             transport::drain(&torques, &mut check).unwrap();
             std::thread::sleep(Duration::from_micros(200));
         }
@@ -471,10 +518,21 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     // One action in flight: the queue never overflows, so every rejection
     // below is the validation's, not a flood's.
     assert_eq!(s.actions_overflow, 0, "{s:?}");
-    // Every action received is accounted for exactly once.
+    // Every action received is accounted for exactly once. Each answers a
+    // frame published a moment before: stale only if the machine stalled
+    // for two policy periods (then counted as such).
+    let stale = s.actions_too_old
+        + s.actions_from_future
+        + s.actions_other_episode
+        + s.actions_replayed;
     assert_eq!(
-        s.actions_accepted + s.actions_rejected + s.actions_ignored + s.actions_overflow,
+        s.actions_accepted + s.actions_rejected + s.actions_ignored + s.actions_overflow + stale,
         N,
+        "{s:?}"
+    );
+    assert_eq!(
+        s.actions_from_future + s.actions_other_episode + s.actions_replayed,
+        0,
         "{s:?}"
     );
     assert!(
@@ -482,7 +540,10 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
         "{bad_schema} {bad_value}"
     );
     if s.faults == 0 {
-        assert_eq!(s.actions_rejected, bad_schema + bad_value, "{s:?}");
+        // Another schema is refused on arrival; a bad value only when not
+        // dropped as stale before the control law sees it.
+        assert!(s.actions_rejected <= bad_schema + bad_value, "{s:?}");
+        assert!(s.actions_rejected + stale >= bad_schema + bad_value, "{s:?}");
         assert_eq!(s.actions_ignored, 0);
     } else {
         // In Fault valid and invalid actions alike are ignored.

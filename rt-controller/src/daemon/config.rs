@@ -85,6 +85,11 @@ pub struct TimingConfig {
     pub lockstep_action_timeout_s: f64,
     /// On SIGTERM/SIGINT: hold the pose this long before exiting, s.
     pub shutdown_hold_s: f64,
+    /// An action is dropped as stale when the observation it answers (its
+    /// `header.t_hw_ns`, a hardware time the daemon itself published) is
+    /// older than this on the hardware's clock when it would be applied,
+    /// ms (two policy periods).
+    pub max_action_age_ms: f64,
 }
 
 impl Default for TimingConfig {
@@ -98,6 +103,7 @@ impl Default for TimingConfig {
             action_period_steps: shared_mem_schema::rates::ACTION_PERIOD_STEPS,
             lockstep_action_timeout_s: 5.0,
             shutdown_hold_s: 0.3,
+            max_action_age_ms: 2.0 * shared_mem_schema::rates::ACTION_PERIOD_S * 1e3,
         }
     }
 }
@@ -222,6 +228,9 @@ impl DaemonConfig {
             0.0..=60.0,
         )?;
         within("timing.shutdown_hold_s", t.shutdown_hold_s, 0.0..=60.0)?;
+        positive("timing.max_action_age_ms", t.max_action_age_ms)?;
+        // Above a second an action is no answer to what the arm does now.
+        within("timing.max_action_age_ms", t.max_action_age_ms, 0.0..=1000.0)?;
         at_least("timing.action_period_steps", t.action_period_steps, 1)?;
         // SCHED_FIFO priorities are 1 to 99.
         within("realtime.priority", self.realtime.priority, 1..=99)?;
@@ -272,6 +281,10 @@ mod tests {
             (
                 "[timing]\nshutdown_hold_s = 1e9\n",
                 "timing.shutdown_hold_s",
+            ),
+            (
+                "[timing]\nmax_action_age_ms = 5000.0\n",
+                "timing.max_action_age_ms",
             ),
             (
                 "[realtime]\nprefault_stack_kib = 65536\n",

@@ -12,8 +12,8 @@ use robot_model::Model;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{
-    ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction, SCHEMA_VERSION,
-    SensorFrame, TorqueCommand,
+    ControllerCommand, ControllerMode, ControllerStatus, HardwareState, Message, PolicyAction,
+    SCHEMA_VERSION, SensorFrame, TorqueCommand,
 };
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -50,6 +50,7 @@ pub struct Daemon<H: Hardware> {
     pub control: ControlCycle,
     pub(super) hw: H,
     actions: Sub<PolicyAction>,
+    commands: Sub<ControllerCommand>,
     sensor_pub: Pub<SensorFrame>,
     status_pub: Pub<ControllerStatus>,
     queue: ActionQueue,
@@ -61,6 +62,8 @@ pub struct Daemon<H: Hardware> {
     sensor: SensorFrame,
     status_seq: u64,
     next_status_ns: u64,
+    command_seq: u64,
+    command_result: u32,
     realtime: bool,
     /// Loop statistics.
     pub stats: Box<Stats>,
@@ -80,6 +83,7 @@ impl<H: Hardware> Daemon<H> {
         let control = ControlCycle::new(&model, cfg.controller.clone())?;
         let ns = &cfg.backend.namespace;
         let actions = transport::subscriber::<PolicyAction>(node, ns)?;
+        let commands = transport::subscriber::<ControllerCommand>(node, ns)?;
         let sensor_pub = transport::publisher::<SensorFrame>(node, ns)?;
         let status_pub = transport::publisher::<ControllerStatus>(node, ns)?;
         let empty = HardwareState::empty(0);
@@ -88,6 +92,7 @@ impl<H: Hardware> Daemon<H> {
             control,
             hw,
             actions,
+            commands,
             sensor_pub,
             status_pub,
             queue: ActionQueue::new(),
@@ -99,6 +104,8 @@ impl<H: Hardware> Daemon<H> {
             sensor: *SensorFrame::boxed_zeroed(),
             status_seq: 0,
             next_status_ns: 0,
+            command_seq: 0,
+            command_result: 0,
             realtime: false,
             stats: Box::new(Stats::EMPTY),
             shared: Arc::new(Shared::default()),
@@ -139,7 +146,9 @@ impl<H: Hardware> Daemon<H> {
     }
 
     /// Polls the hardware once; true when a new state arrived. A state of a
-    /// new episode (the robot was reset) restarts the control law.
+    /// new episode (the robot was reset) restarts the control law unless a
+    /// fault is latched. States keep being read while the hardware is
+    /// counted lost (a reset needs a live hardware), but nothing is sent.
     pub fn poll_hardware(&mut self, now_ns: u64) -> Result<bool, HardwareError> {
         let nv = self.model.nv();
         let Some(s) = self.hw.poll()? else {
@@ -150,6 +159,7 @@ impl<H: Hardware> Daemon<H> {
             return Ok(false);
         }
         if self.have_state
+            && !self.hardware_lost
             && Some(s.header.episode) == self.control.episode()
             && s.step == self.state.step
             && self.last_command.state_step == s.step
@@ -175,7 +185,6 @@ impl<H: Hardware> Daemon<H> {
         self.last_state_ns = now_ns;
         if self.control.observe_episode(&self.state) {
             self.queue.clear();
-            self.hardware_lost = false;
         }
         self.have_state = true;
         Ok(true)
@@ -190,14 +199,14 @@ impl<H: Hardware> Daemon<H> {
         let episode = self.control.episode();
         let drained = transport::try_drain(&self.actions, |a| {
             stats.actions_received += 1;
-            if !for_episode(a, episode) {
+            if a.header.schema_version != SCHEMA_VERSION {
+                // Another schema's bytes.
+                stats.actions_garbage += 1;
+            } else if !for_episode(a, episode) {
                 // Sent for the episode before a reset, arriving after it: in
                 // lockstep it would sit at the queue's front, addressed to a
                 // step of the old episode, and hold back the new one's.
-                stats.actions_stale += 1;
-            } else if a.header.schema_version != SCHEMA_VERSION {
-                // Another schema's bytes.
-                stats.actions_garbage += 1;
+                stats.actions_other_episode += 1;
             } else if queue.push(*a) {
                 // A flood: the oldest queued action went, unread. Counted
                 // apart from garbage, which says something about the values.
@@ -209,6 +218,94 @@ impl<H: Hardware> Daemon<H> {
         }
     }
 
+    /// Handles the controller commands that arrived (resets), at `now_ns`;
+    /// `silent`: no hardware state within `hardware_timeout_ms`. A reset
+    /// clears a latched Fault, or a silent hardware's fault once states
+    /// come again (the control law then restarts at the state it sees: the
+    /// arm may have been moved or braked meanwhile); it is refused while
+    /// the hardware is silent. The answer goes out in a status published
+    /// at once. Never allocates.
+    fn take_commands(&mut self, now_ns: u64, silent: bool) {
+        let mut last: Option<ControllerCommand> = None;
+        let mut received = 0u64;
+        // Several at once: the newest counts (each asks for the same reset).
+        let drained = transport::try_drain(&self.commands, |c| {
+            received += 1;
+            last = Some(*c);
+        });
+        if drained.is_err() {
+            self.stats.receive_errors += 1;
+        }
+        let Some(c) = last else {
+            return;
+        };
+        self.stats.commands += received;
+        if c.header.seq == self.command_seq {
+            // A sender that missed the answer asks again: answer again.
+            self.next_status_ns = now_ns;
+            return;
+        }
+        let t_hw = self.state.header.t_hw_ns;
+        let result = if c.header.schema_version != SCHEMA_VERSION
+            || c.command != ControllerCommand::RESET
+        {
+            ControllerCommand::RESULT_UNKNOWN
+        } else if self.hardware_lost {
+            if silent || !self.have_state {
+                ControllerCommand::RESULT_HARDWARE_SILENT
+            } else {
+                self.hardware_lost = false;
+                self.queue.clear();
+                self.control.restart(t_hw);
+                ControllerCommand::RESULT_CLEARED
+            }
+        } else if self.control.reset(t_hw) {
+            self.queue.clear();
+            ControllerCommand::RESULT_CLEARED
+        } else {
+            ControllerCommand::RESULT_NO_FAULT
+        };
+        if matches!(
+            result,
+            ControllerCommand::RESULT_HARDWARE_SILENT | ControllerCommand::RESULT_UNKNOWN
+        ) {
+            self.stats.commands_refused += 1;
+        }
+        self.command_seq = c.header.seq;
+        self.command_result = result;
+        self.shared
+            .command_seq
+            .store(c.header.seq, Ordering::Relaxed);
+        self.shared.command_result.store(result, Ordering::Relaxed);
+        // The sender waits for the answer: publish the status now.
+        self.next_status_ns = now_ns;
+    }
+
+    /// Whether `a` may be applied to the current state: it must answer an
+    /// observation of this episode (its `header.t_hw_ns`, a hardware time
+    /// this daemon published in a sensor frame) made at most
+    /// `timing.max_action_age_ms` ago on the hardware's clock, and be newer
+    /// than the last action applied this episode. Stale ones are counted
+    /// by reason.
+    fn admit(&mut self, a: PolicyAction) -> Option<PolicyAction> {
+        let now_hw = self.state.header.t_hw_ns;
+        let max_age = (self.cfg.timing.max_action_age_ms * 1e6) as u64;
+        let s = &mut self.stats;
+        let counter = if a.header.episode != self.state.header.episode {
+            &mut s.actions_other_episode
+        } else if a.header.t_hw_ns > now_hw {
+            &mut s.actions_from_future
+        } else if now_hw - a.header.t_hw_ns > max_age {
+            &mut s.actions_too_old
+        } else if a.header.seq <= self.control.last_action_seq() {
+            &mut s.actions_replayed
+        } else {
+            return Some(a);
+        };
+        *counter += 1;
+        None
+    }
+
     /// Lockstep: waits (bounded) for the action addressed to `step`.
     fn wait_for_addressed_action(&mut self, step: u64) {
         let limit = (self.cfg.timing.lockstep_action_timeout_s * 1e9) as u64;
@@ -217,6 +314,14 @@ impl<H: Hardware> Daemon<H> {
         loop {
             self.take_actions();
             self.queue.drop_before(step);
+            // Commands and the status are answered while waiting: a learner
+            // that resets a fault before acting must not wait for this wait.
+            let now = mono_now_ns();
+            self.take_commands(now, false);
+            if now >= self.next_status_ns {
+                self.publish_status(now);
+                self.next_status_ns = now + (self.cfg.timing.status_period_ms * 1e6) as u64;
+            }
             if self.queue.front().is_some_and(|a| a.apply_at_step == step)
                 || shared_mem_schema::process::termination_requested()
                 || mono_now_ns() - start > limit
@@ -267,6 +372,15 @@ impl<H: Hardware> Daemon<H> {
         self.shared
             .learner_io_errors
             .store(io_errors, Ordering::Relaxed);
+        self.shared
+            .stale_actions
+            .store(self.stats.actions_stale(), Ordering::Relaxed);
+        self.shared
+            .resets
+            .store(self.control.resets(), Ordering::Relaxed);
+        self.shared
+            .commands_refused
+            .store(self.stats.commands_refused, Ordering::Relaxed);
         Ok(outcome)
     }
 
@@ -275,17 +389,20 @@ impl<H: Hardware> Daemon<H> {
     }
 
     fn control(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
+        let timeout_ns = (self.cfg.timing.hardware_timeout_ms * 1e6) as u64;
+        let silent = now_ns.saturating_sub(self.last_state_ns) > timeout_ns;
+        if self.have_state && silent {
+            self.hardware_lost = true;
+        }
+        self.take_commands(now_ns, silent);
         if !self.have_state {
             self.take_actions();
             self.queue.clear();
             return Ok(CycleOutcome::WaitingForHardware);
         }
-        let timeout_ns = (self.cfg.timing.hardware_timeout_ms * 1e6) as u64;
-        if now_ns.saturating_sub(self.last_state_ns) > timeout_ns {
-            self.hardware_lost = true;
-        }
         if self.hardware_lost {
-            // Latched until the hardware comes back with a new episode.
+            // Latched until a reset command once the hardware streams
+            // again (a restarted robot or simulator is no reason to move).
             self.take_actions();
             self.queue.clear();
             return Ok(CycleOutcome::HardwareLost);
@@ -304,7 +421,7 @@ impl<H: Hardware> Daemon<H> {
         } else {
             self.take_actions();
         }
-        let action = self.queue.next_for(step);
+        let action = self.queue.next_for(step).and_then(|a| self.admit(a));
         let info = self.control.cycle(
             &self.model,
             &self.state,
@@ -351,6 +468,11 @@ impl<H: Hardware> Daemon<H> {
         );
         let (mode, fault, garbage) = (self.mode() as u32, self.fault_code(), self.garbage());
         let (last_action, realtime) = (self.control.last_action_seq(), self.realtime as u32);
+        let (resets, command_seq, command_result) = (
+            self.control.resets(),
+            self.command_seq,
+            self.command_result,
+        );
         let sent = transport::try_send_with(&self.status_pub, |m| {
             m.header = header;
             m.cycles = s.cycles;
@@ -365,9 +487,16 @@ impl<H: Hardware> Daemon<H> {
             m.hardware_misses = s.hardware_misses;
             m.hardware_states_skipped = s.hardware_states_skipped;
             m.last_action_seq = last_action;
+            m.actions_too_old = s.actions_too_old;
+            m.actions_from_future = s.actions_from_future;
+            m.actions_other_episode = s.actions_other_episode;
+            m.actions_replayed = s.actions_replayed;
+            m.resets = resets;
+            m.command_seq = command_seq;
             m.mode = mode;
             m.fault_code = fault;
             m.realtime = realtime;
+            m.command_result = command_result;
             m.wakeup_latency = s.wakeup;
             m.compute = s.compute;
             m.action_latency = s.action_latency;

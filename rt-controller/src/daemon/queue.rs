@@ -4,10 +4,10 @@ use shared_mem_schema::PolicyAction;
 
 /// Whether `a` may be queued while the hardware is in `episode`: an action
 /// names the episode of the observation it answers, and one of another
-/// episode is stale. Episode 0 (a sender that does not track episodes) and
-/// no episode yet accept anything.
+/// episode is stale (episode 0 is hw-sim's idle start, an episode like any
+/// other). Before any state, anything may wait in the queue.
 pub(crate) fn for_episode(a: &PolicyAction, episode: Option<u64>) -> bool {
-    a.header.episode == 0 || episode.is_none_or(|e| e == a.header.episode)
+    episode.is_none_or(|e| e == a.header.episode)
 }
 
 /// Fixed-capacity FIFO of actions (no allocation after construction).
@@ -108,7 +108,8 @@ mod tests {
     #[test]
     fn actions_of_another_episode_are_stale() {
         let mut a = action(1, 50);
-        assert!(for_episode(&a, Some(2)), "episode 0: any");
+        assert!(!for_episode(&a, Some(2)), "episode 0 is an episode");
+        assert!(for_episode(&a, Some(0)));
         a.header.episode = 1;
         assert!(for_episode(&a, None));
         assert!(for_episode(&a, Some(1)));

@@ -27,4 +27,14 @@ pub struct Shared {
     /// Failed publications to and receives from the learner so far
     /// ([`crate::daemon::Stats`]' `publish_errors` + `receive_errors`).
     pub learner_io_errors: AtomicU64,
+    /// Stale actions dropped so far (every reason).
+    pub stale_actions: AtomicU64,
+    /// Faults cleared by a reset command so far.
+    pub resets: AtomicU64,
+    /// Reset commands refused so far.
+    pub commands_refused: AtomicU64,
+    /// `header.seq` of the last controller command handled.
+    pub command_seq: AtomicU64,
+    /// Its result (`ControllerCommand::RESULT_*`).
+    pub command_result: AtomicU32,
 }

@@ -20,8 +20,21 @@ pub struct Stats {
     pub actions_garbage: u64,
     /// Actions dropped from the full action queue (the oldest goes).
     pub actions_overflow: u64,
-    /// Actions dropped as answers to an earlier episode.
-    pub actions_stale: u64,
+    /// Actions dropped as answers to another episode than the hardware's.
+    pub actions_other_episode: u64,
+    /// Actions dropped because the observation they answer is older than
+    /// `timing.max_action_age_ms` on the hardware's clock.
+    pub actions_too_old: u64,
+    /// Actions dropped because they answer an observation the hardware has
+    /// not made yet (a stamp after the current state's).
+    pub actions_from_future: u64,
+    /// Actions dropped because their sequence number is not above the
+    /// newest one applied this episode.
+    pub actions_replayed: u64,
+    /// Controller commands received.
+    pub commands: u64,
+    /// Resets refused (the hardware still silent, or an unknown command).
+    pub commands_refused: u64,
     /// Sensor frames and status messages that could not be published (the
     /// loop goes on: only the torque command is the arm's).
     pub publish_errors: u64,
@@ -37,6 +50,14 @@ pub struct Stats {
 }
 
 impl Stats {
+    /// Actions dropped as stale, every reason together.
+    pub fn actions_stale(&self) -> u64 {
+        self.actions_other_episode
+            + self.actions_too_old
+            + self.actions_from_future
+            + self.actions_replayed
+    }
+
     /// Nothing counted yet.
     pub const EMPTY: Self = Self {
         cycles: 0,
@@ -46,7 +67,12 @@ impl Stats {
         actions_received: 0,
         actions_garbage: 0,
         actions_overflow: 0,
-        actions_stale: 0,
+        actions_other_episode: 0,
+        actions_too_old: 0,
+        actions_from_future: 0,
+        actions_replayed: 0,
+        commands: 0,
+        commands_refused: 0,
         publish_errors: 0,
         receive_errors: 0,
         wakeup: LatencyHistogram::EMPTY,

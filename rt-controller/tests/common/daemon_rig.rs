@@ -60,6 +60,15 @@ impl DaemonRig {
         &self.daemon.config().backend.namespace
     }
 
+    /// An action `delta` numbered `seq`, answering the state last published
+    /// (its episode and hardware time), as a policy node stamps it.
+    pub fn action(&self, seq: u64, delta: [f64; 4]) -> PolicyAction {
+        let mut a = PolicyAction::new(seq, shared_mem_schema::process::mono_now_ns(), delta);
+        a.header.episode = self.state.header.episode;
+        a.header.t_hw_ns = self.state.header.t_hw_ns;
+        a
+    }
+
     /// Publishes the state of hardware step `k` (1 ms apart).
     pub fn publish_state(&mut self, k: u64) {
         self.state.header.seq = k + 1;

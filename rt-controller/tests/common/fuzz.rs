@@ -64,6 +64,8 @@ pub struct Cycle {
     /// The action due in this cycle: (Δx, Δy, Δz, Δroll), sequence number,
     /// its header's schema version, episode and step.
     pub action: Option<([f64; 4], u64, u32, u64, u64)>,
+    /// An explicit reset ([`ControlCycle::reset`]) before the cycle.
+    pub reset: bool,
 }
 
 /// One case: a robot and a run of cycles on one fresh controller.
@@ -150,12 +152,14 @@ fn cycle() -> impl Strategy<Value = Cycle> {
         ],
         header(),
         proptest::option::weighted(0.4, action()),
+        proptest::bool::weighted(0.1),
     )
-        .prop_map(|(unit, nasty, header, action)| Cycle {
+        .prop_map(|(unit, nasty, header, action, reset)| Cycle {
             unit,
             nasty,
             header,
             action,
+            reset,
         })
 }
 
@@ -244,7 +248,7 @@ fn expected_fault(robot: &Robot, cfg: &ControllerConfig, s: &HardwareState) -> O
 /// the command before (after a new episode: of the measured torques the
 /// limiter restarts from, when they are finite); nothing past the robot's
 /// joints; the sensor frame's mode and fault code as the state demands
-/// (a fault latches its first reason until a new episode).
+/// (a fault latches its first reason, across episodes, until a reset).
 pub fn check(case: &Case) -> Result<(), TestCaseError> {
     let robot = &robots()[case.robot];
     let model = &robot.model;
@@ -262,9 +266,18 @@ pub fn check(case: &Case) -> Result<(), TestCaseError> {
     let mut seed_pending = true;
     for (k, c) in case.cycles.iter().enumerate() {
         let s = state_of(robot, c, &prev_state);
+        // A reset clears a latched fault and restarts the limiter; a new
+        // episode restarts it too, but leaves a latched fault latched.
+        if c.reset {
+            let resets = cc.resets();
+            prop_assert_eq!(cc.reset(prev_state.header.t_hw_ns), latched.is_some());
+            prop_assert_eq!(cc.resets(), resets + u64::from(latched.is_some()));
+            if latched.take().is_some() {
+                seed_pending = true;
+            }
+        }
         let new_episode = cc.episode() != Some(s.header.episode);
-        if new_episode {
-            latched = None;
+        if new_episode && latched.is_none() {
             seed_pending = true;
         }
         let from_state = expected_fault(robot, &cfg, &s);

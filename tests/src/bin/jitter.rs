@@ -18,7 +18,7 @@ use shared_mem_schema::process::{
 };
 use shared_mem_schema::rates::CONTROL_PERIOD_NS;
 use shared_mem_schema::transport;
-use shared_mem_schema::{ControllerStatus, LatencyHistogram, PolicyAction};
+use shared_mem_schema::{ControllerStatus, LatencyHistogram, PolicyAction, SensorFrame};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -137,6 +137,7 @@ fn main() -> anyhow::Result<()> {
     let node = transport::create_node("jitter-harness")?;
     let status = transport::subscriber::<ControllerStatus>(&node, &ns)?;
     let actions = transport::publisher::<PolicyAction>(&node, &ns)?;
+    let frames = transport::subscriber::<SensorFrame>(&node, &ns)?;
     // Wait until the loop runs.
     let start = std::time::Instant::now();
     let mut first: Option<ControllerStatus> = None;
@@ -175,7 +176,13 @@ fn main() -> anyhow::Result<()> {
         } else {
             -0.0005
         };
-        let a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
+        let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
+        // Answering the newest sensor frame, as a policy does (the daemon
+        // drops actions answering none, or an old one).
+        transport::drain(&frames, |f| {
+            a.header.episode = f.header.episode;
+            a.header.t_hw_ns = f.header.t_hw_ns;
+        })?;
         transport::send(&actions, &a)?;
         // 20 Hz, each at another phase of the daemon's 1 ms cycle (both
         // clocks are absolute: a fixed phase would measure one point of
