@@ -35,6 +35,11 @@ pub struct Mix {
     pub heuristic_noise_m: f64,
     /// The random policy's tuning.
     pub random: RandomConfig,
+    /// An episode that completed the insertion ends this many actions
+    /// later (none: it runs its full length). A peg resting at the bottom
+    /// changes nothing from one state to the next; the states it would take
+    /// go to new episodes instead (new box poses, approaches and contacts).
+    pub end_after_completion: Option<u32>,
 }
 
 impl Default for Mix {
@@ -43,6 +48,7 @@ impl Default for Mix {
             heuristic_fraction: 0.5,
             heuristic_noise_m: 0.001,
             random: RandomConfig::default(),
+            end_after_completion: None,
         }
     }
 }
@@ -163,8 +169,86 @@ pub struct EpisodeShard {
     pub states: u64,
     /// Best stage reached.
     pub stage: Stage,
+    /// The controller's fault, if it faulted (it stays latched until the
+    /// episode ends).
+    pub fault: Option<EpisodeFault>,
     /// The file.
     pub file: PathBuf,
+}
+
+/// Where the peg was when the controller faulted, from the simulator's
+/// task state at that cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultSite {
+    /// Touching the box outside the hole (its top face or rim, mostly: the
+    /// first contact of a descent).
+    Box,
+    /// In the hole, above the bottom.
+    InHole,
+    /// At the hole's bottom (the completed stage).
+    Bottom,
+    /// Not touching the box.
+    NoContact,
+}
+
+impl FaultSite {
+    /// All sites, in order.
+    pub const ALL: [FaultSite; 4] = [Self::Box, Self::InHole, Self::Bottom, Self::NoContact];
+
+    /// Name used in tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Box => "box",
+            Self::InHole => "in_hole",
+            Self::Bottom => "bottom",
+            Self::NoContact => "no_contact",
+        }
+    }
+
+    fn of(task: Option<&hw_sim::TaskState>) -> Self {
+        match task {
+            Some(t) if t.stage_now == Stage::Completed => Self::Bottom,
+            Some(t) if t.in_hole => Self::InHole,
+            Some(t) if t.in_contact => Self::Box,
+            _ => Self::NoContact,
+        }
+    }
+}
+
+/// A controller fault during an episode.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct EpisodeFault {
+    /// Episode time of the fault, s.
+    pub t_s: f64,
+    /// The supervisor's reason.
+    pub reason: String,
+    /// Where the peg was.
+    pub site: FaultSite,
+    /// Norm of the wrist force at the fault, N.
+    pub force_n: f64,
+    /// Highest tip speed in the 10 cycles before the fault, m/s (an impact's
+    /// approach speed).
+    pub tip_speed_mps: f64,
+}
+
+/// Tip speeds of the last few cycles (fixed ring).
+#[derive(Debug, Default)]
+struct RecentSpeeds {
+    v: [f64; 10],
+    next: usize,
+}
+
+impl RecentSpeeds {
+    fn push(&mut self, frame: &shared_mem_schema::SensorFrame) {
+        let t = &frame.ee_twist;
+        self.v[self.next] = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+        self.next = (self.next + 1) % self.v.len();
+    }
+
+    fn max(&self) -> f64 {
+        self.v.iter().copied().fold(0.0, f64::max)
+    }
 }
 
 /// Result of a collection run.
@@ -176,6 +260,50 @@ pub struct CollectSummary {
     pub states: u64,
     /// Wall time, s.
     pub wall_s: f64,
+}
+
+/// Per policy: episodes, completions and controller faults by where the
+/// peg was (with the median force and approach speed of each site's
+/// faults), as a Markdown table.
+pub fn fault_table(shards: &[EpisodeShard]) -> String {
+    let median = |mut v: Vec<f64>| -> String {
+        if v.is_empty() {
+            return "–".into();
+        }
+        v.sort_by(f64::total_cmp);
+        format!("{:.0}", v[v.len() / 2])
+    };
+    let mut out = String::from("| policy | episodes | completed | faulted |");
+    for site in FaultSite::ALL {
+        out += &format!(" {} |", site.name());
+    }
+    out += "\n|---|---|---|---|";
+    out += &"---|".repeat(FaultSite::ALL.len());
+    for kind in [EpisodePolicy::Heuristic, EpisodePolicy::Random] {
+        let eps: Vec<&EpisodeShard> = shards.iter().filter(|s| s.policy == kind).collect();
+        let faults: Vec<&EpisodeFault> = eps.iter().filter_map(|s| s.fault.as_ref()).collect();
+        out += &format!(
+            "\n| {} | {} | {} | {} |",
+            kind.name(),
+            eps.len(),
+            eps.iter().filter(|s| s.stage == Stage::Completed).count(),
+            faults.len()
+        );
+        for site in FaultSite::ALL {
+            let at: Vec<&&EpisodeFault> = faults.iter().filter(|f| f.site == site).collect();
+            if at.is_empty() {
+                out += " 0 |";
+            } else {
+                out += &format!(
+                    " {} ({} N, {} mm/s) |",
+                    at.len(),
+                    median(at.iter().map(|f| f.force_n).collect()),
+                    median(at.iter().map(|f| 1e3 * f.tip_speed_mps).collect()),
+                );
+            }
+        }
+    }
+    out
 }
 
 /// The task geometry the policies need, from the simulated world.
@@ -248,6 +376,9 @@ pub fn run_episode(
     log.camera(&cam)?;
     let mut obs = None;
     let mut stop = false;
+    let mut fault = None;
+    let mut speeds = RecentSpeeds::default();
+    let mut completed_actions = 0u32;
     for _ in 0..actions {
         // The first cycle has no observation yet: it holds the start pose.
         let action = obs.as_ref().map(|o| policy.act(o, &env.wrench, &task));
@@ -256,10 +387,27 @@ pub fn run_episode(
             if let Some(m) = env.cycle(if c == 0 { action.as_ref() } else { None })? {
                 log.action(&m)?;
             }
-            log.sensor(env.sensor_frame())?;
+            let frame = env.sensor_frame();
+            log.sensor(frame)?;
+            if fault.is_none()
+                && let Some(reason) = env.controller_data().supervisor.fault()
+            {
+                let w = &frame.wrench;
+                fault = Some(EpisodeFault {
+                    t_s: env.world().time_s(),
+                    reason: format!("{reason:?}"),
+                    site: FaultSite::of(env.world().task()),
+                    force_n: (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt(),
+                    tip_speed_mps: speeds.max(),
+                });
+            }
+            speeds.push(frame);
         }
         obs = Some(env.last_observation().expect("cycles ran"));
         stage_of(env, &mut log)?;
+        if env.world().task().map(|t| t.best_stage) == Some(Stage::Completed) {
+            completed_actions += 1;
+        }
         if env.world().camera_due() {
             env.render_camera(&mut cam);
             log.camera(&cam)?;
@@ -272,6 +420,12 @@ pub fn run_episode(
                 stop = true;
                 break;
             }
+        }
+        if mix
+            .end_after_completion
+            .is_some_and(|n| completed_actions > n)
+        {
+            break;
         }
     }
     // The sensor frame of the last camera frame's step: its sample needs
@@ -299,6 +453,7 @@ pub fn run_episode(
         policy: policy.kind(),
         states,
         stage: best,
+        fault,
         file,
     })
 }

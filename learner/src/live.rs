@@ -139,6 +139,9 @@ pub fn collect_live(c: &LiveCollect) -> Result<(), StackError> {
     if !c.log.foxglove {
         run_args.push("--no-foxglove".into());
     }
+    if c.mix.end_after_completion.is_none() {
+        run_args.push("--full-episodes".into());
+    }
     let status = crate::stack::run(&crate::stack::StackConfig {
         namespace: shared_mem_schema::DEFAULT_NAMESPACE.into(),
         lockstep: false,
@@ -688,15 +691,23 @@ impl LiveEpisode {
     }
 
     /// Whether the episode is over at `frame`. Collection runs its episodes
-    /// to their length; insertion episodes end once the peg has settled at
-    /// the bottom.
+    /// to their length, or to the mix's `end_after_completion`; insertion
+    /// episodes end once the peg has settled at the bottom.
     fn over(&self, cfg: &LiveConfig, frame: &SensorFrame, total_actions: u64) -> bool {
         let t = frame.header.t_hw_ns;
         let t_ep = hw_time_s(t.saturating_sub(self.first.header.t_hw_ns));
-        let settled = cfg.max_actions.is_none()
-            && self
-                .completed_at
-                .is_some_and(|c| hw_time_s(t.saturating_sub(c)) >= cfg.settle_s);
+        let since_completed = self.completed_at.map(|c| t.saturating_sub(c));
+        let rest_ns = match cfg.max_actions {
+            None => Some((cfg.settle_s * 1e9) as u64),
+            Some(_) => cfg
+                .mix
+                .as_ref()
+                .and_then(|m| m.end_after_completion)
+                .map(|n| (n as u64 + 1) * ACTION_PERIOD_NS),
+        };
+        let settled = since_completed
+            .zip(rest_ns)
+            .is_some_and(|(since, rest)| since >= rest);
         let enough = cfg.max_actions.is_some_and(|n| self.actions >= n as u64)
             || cfg.target_states.is_some_and(|n| total_actions >= n);
         settled || enough || t_ep >= cfg.episode_timeout_s || termination_requested()

@@ -90,6 +90,10 @@ struct RunCollectArgs {
     /// Stop after this many states (actions), with a progress bar.
     #[arg(long)]
     states: Option<u64>,
+    /// Collection: run completed episodes to their length instead of
+    /// ending them shortly after completion.
+    #[arg(long)]
+    full_episodes: bool,
     /// Leave out the Foxglove view channels.
     #[arg(long)]
     no_foxglove: bool,
@@ -122,6 +126,11 @@ struct CollectArgs {
     /// Share of episodes run by the heuristic; the rest are random.
     #[arg(long, default_value_t = 0.5)]
     heuristic_fraction: f64,
+    /// Run episodes that completed the insertion to their length (by
+    /// default they end 10 actions after completion, so that a peg resting
+    /// at the bottom does not dominate the data).
+    #[arg(long)]
+    full_episodes: bool,
     /// Worker threads (fast mode); default: all cores.
     #[arg(long)]
     workers: Option<usize>,
@@ -168,10 +177,13 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         view_rate_hz: a.view_rate_hz,
         ..Default::default()
     };
-    let mix = Mix {
+    let mut mix = Mix {
         heuristic_fraction: a.heuristic_fraction,
         ..Mix::default()
     };
+    if a.full_episodes {
+        mix.end_after_completion = None;
+    }
     if a.live {
         return Ok(live::collect_live(&live::LiveCollect {
             out_dir: a.out.clone(),
@@ -235,6 +247,11 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         summary.states as f64 / summary.wall_s.max(1e-9),
         bytes as f64 * 1e-9,
         a.out.display()
+    );
+    println!(
+        "controller faults by where the peg was (count, median force, median tip speed in the \
+         10 ms before):\n{}",
+        collect::fault_table(&summary.shards)
     );
     Ok(())
 }
@@ -342,6 +359,17 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
                 100.0 * ds.pairing_ratio(),
                 100.0 * ds.stats.mask_ratio
             );
+            let b = &ds.stats.balance;
+            if b.total().samples == m.samples {
+                println!(
+                    "balance (stage: the best reached by the sample's frame; moving: the tip \
+                     moves more than {} mm until the next frame):\n{}",
+                    1e3 * dataset::MOVING_M,
+                    b.table()
+                );
+            } else {
+                println!("balance: not recorded (built before it was; rebuild to see it)");
+            }
             if !m.skipped.is_empty() {
                 println!("{} logs skipped:", m.skipped.len());
                 for (f, why) in &m.skipped {
@@ -499,9 +527,15 @@ fn run(cli: Cli) -> Result<()> {
             cfg.episode_timeout_s = a.episode_timeout_s;
             cfg.lockstep = a.lockstep;
             cfg.pegs = c.pegs.clone();
-            cfg.mix = c.mix_heuristic_fraction.map(|f| learner::collect::Mix {
-                heuristic_fraction: f,
-                ..Default::default()
+            cfg.mix = c.mix_heuristic_fraction.map(|f| {
+                let mut m = learner::collect::Mix {
+                    heuristic_fraction: f,
+                    ..Default::default()
+                };
+                if c.full_episodes {
+                    m.end_after_completion = None;
+                }
+                m
             });
             cfg.max_actions = c.episode_actions;
             cfg.target_states = c.states;

@@ -197,6 +197,7 @@ pub struct HeuristicPolicy {
     phase: Phase,
     free_force: Option<Vector3<f64>>,
     stuck: u32,
+    resting: bool,
 }
 
 /// The tip relative to the hole: position in the hole frame and roll
@@ -229,12 +230,18 @@ impl HeuristicPolicy {
             phase: Phase::Approach,
             free_force: None,
             stuck: 0,
+            resting: false,
         }
     }
 
     /// The current phase.
     pub fn phase(&self) -> Phase {
         self.phase
+    }
+
+    /// Whether the last action rests on the hole's bottom (the task done).
+    pub fn resting(&self) -> bool {
+        self.resting
     }
 
     /// Starts over (new episode).
@@ -259,6 +266,7 @@ impl HeuristicPolicy {
         let to_base = |d: Vector3<f64>| task.hole_pose.rotation * d;
         let inserted = s.z < -0.003;
         let at_bottom = self.phase == Phase::Insert && task.depth_m + s.z < c.bottom_tol_m;
+        self.resting = at_bottom;
         let step_hole = match self.phase {
             Phase::Approach => {
                 let goal = Vector3::new(0.0, 0.0, c.above_m);

@@ -75,6 +75,15 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
 
 /// A short collection shared by the tests below.
 fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::collect::CollectSummary {
+    collect_with(dir, fraction, actions, Mix::default().end_after_completion)
+}
+
+fn collect_with(
+    dir: &std::path::Path,
+    fraction: f64,
+    actions: u32,
+    end_after_completion: Option<u32>,
+) -> learner::collect::CollectSummary {
     let cfg = CollectConfig {
         out_dir: dir.to_path_buf(),
         states: u64::MAX,
@@ -87,6 +96,7 @@ fn collect(dir: &std::path::Path, fraction: f64, actions: u32) -> learner::colle
         controller: rt_controller::ControllerConfig::default(),
         mix: Mix {
             heuristic_fraction: fraction,
+            end_after_completion,
             ..Mix::default()
         },
         log: LogOptions {
@@ -268,4 +278,116 @@ fn a_short_collection_builds_the_expected_dataset() {
     .unwrap();
     let e = Dataset::open(&out).err().unwrap().to_string();
     assert!(e.contains("format version 9"), "{e}");
+}
+
+/// Recounts a dataset's balance from its samples and its logs: the stage
+/// from each log's stage events at the sample's frame, contact from the
+/// sample, motion from its position label.
+fn recount(ds: &Dataset) -> dataset::Balance {
+    use learner::log::{Event, LogReader, topics};
+    let mut b = dataset::Balance::default();
+    let mut samples = Vec::new();
+    for (shard, blocks) in ds.meta.shards.iter().enumerate() {
+        for k in 0..blocks.1.len() {
+            samples.extend(ds.read_block(shard, k).unwrap());
+        }
+    }
+    for e in &ds.meta.episodes {
+        let log = LogReader::open(std::path::Path::new(&e.source)).unwrap();
+        let frames: Vec<shared_mem_schema::SensorFrame> =
+            log.read_raw(topics::SENSOR, None).unwrap();
+        let events = log.read_events(None).unwrap();
+        for s in &samples[e.first_id as usize..(e.first_id + e.samples) as usize] {
+            let f = frames.iter().find(|f| f.step == s.step).unwrap();
+            let stage = events
+                .iter()
+                .filter_map(|(t, ev)| match ev {
+                    Event::Stage { stage } if *t <= f.header.t_hw_ns => Some(*stage),
+                    _ => None,
+                })
+                .max()
+                .unwrap_or(hw_sim::Stage::Failed);
+            let moved = (0..3)
+                .map(|k| (s.ee_next[k] as f64 - f.ee_pos_m[k]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let tags = dataset::SampleTags {
+                stage,
+                moving: moved > dataset::MOVING_M,
+            };
+            b.add(e.policy, tags, s.contact);
+        }
+    }
+    b
+}
+
+#[test]
+fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
+    // Full 4 s episodes: the heuristic completes (about 2.7 s) and rests.
+    let full = test_support::scratch_dir("full");
+    let summary = collect_with(&full, 1.0, 80, None);
+    assert!(summary.shards.iter().all(|s| s.states == 79));
+    let out = test_support::scratch_dir("full-ds");
+    let files = dataset::find_logs(&[full.to_path_buf()]).unwrap();
+    dataset::build(&files, &out, &BuildConfig::default(), 2, |_, r| {
+        r.unwrap();
+    })
+    .unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    let b = &ds.stats.balance;
+    assert_eq!(*b, recount(&ds));
+    assert_eq!(b.total().samples, ds.meta.samples);
+    assert_eq!(b.policy_total(learner::collect::EpisodePolicy::Random).samples, 0);
+    let done = b.heuristic[hw_sim::Stage::Completed.code() as usize];
+    assert!(
+        summary.shards.iter().all(|s| s.stage == hw_sim::Stage::Completed),
+        "{:?}",
+        summary.shards
+    );
+    // Resting at the bottom: many samples, mostly still, in contact.
+    assert!(done.samples >= 20, "{done:?}");
+    assert!(done.moving * 2 < done.samples, "{done:?}");
+    assert!(done.contact * 2 > done.samples, "{done:?}");
+
+    // `learner dataset inspect` shows it.
+    let sheet = out.join("sheet.png");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["dataset", "inspect"])
+        .arg(&*out)
+        .arg("--sheet")
+        .arg(&sheet)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{text}");
+    let all = b.total();
+    let row = format!(
+        "| heuristic | completed | {} | {:.1} % | {:.1} % | {:.1} % |",
+        done.samples,
+        100.0 * done.samples as f64 / all.samples as f64,
+        100.0 * done.contact as f64 / done.samples as f64,
+        100.0 * done.moving as f64 / done.samples as f64
+    );
+    assert!(text.contains(&row), "{row} not in:\n{text}");
+    assert!(text.contains(&format!("| all | all | {} | 100.0 % |", all.samples)), "{text}");
+
+    // By default a completed episode ends 10 actions after completion.
+    let short = test_support::scratch_dir("short");
+    let n = Mix::default().end_after_completion.expect("on by default");
+    let summary = collect_with(&short, 1.0, 80, Some(n));
+    let out = test_support::scratch_dir("short-ds");
+    let files = dataset::find_logs(&[short.to_path_buf()]).unwrap();
+    dataset::build(&files, &out, &BuildConfig::default(), 2, |_, r| {
+        r.unwrap();
+    })
+    .unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    let b = &ds.stats.balance;
+    assert_eq!(*b, recount(&ds));
+    for s in &summary.shards {
+        assert_eq!(s.stage, hw_sim::Stage::Completed);
+        assert!(s.states < 79, "{s:?}");
+    }
+    let rest = b.heuristic[hw_sim::Stage::Completed.code() as usize].samples;
+    assert!(rest <= 2 * (n as u64 + 1), "{rest} samples after completion");
 }

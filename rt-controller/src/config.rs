@@ -70,10 +70,42 @@ impl Default for ControllerConfig {
     }
 }
 
+/// What a policy step is added to (TOML `trajectory.target`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrajectoryTarget {
+    /// The previous target plus the step, kept within `max_lead_m` /
+    /// `max_lead_rad` of the measured pose. Steps add up exactly while the
+    /// arm lags behind its reference, so the policy's steps are what the arm
+    /// ends up doing in free space.
+    #[default]
+    Accumulated,
+    /// The paper's literal scheme: the measured pose plus the step. In
+    /// contact, the target then leads the pose by one step at most; in free
+    /// space, a step shorter than the arm's tracking lag moves it less than
+    /// asked.
+    Measured,
+}
+
+impl TrajectoryTarget {
+    /// The TOML value.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Accumulated => "accumulated",
+            Self::Measured => "measured",
+        }
+    }
+}
+
 /// How policy actions become a Cartesian reference.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrajectoryConfig {
+    /// What each step is added to: `"accumulated"` (the previous target,
+    /// the default) or `"measured"` (the measured pose, as in the paper).
+    /// docs/paper-measurements.md has the measurement that chose the
+    /// default.
+    pub target: TrajectoryTarget,
     /// Duration of the quintic towards each new target. The default is two
     /// policy periods (2 × 50 ms): consecutive actions then blend into one
     /// smooth motion, where one period makes every segment stop at rest
@@ -104,6 +136,7 @@ pub struct TrajectoryConfig {
 impl Default for TrajectoryConfig {
     fn default() -> Self {
         Self {
+            target: TrajectoryTarget::default(),
             interpolation_s: 0.1,
             max_step_m: 0.01,
             max_step_rad: 0.05,
@@ -396,5 +429,30 @@ impl ControllerConfig {
             )?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trajectory_target_reads_from_toml_and_names_a_bad_value() {
+        let c: ControllerConfig = toml::from_str("[trajectory]\ntarget = \"measured\"\n").unwrap();
+        assert_eq!(c.trajectory.target, TrajectoryTarget::Measured);
+        let c: ControllerConfig = toml::from_str("").unwrap();
+        assert_eq!(c.trajectory.target, TrajectoryTarget::default());
+        for t in [TrajectoryTarget::Accumulated, TrajectoryTarget::Measured] {
+            let text = format!("[trajectory]\ntarget = \"{}\"\n", t.name());
+            let c: ControllerConfig = toml::from_str(&text).unwrap();
+            assert_eq!(c.trajectory.target, t);
+        }
+        let e = toml::from_str::<ControllerConfig>("[trajectory]\ntarget = \"paper\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("paper") && e.contains("accumulated") && e.contains("measured"),
+            "{e}"
+        );
     }
 }

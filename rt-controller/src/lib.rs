@@ -40,7 +40,7 @@ pub mod trajectory;
 
 pub use config::{
     ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, SafetyConfig,
-    TrajectoryConfig,
+    TrajectoryConfig, TrajectoryTarget,
 };
 pub use cycle::ControlCycle;
 pub use qp::QpOutcome;

@@ -11,7 +11,7 @@
 //! position, velocity and acceleration to the target at rest, so a new action
 //! arriving mid-segment leaves the reference C² continuous.
 
-use crate::config::TrajectoryConfig;
+use crate::config::{TrajectoryConfig, TrajectoryTarget};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// A quintic `p(t)` on `[0, T]` with given end conditions; constant after.
@@ -161,10 +161,11 @@ impl TrajectoryGenerator {
         self.target
     }
 
-    /// Starts a segment towards `target + (Δx, Δroll)` after clamping the step
+    /// Starts a segment towards `base + (Δx, Δroll)` after clamping the step
     /// to its maximum, the target to the workspace box and roll range, and the
     /// lead over the measured pose (`meas_pos`, `meas_roll`) to the
-    /// anti-windup bound. `delta` must be finite (the supervisor checks).
+    /// anti-windup bound. `base` is the previous target or the measured pose,
+    /// as `cfg.target` says. `delta` must be finite (the supervisor checks).
     pub fn apply_action(
         &mut self,
         cfg: &TrajectoryConfig,
@@ -185,6 +186,12 @@ impl TrajectoryGenerator {
             y
         };
         let mut target = self.target;
+        if cfg.target == TrajectoryTarget::Measured {
+            target[..3].copy_from_slice(meas_pos.as_slice());
+            // The measured roll on the previous target's branch, so that
+            // the roll range is not crossed at the ±π wrap.
+            target[3] += wrap_angle(meas_roll - target[3]);
+        }
         for i in 0..3 {
             let d = clamp(delta[i], -cfg.max_step_m, cfg.max_step_m);
             let mut x = target[i] + d;
@@ -404,5 +411,35 @@ mod tests {
         }
         // Measured roll follows across +π (wrapping to −π): no lead clamp.
         assert!((g.target()[3] - 3.3).abs() < 1e-12, "{:?}", g.target());
+    }
+
+    #[test]
+    fn measured_target_adds_the_step_to_the_measured_pose() {
+        let c = TrajectoryConfig {
+            target: TrajectoryTarget::Measured,
+            ..cfg()
+        };
+        let mut g = TrajectoryGenerator::default();
+        let rot = Rotation3::from_euler_angles(0.0, 0.0, 3.1).into_inner();
+        let p = Vector3::new(0.5, 0.0, 0.3);
+        g.reset(&p, &rot, 0.0);
+        // The pose is stuck (in contact): the target leads it by one step,
+        // however many steps push, where accumulation would wind up to
+        // max_lead.
+        for k in 0..20 {
+            let e = g.apply_action(&c, [0.004, 0.0, -0.002, 0.0], &p, 3.1, k as f64 * 0.05);
+            assert_eq!(e, ActionEffect::Applied);
+        }
+        let t = g.target();
+        assert!((t[0] - 0.504).abs() < 1e-12 && (t[2] - 0.298).abs() < 1e-12, "{t:?}");
+        // The measured pose moved on: the next target starts from it.
+        let q = Vector3::new(0.52, 0.01, 0.25);
+        g.apply_action(&c, [0.001, 0.0, 0.0, 0.0], &q, 3.1, 1.0);
+        let t = g.target();
+        assert!((t[0] - 0.521).abs() < 1e-12 && (t[1] - 0.01).abs() < 1e-12);
+        assert!((t[2] - 0.25).abs() < 1e-12);
+        // Roll: measured across the ±π wrap, taken on the target's branch.
+        g.apply_action(&c, [0.0, 0.0, 0.0, 0.05], &q, wrap_angle(3.2), 1.05);
+        assert!((g.target()[3] - 3.25).abs() < 1e-12, "{:?}", g.target());
     }
 }

@@ -57,8 +57,9 @@ impl Builder {
             first_id: self.meta.samples,
             samples: ep.samples.len() as u64,
         });
-        for mut s in ep.samples {
+        for (mut s, tags) in ep.samples.into_iter().zip(ep.tags) {
             s.episode = episode;
+            self.stats.balance.add(ep.policy, tags, s.contact);
             for row in s.wrench.chunks_exact(6) {
                 self.stats.wrench.add(row);
             }

@@ -4,12 +4,12 @@
 use super::*;
 use crate::collect::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
-use crate::log::{CameraImage, LogReader, topics};
+use crate::log::{CameraImage, Event, LogReader, topics};
 use crate::policy::WRENCH_WINDOW;
 use hw_sim::PegShape;
 use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};
-use shared_mem_schema::{PolicyAction, SensorFrame};
+use shared_mem_schema::{PolicyAction, SensorFrame, Stage};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -57,6 +57,8 @@ pub struct EpisodeSamples {
     pub policy: EpisodePolicy,
     /// Samples in order.
     pub samples: Vec<Sample>,
+    /// Per sample: the stage reached and whether it moves (the balance).
+    pub tags: Vec<SampleTags>,
     /// Image size.
     pub size: (usize, usize),
 }
@@ -115,6 +117,24 @@ pub fn episode_samples(
     let frames: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None)?;
     let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None)?;
     let cams: Vec<CameraImage> = r.read_camera(None)?;
+    // When each better stage was reached (log time = hardware time).
+    let stage_times: Vec<(u64, Stage)> = r
+        .read_events(None)?
+        .into_iter()
+        .filter_map(|(t, e)| match e {
+            Event::Stage { stage } => Some((t, stage)),
+            _ => None,
+        })
+        .collect();
+    let stage_at = |t: u64| {
+        stage_times
+            .iter()
+            .filter(|(ts, _)| *ts <= t)
+            .map(|(_, s)| *s)
+            .max()
+            .unwrap_or(Stage::Failed)
+    };
+    let mut tags = Vec::new();
     if frames.is_empty() {
         return Err(DatasetError::NoSensorFrames(path.to_path_buf()));
     }
@@ -221,6 +241,14 @@ pub fn episode_samples(
             proprio[k] = *x as f32;
         }
         let ee1 = frames[i1].ee_pos_m;
+        let moved = (0..3)
+            .map(|k| (ee1[k] - f0.ee_pos_m[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        tags.push(SampleTags {
+            stage: stage_at(f0.header.t_hw_ns),
+            moving: moved > MOVING_M,
+        });
         out.push(Sample {
             episode: 0,
             index: out.len() as u32,
@@ -241,6 +269,7 @@ pub fn episode_samples(
         peg: world.task.peg,
         policy: config.policy,
         samples: out,
+        tags,
         size,
     })
 }

@@ -119,6 +119,10 @@ pub struct Stats {
     pub contact_next_ratio: f64,
     /// Share of flow-mask pixels.
     pub mask_ratio: f64,
+    /// Samples by policy, stage reached, contact and motion (absent from
+    /// datasets built before it existed: all zero).
+    #[serde(default)]
+    pub balance: super::Balance,
 }
 
 pub(super) fn stats_new() -> Stats {
@@ -131,5 +135,6 @@ pub(super) fn stats_new() -> Stats {
         ee_delta: Moments::new(3),
         contact_next_ratio: 0.0,
         mask_ratio: 0.0,
+        balance: Default::default(),
     }
 }

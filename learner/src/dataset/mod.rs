@@ -11,8 +11,10 @@
 //! Files: `sample` (the sample and its encoding), `label` (log → samples),
 //! `meta` (meta.json, stats.json), `build` (the writer and the parallel
 //! build), `reader` (an opened dataset), `loader` (shuffled batches with
-//! pairing negatives), `sheet` (the contact sheet), `error` (what can fail).
+//! pairing negatives), `sheet` (the contact sheet), `balance` (how the
+//! samples split by stage, contact and motion), `error` (what can fail).
 
+mod balance;
 mod build;
 mod error;
 mod label;
@@ -22,6 +24,7 @@ mod reader;
 mod sample;
 mod sheet;
 
+pub use balance::{Balance, MOVING_M, SampleTags, StageCounts};
 pub use build::{build, find_logs};
 pub use error::{DatasetError, Result};
 pub use label::{BuildConfig, EpisodeSamples, Models, episode_samples};
