@@ -233,10 +233,10 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     );
     // The policy comes back: actions resume the run.
     let back = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
+    let mut seq = 1_000_000;
     let resumed = {
         let start = Instant::now();
         let mut hit = None;
-        let mut seq = 1_000_000;
         while hit.is_none() && start.elapsed() < Duration::from_secs(5) {
             seq += 1;
             let a = action(seq, 0.0, SCHEMA_VERSION, &latest(&frames));
