@@ -253,6 +253,10 @@ enum DatasetCmd {
         /// Contact: force change against free space above this, N.
         #[arg(long, default_value_t = 3.0)]
         contact_threshold_n: f64,
+        /// Flow mask: image motion from which a robot pixel counts as
+        /// moving, px (0: every robot pixel).
+        #[arg(long, default_value_t = hw_sim::camera::FLOW_MASK_MIN_PX as f64)]
+        flow_mask_min_px: f64,
         /// Worker threads; default: all cores.
         #[arg(long)]
         workers: Option<usize>,
@@ -277,12 +281,14 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             logs,
             out,
             contact_threshold_n,
+            flow_mask_min_px,
             workers,
         } => {
             let files = dataset::find_logs(&logs)?;
             anyhow::ensure!(!files.is_empty(), "no .mcap logs in {logs:?}");
             let cfg = BuildConfig {
                 contact_threshold_n,
+                flow_mask_min_px,
                 ..Default::default()
             };
             let workers = workers
