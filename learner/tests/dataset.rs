@@ -59,7 +59,12 @@ fn kinematic_flow_labels_agree_with_the_simulators_ground_truth() {
                 moving += (gt.flow_px[i][0].hypot(gt.flow_px[i][1]) > 0.05) as usize;
             }
         }
-        let iou = both as f64 / either.max(1) as f64;
+        // A still arm: both masks empty, in full agreement.
+        let iou = if either == 0 {
+            1.0
+        } else {
+            both as f64 / either as f64
+        };
         let epe = err / both.max(1) as f64;
         assert!(iou > 0.97, "mask IoU {iou:.3}");
         assert!(epe < 0.02, "mean endpoint difference {epe:.4} px");
