@@ -311,4 +311,72 @@ fn the_default_camera_sees_box_opening_and_peg_for_every_box_pose() {
             "{peg:?}: opening or tip near the border ({margin_px:.1} px)"
         );
     }
+/// The flow mask is the robot in motion: turning one wrist joint masks the
+/// links after it and the peg, never the links before it; a still arm masks
+/// nothing, though its flow stays defined (zero) on every robot pixel.
+#[test]
+fn the_flow_mask_is_the_robot_in_motion() {
+    let model = robot_model::descriptions::builtin("iiwa14").unwrap();
+    let world = WorldConfig::default();
+    let mut prims = hw_sim::camera::robot_primitives(&model);
+    prims.push(
+        hw_sim::world::peg_info(&model, &world.task)
+            .unwrap()
+            .primitive(),
+    );
+    let wrist = 5; // joint 6 (0-based 5): links 6, 7 and the peg turn
+    let still = |p: &Primitive| matches!(p.body, BodyRef::Link(j) if j <= wrist);
+    let base: Vec<Primitive> = prims.iter().filter(|&p| still(p)).cloned().collect();
+    let mut data = model.create_data();
+    let mut links_at = |q: &[f64]| -> Vec<Isometry3<f64>> {
+        robot_model::forward_kinematics(&model, &mut data, q);
+        data.o_m_i.iter().map(|m| m.to_isometry()).collect()
+    };
+    let q0 = hw_sim::world::default_initial_q(&model);
+    let mut q1 = q0.clone();
+    q1[wrist] += 0.05;
+    let (l0, l1) = (links_at(&q0), links_at(&q1));
+    fn poses(links: &[Isometry3<f64>]) -> BodyPoses<'_> {
+        BodyPoses {
+            links,
+            box_pose: None,
+        }
+    }
+    let mut cam = Camera::new(&world.camera, prims, 0);
+    let (mut a, mut b, mut c) = (
+        CameraFrame::default(),
+        CameraFrame::default(),
+        CameraFrame::default(),
+    );
+    cam.render(&poses(&l0), 0.0, &[], (0.0, 0.0), &mut a);
+    cam.render(&poses(&l1), 0.05, &[], (0.0, 0.0), &mut b);
+    cam.render(&poses(&l1), 0.10, &[], (0.0, 0.0), &mut c);
+    // Pixels where frame a saw a link up to the wrist joint's parent: the
+    // links alone render the same depth there.
+    let mut only_base = CameraFrame::default();
+    Camera::new(&world.camera, base, 0).render(&poses(&l0), 0.0, &[], (0.0, 0.0), &mut only_base);
+    let robot = |x: u8| x == Class::Robot as u8 || x == Class::Peg as u8;
+    let (mut base_px, mut moving_px) = (0, 0);
+    for i in 0..a.class.len() {
+        let is_base =
+            robot(only_base.class[i]) && (only_base.depth_m[i] - a.depth_m[i]).abs() < 1e-6;
+        if is_base {
+            base_px += 1;
+            assert_eq!(b.flow_mask[i], 0, "pixel {i} of a still link is masked");
+            let f = b.flow_px[i];
+            assert!(
+                f[0].hypot(f[1]) < 1e-6,
+                "pixel {i} of a still link flows {f:?}"
+            );
+        } else if b.flow_mask[i] == 1 {
+            moving_px += 1;
+            assert!(robot(a.class[i]));
+        }
+    }
+    assert!(base_px > 300, "the still links cover {base_px} pixels");
+    assert!(moving_px > 30, "the wrist's turn masks {moving_px} pixels");
+    // Still: an empty mask, zero flow on every robot pixel.
+    assert!(c.flow_mask.iter().all(|&m| m == 0), "a still arm is masked");
+    assert!(c.class.iter().any(|&x| robot(x)));
+    assert!(c.flow_px.iter().all(|f| f[0].hypot(f[1]) < 1e-6));
 }

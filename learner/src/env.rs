@@ -10,6 +10,7 @@
 //! cycle before the one its action is applied in.
 
 use crate::policy::{Action4, Observation, WrenchHistory};
+use crate::proprio::roll_reference;
 use hw_sim::{SimError, SimHardware, World, WorldConfig};
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
@@ -41,6 +42,8 @@ pub struct FastEnv {
     /// Wrench readings of every cycle (the policy's window).
     pub wrench: WrenchHistory,
     cycled: bool,
+    /// The episode's roll reference: the roll of its first sensor frame.
+    roll_ref_rad: f64,
     frame: SensorFrame,
     image: hw_sim::CameraFrame,
     camera_seq: u64,
@@ -65,6 +68,7 @@ impl FastEnv {
             episodes: 0,
             wrench: WrenchHistory::default(),
             cycled: false,
+            roll_ref_rad: 0.0,
             frame,
             image: hw_sim::CameraFrame::default(),
             camera_seq: 0,
@@ -75,7 +79,8 @@ impl FastEnv {
     /// The observation of the last cycle (what the policy node reads from
     /// its sensor frame).
     pub fn last_observation(&self) -> Option<Observation> {
-        self.cycled.then(|| Observation::from_frame(&self.frame))
+        self.cycled
+            .then(|| Observation::from_frame(&self.frame, self.roll_ref_rad))
     }
 
     /// The sensor frame of the last cycle, as the daemon publishes it.
@@ -166,6 +171,9 @@ impl FastEnv {
             &mut self.command,
             &mut self.frame,
         );
+        if !self.cycled {
+            self.roll_ref_rad = roll_reference(&self.frame);
+        }
         self.cycled = true;
         self.wrench.push(self.frame.wrench);
         self.hardware.apply(&mut self.world, Some(&self.command))?;
@@ -179,6 +187,6 @@ impl FastEnv {
         while !self.world.step_index().is_multiple_of(ACTION_PERIOD_STEPS) {
             self.cycle(None)?;
         }
-        Ok(Observation::from_frame(&self.frame))
+        Ok(Observation::from_frame(&self.frame, self.roll_ref_rad))
     }
 }

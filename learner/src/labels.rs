@@ -6,11 +6,12 @@
 //!   frames, the robot's and the peg's geometry, and the camera's recorded
 //!   calibration; a pixel counts when the recorded depth shows that the
 //!   robot is what the camera saw there (the box and anything else in front
-//!   hide it);
+//!   hide it); the mask is the robot in motion (as hw-sim's, moved at least
+//!   [`hw_sim::camera::FLOW_MASK_MIN_PX`]);
 //! - contact, from the wrist wrench against the free-space reading.
 
 use hw_sim::SimError;
-use hw_sim::camera::{BodyPoses, Camera, CameraFrame, Primitive};
+use hw_sim::camera::{BodyPoses, Camera, CameraFrame, Class, Primitive};
 use hw_sim::config::TaskConfig;
 use nalgebra::{Isometry3, Vector3};
 use robot_model::Model;
@@ -38,10 +39,16 @@ pub struct FlowLabeler {
     a: CameraFrame,
     b: CameraFrame,
     links: Vec<Isometry3<f64>>,
-    /// Flow on the first frame's grid, px (u right, v down).
+    /// Flow on the first frame's grid, px (u right, v down), wherever the
+    /// first frame saw the robot or the peg, moving or not.
     pub flow_px: Vec<[f32; 2]>,
-    /// 1 where the first frame saw the robot or the peg.
+    /// 1 where the first frame saw the robot or the peg and it moved (the
+    /// robot in motion).
     pub mask: Vec<u8>,
+    /// Flow from which a pixel counts as moving, px; hw-sim's
+    /// [`hw_sim::camera::FLOW_MASK_MIN_PX`] unless set (0: every robot
+    /// pixel, the mask of dataset format version 1).
+    pub mask_min_px: f32,
 }
 
 impl FlowLabeler {
@@ -73,6 +80,7 @@ impl FlowLabeler {
             b: CameraFrame::default(),
             flow_px: vec![[0.0; 2]; n],
             mask: vec![0; n],
+            mask_min_px: hw_sim::camera::FLOW_MASK_MIN_PX,
         })
     }
 
@@ -85,8 +93,9 @@ impl FlowLabeler {
 
     /// The flow from the frame at joint positions `q0` (whose recorded
     /// depth is `depth0`, m, 0 for no return) to the frame at `q1`. A pixel
-    /// is labelled when the robot or peg rendered there lies within
-    /// `depth_tol_m` of the recorded depth.
+    /// gets flow when the robot or peg rendered there lies within
+    /// `depth_tol_m` of the recorded depth, and is in the mask when it also
+    /// moved at least `mask_min_px` (as hw-sim's mask).
     pub fn label(&mut self, q0: &[f64], q1: &[f64], depth0: &[f32], depth_tol_m: f64) {
         self.camera.reset();
         self.poses(q0);
@@ -111,10 +120,14 @@ impl FlowLabeler {
         );
         for i in 0..self.flow_px.len() {
             let seen = depth0.get(i).copied().unwrap_or(0.0);
-            let visible = self.b.flow_mask[i] == 1
+            let robot =
+                self.a.class[i] == Class::Robot as u8 || self.a.class[i] == Class::Peg as u8;
+            let visible = robot
                 && seen > 0.0
                 && (self.a.depth_m[i] as f64 - seen as f64).abs() <= depth_tol_m;
-            self.mask[i] = visible as u8;
+            let f = self.b.flow_px[i];
+            let moved = f[0] * f[0] + f[1] * f[1] >= self.mask_min_px * self.mask_min_px;
+            self.mask[i] = (visible && moved) as u8;
             self.flow_px[i] = if visible { self.b.flow_px[i] } else { [0.0; 2] };
         }
     }
@@ -176,8 +189,10 @@ mod tests {
         );
         let depth = l.a.depth_m.clone();
         l.label(&q, &q, &depth, 0.01);
-        let seen = l.mask.iter().filter(|&&m| m == 1).count();
+        let robot = |c: u8| c == Class::Robot as u8 || c == Class::Peg as u8;
+        let seen = l.a.class.iter().filter(|&&c| robot(c)).count();
         assert!(seen > 200, "the robot covers {seen} pixels");
+        assert!(l.mask.iter().all(|&m| m == 0), "a still arm: empty mask");
         assert!(
             l.flow_px
                 .iter()
@@ -193,7 +208,8 @@ mod tests {
         let pose = cam.pose;
         let mut checked = 0;
         for i in 0..l.mask.len() {
-            if l.mask[i] == 0 {
+            if !robot(l.a.class[i]) {
+                assert_eq!(l.mask[i], 0, "pixel {i} is not the robot");
                 continue;
             }
             let (u, v) = ((i % 128) as f64 + 0.5, (i / 128) as f64 + 0.5);
@@ -212,7 +228,10 @@ mod tests {
                 "pixel {i}: {fl:?} vs {:?}",
                 (u1 - u, v1 - v)
             );
-            checked += turned as usize;
+            // The mask is the robot in motion: the base is left out.
+            let moving = fl[0].hypot(fl[1]) >= hw_sim::camera::FLOW_MASK_MIN_PX;
+            assert_eq!(l.mask[i] == 1, moving, "pixel {i}: {fl:?}");
+            checked += (turned && moving) as usize;
         }
         assert!(checked > 150, "{checked} of {seen} pixels turned");
     }

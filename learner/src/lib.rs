@@ -22,4 +22,5 @@ pub mod log;
 pub mod plot;
 pub mod policy;
 pub mod progress;
+pub mod proprio;
 pub mod stack;

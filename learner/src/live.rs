@@ -13,6 +13,7 @@ use crate::log::gaps::SensorGapCounter;
 use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
 use crate::progress::Progress;
+use crate::proprio::roll_reference;
 use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
@@ -206,6 +207,9 @@ const EARLY_FRAMES: usize = 2000;
 /// What the node has seen of the current episode.
 struct Seen {
     frame: Option<SensorFrame>,
+    /// The episode's roll reference: the roll of its first frame (the first
+    /// one logged).
+    roll_ref_rad: Option<f64>,
     report: Option<EpisodeReport>,
     wrench: WrenchHistory,
     frames: u64,
@@ -254,6 +258,7 @@ impl PolicyNode {
             {
                 err = Some(e);
             }
+            seen.roll_ref_rad.get_or_insert_with(|| roll_reference(f));
             seen.frame = Some(*f);
         };
         for f in self.early.drain(..) {
@@ -615,6 +620,7 @@ impl LiveEpisode {
             heuristic: HeuristicPolicy::new(HeuristicConfig::default()),
             seen: Seen {
                 frame: None,
+                roll_ref_rad: None,
                 report: Some(first),
                 wrench: WrenchHistory::default(),
                 frames: 0,
@@ -731,7 +737,8 @@ impl LiveEpisode {
         cfg: &LiveConfig,
         frame: &SensorFrame,
     ) -> Result<(), StackError> {
-        let obs = Observation::from_frame(frame);
+        let roll_ref = self.seen.roll_ref_rad.expect("set with the first frame");
+        let obs = Observation::from_frame(frame, roll_ref);
         let a = match self.mixed.as_mut() {
             Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
             None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),

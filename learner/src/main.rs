@@ -270,6 +270,10 @@ enum DatasetCmd {
         /// Contact: force change against free space above this, N.
         #[arg(long, default_value_t = 3.0)]
         contact_threshold_n: f64,
+        /// Flow mask: image motion from which a robot pixel counts as
+        /// moving, px (0: every robot pixel).
+        #[arg(long, default_value_t = hw_sim::camera::FLOW_MASK_MIN_PX as f64)]
+        flow_mask_min_px: f64,
         /// Worker threads; default: all cores.
         #[arg(long)]
         workers: Option<usize>,
@@ -298,6 +302,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             logs,
             out,
             contact_threshold_n,
+            flow_mask_min_px,
             workers,
             robot_dir,
         } => {
@@ -306,6 +311,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             let cfg = BuildConfig {
                 contact_threshold_n,
                 robot_dir,
+                flow_mask_min_px,
                 ..Default::default()
             };
             let workers = workers

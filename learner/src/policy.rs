@@ -6,6 +6,7 @@
 //! moves above it, aligns the roll, descends to contact, searches on a
 //! spiral when it lands on the surface, and inserts.
 
+use crate::proprio::Proprio;
 use hw_sim::rng;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use shared_mem_schema::SensorFrame;
@@ -88,11 +89,15 @@ pub struct Observation {
     pub ee_rot: UnitQuaternion<f64>,
     /// End-effector twist (linear, angular), base frame.
     pub ee_twist: [f64; 6],
+    /// The paper's proprioception (the representation's input), roll taken
+    /// from the episode's start.
+    pub proprio: Proprio,
 }
 
 impl Observation {
-    /// From a controller sensor frame.
-    pub fn from_frame(f: &SensorFrame) -> Self {
+    /// From a controller sensor frame and the episode's roll reference
+    /// ([`crate::proprio::roll_reference`] of its first frame).
+    pub fn from_frame(f: &SensorFrame, roll_ref_rad: f64) -> Self {
         let [x, y, z, w] = f.ee_quat_xyzw;
         Self {
             t_hw_ns: f.header.t_hw_ns,
@@ -101,6 +106,7 @@ impl Observation {
             ee_pos: Vector3::from(f.ee_pos_m),
             ee_rot: unit_quaternion([x, y, z, w]),
             ee_twist: f.ee_twist,
+            proprio: Proprio::from_frame(f, roll_ref_rad),
         }
     }
 }
@@ -445,6 +451,12 @@ mod tests {
             ee_pos: Vector3::new(0.7, -0.2, 0.4),
             ee_rot: UnitQuaternion::identity(),
             ee_twist: [0.0; 6],
+            proprio: Proprio::new(
+                &Vector3::zeros(),
+                &UnitQuaternion::identity(),
+                &[0.0; 6],
+                0.0,
+            ),
         };
         // Far outside on every axis: every step points back.
         for _ in 0..50 {

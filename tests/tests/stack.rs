@@ -589,6 +589,7 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
     let mut wrench = WrenchHistory::default();
     let mut stack_obs = Vec::new();
+    let mut roll_ref = None;
     let start = Instant::now();
     while stack_obs.len() < actions {
         assert!(
@@ -603,13 +604,14 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
         })
         .unwrap();
         for f in frames {
+            roll_ref.get_or_insert_with(|| learner::proprio::roll_reference(&f));
             wrench.push(f.wrench);
             if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
-                let obs = Observation::from_frame(&f);
+                let obs = Observation::from_frame(&f, roll_ref.expect("first frame"));
                 let a = policy.act(&obs, &wrench, &task);
                 node.send_action(episode, f.header.t_hw_ns, f.step + 1, a)
                     .unwrap();
-                stack_obs.push((f.step, obs.ee_pos, a));
+                stack_obs.push((f.step, obs.ee_pos, obs.proprio, a));
             }
         }
         std::thread::yield_now();
@@ -620,7 +622,7 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     env.reset(seed).unwrap();
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
     let mut obs = env.step(None).unwrap();
-    for (k, (step, ee, a_stack)) in stack_obs.iter().enumerate() {
+    for (k, (step, ee, proprio, a_stack)) in stack_obs.iter().enumerate() {
         assert_eq!(obs.step, *step);
         assert_eq!(
             obs.ee_pos,
@@ -628,6 +630,8 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
             "action {k} (step {step}): the end-effector differs by {:e} m",
             (obs.ee_pos - ee).norm()
         );
+        // Proprioception (roll from the episode's first frame) too.
+        assert_eq!(obs.proprio, *proprio, "action {k}: proprioception differs");
         let a = policy.act(&obs, &env.wrench, &task);
         assert_eq!(&a, a_stack, "action {k} differs");
         obs = env.step(Some(&a)).unwrap();

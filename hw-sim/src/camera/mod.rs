@@ -21,6 +21,6 @@ mod visual;
 
 pub use geometry::{BodyRef, Class, Geometry, Primitive};
 pub use message::fill_message;
-pub use render::{Camera, CameraFrame, CameraShot};
+pub use render::{Camera, CameraFrame, CameraShot, FLOW_MASK_MIN_PX};
 pub use scene::{BodyPoses, prism_geometry, robot_primitives};
 pub use visual::{depth_to_gray, flow_to_rgb};

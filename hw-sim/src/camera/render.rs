@@ -28,12 +28,22 @@ pub struct CameraFrame {
     pub class: Vec<u8>,
     /// Forward flow on the previous frame's pixel grid, px: where each pixel
     /// of the previous frame that saw the robot or the peg went in this
-    /// frame. Zero elsewhere.
+    /// frame, moving or not. Zero elsewhere.
     pub flow_px: Vec<[f32; 2]>,
-    /// 1 where `flow_px` is defined (the previous frame saw the robot or the
-    /// peg there), else 0. All zero in the first frame of an episode.
+    /// The robot in motion (the paper's flow mask): 1 where the previous
+    /// frame saw the robot or the peg and that point moved at least
+    /// [`FLOW_MASK_MIN_PX`] in the image, else 0. All zero in the first
+    /// frame of an episode.
     pub flow_mask: Vec<u8>,
 }
+
+/// Image-plane displacement from one frame to the next, px, from which a
+/// robot or peg pixel counts as moving in [`CameraFrame::flow_mask`].
+/// Measured on collected data (docs/paper-measurements.md, "Flow mask"):
+/// an arm holding still under the controller moves its pixels far less
+/// than this, and a tenth of a pixel is below what a flow label resolves
+/// (the paper predicts flow at 32×32, a quarter of the image's resolution).
+pub const FLOW_MASK_MIN_PX: f32 = 0.1;
 
 /// One instant as the camera sees it: body poses, time, occlusions and
 /// noise levels (see [`crate::World::camera_shot`]).
@@ -511,8 +521,11 @@ impl Camera {
                     let p = poses.get(body) * Point3::from(local);
                     if let Some((u, v, _)) = self.project(&p.coords) {
                         let (u0, v0) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
-                        frame.flow_px[i] = [(u - u0) as f32, (v - v0) as f32];
-                        frame.flow_mask[i] = 1;
+                        let f = [(u - u0) as f32, (v - v0) as f32];
+                        frame.flow_px[i] = f;
+                        let moved =
+                            f[0] * f[0] + f[1] * f[1] >= FLOW_MASK_MIN_PX * FLOW_MASK_MIN_PX;
+                        frame.flow_mask[i] = moved as u8;
                     }
                 }
             }

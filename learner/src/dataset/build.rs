@@ -225,6 +225,9 @@ pub fn build(
             shard_samples: cfg.shard_samples,
         });
     }
+    if !(cfg.flow_mask_min_px.is_finite() && cfg.flow_mask_min_px >= 0.0) {
+        return Err(DatasetError::FlowMaskThreshold(cfg.flow_mask_min_px));
+    }
     let io_err = |path: PathBuf| move |source| DatasetError::Io { path, source };
     std::fs::create_dir_all(out).map_err(io_err(out.to_path_buf()))?;
     let wrench_path = out.join("wrench.bin");

@@ -30,7 +30,11 @@ pub enum DatasetError {
         source: serde_json::Error,
     },
     /// meta.json is of another format version.
-    #[error("dataset {}: format version {found}, this build reads version {expected}", dir.display())]
+    #[error(
+        "dataset {}: format version {found}, this build reads version {expected}; rebuild it \
+         from its logs with `learner dataset build`",
+        dir.display()
+    )]
     FormatVersion {
         /// The dataset.
         dir: PathBuf,
@@ -38,6 +42,23 @@ pub enum DatasetError {
         found: u32,
         /// [`super::FORMAT_VERSION`].
         expected: u32,
+    },
+    /// A shard does not start with this format version's magic.
+    #[error(
+        "dataset shard {}: starts with {found:?}, not {expected:?}: a shard of another format \
+         version (this build reads version {version}); rebuild the dataset from its logs with \
+         `learner dataset build`",
+        path.display()
+    )]
+    ShardMagic {
+        /// The shard.
+        path: PathBuf,
+        /// Its first bytes, as text.
+        found: String,
+        /// [`super::SHARD_MAGIC`], as text.
+        expected: String,
+        /// [`super::FORMAT_VERSION`].
+        version: u32,
     },
     /// The pairing table (wrench.bin) does not match meta.json.
     #[error("{}: holds {bytes} bytes, {samples} samples need {need}", path.display())]
@@ -115,6 +136,9 @@ pub enum DatasetError {
         /// Samples per shard.
         shard_samples: usize,
     },
+    /// The flow mask's motion threshold is negative or not a number.
+    #[error("flow_mask_min_px {0} must be a finite number of pixels ≥ 0")]
+    FlowMaskThreshold(f64),
     /// A log's images are not of the dataset's size.
     #[error(
         "{}: images of {}×{}, the dataset's are {}×{}",

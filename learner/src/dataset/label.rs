@@ -6,6 +6,7 @@ use crate::collect::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
 use crate::log::{CameraImage, Event, LogReader, topics};
 use crate::policy::WRENCH_WINDOW;
+use crate::proprio::{Proprio, roll_reference};
 use hw_sim::PegShape;
 use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};
@@ -23,6 +24,9 @@ pub struct BuildConfig {
     pub contact_window: usize,
     /// Flow mask: rendered robot depth within this of the recorded depth, m.
     pub flow_depth_tol_m: f64,
+    /// Flow mask: image motion from which a robot pixel counts as moving, px
+    /// (0: every robot pixel, as format version 1).
+    pub flow_mask_min_px: f64,
     /// Samples per compressed block (the loader's unit of reading).
     pub block_samples: usize,
     /// Samples per shard file.
@@ -41,6 +45,7 @@ impl Default for BuildConfig {
             contact_threshold_n: 3.0,
             contact_window: 4,
             flow_depth_tol_m: 0.01,
+            flow_mask_min_px: hw_sim::camera::FLOW_MASK_MIN_PX as f64,
             block_samples: 32,
             shard_samples: 4096,
             zstd_level: 3,
@@ -176,6 +181,8 @@ pub fn episode_samples(
         let fs: Vec<[f64; 3]> = (lo..=i).map(force).collect();
         in_contact(&fs, &free, cfg.contact_threshold_n)
     };
+    // Roll is taken from the episode's start (a log holds one episode).
+    let roll_ref = roll_reference(&frames[0]);
     let mut labeler: Option<FlowLabeler> = None;
     let mut out = Vec::new();
     let nq = frames[0].n_joints as usize;
@@ -218,6 +225,7 @@ pub fn episode_samples(
             return Err(DatasetError::ImageSizeChanges(path.to_path_buf()));
         }
         let l = labeler.as_mut().expect("made");
+        l.mask_min_px = cfg.flow_mask_min_px as f32;
         l.label(
             &frames[i0].q[..nq],
             &frames[i1].q[..nq],
@@ -230,16 +238,7 @@ pub fn episode_samples(
             let i = (i0 + k + 1).saturating_sub(WRENCH_WINDOW);
             wrench.extend(frames[i].wrench.iter().map(|&x| x as f32));
         }
-        let mut proprio = [0f32; PROPRIO];
-        for (k, x) in f0
-            .ee_pos_m
-            .iter()
-            .chain(&f0.ee_quat_xyzw)
-            .chain(&f0.ee_twist)
-            .enumerate()
-        {
-            proprio[k] = *x as f32;
-        }
+        let proprio = Proprio::from_frame(f0, roll_ref).to_array();
         let ee1 = frames[i1].ee_pos_m;
         let moved = (0..3)
             .map(|k| (ee1[k] - f0.ee_pos_m[k]).powi(2))

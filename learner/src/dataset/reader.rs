@@ -44,6 +44,25 @@ impl Dataset {
             what,
         };
         validate_meta(dir, &meta).map_err(bad)?;
+        // Shards copied in from another version would decode as garbage.
+        for (name, _) in &meta.shards {
+            let path = dir.join(name);
+            let mut head = [0u8; 8];
+            std::fs::File::open(&path)
+                .and_then(|mut f| f.read_exact(&mut head))
+                .map_err(|source| DatasetError::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+            if &head != SHARD_MAGIC {
+                return Err(DatasetError::ShardMagic {
+                    path,
+                    found: String::from_utf8_lossy(&head).into_owned(),
+                    expected: String::from_utf8_lossy(SHARD_MAGIC).into_owned(),
+                    version: FORMAT_VERSION,
+                });
+            }
+        }
         let stats: Stats =
             serde_json::from_slice(&read("stats.json")?).map_err(parse_err("stats.json"))?;
         validate_stats(&stats).map_err(|what| DatasetError::BadMeta {
