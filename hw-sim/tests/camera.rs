@@ -311,6 +311,8 @@ fn the_default_camera_sees_box_opening_and_peg_for_every_box_pose() {
             "{peg:?}: opening or tip near the border ({margin_px:.1} px)"
         );
     }
+}
+
 /// The flow mask is the robot in motion: turning one wrist joint masks the
 /// links after it and the peg, never the links before it; a still arm masks
 /// nothing, though its flow stays defined (zero) on every robot pixel.
