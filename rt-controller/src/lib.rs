@@ -395,7 +395,8 @@ fn safe_command(model: &Model, ctrl: &Controller, d: &mut ControllerData, v: Opt
     }
     torque_box(ctrl, d);
     for i in 0..d.tau_cmd.len() {
-        let t = d.dynamics.g[i] - v.map_or(0.0, |v| fault_damping(ctrl, &d.dynamics.mass, i) * v[i]);
+        let t =
+            d.dynamics.g[i] - v.map_or(0.0, |v| fault_damping(ctrl, &d.dynamics.mass, i) * v[i]);
         d.tau_cmd[i] = clamp_torque(t, d.tau_lo[i], d.tau_hi[i]);
     }
     d.tau_prev.copy_from(&d.tau_cmd);

@@ -8,11 +8,11 @@ use rt_controller::daemon::rt::{self, Notifier};
 use rt_controller::daemon::rt_alloc::{self, RtAllocator};
 use rt_controller::daemon::{Daemon, FAULT_HARDWARE_SILENT, Shared, SimBackend};
 use shared_mem_schema::process::mono_now_ns;
-use shared_mem_schema::{ControllerCommand, ControllerMode, ControllerStatus};
 use shared_mem_schema::process::{
     install_termination_handler, termination_requested, termination_signal,
 };
 use shared_mem_schema::transport;
+use shared_mem_schema::{ControllerCommand, ControllerMode, ControllerStatus};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -256,7 +256,10 @@ fn send_reset(namespace: &str, timeout_s: f64) -> Result<()> {
             );
             return match s.command_result {
                 ControllerCommand::RESULT_CLEARED | ControllerCommand::RESULT_NO_FAULT => Ok(()),
-                r => bail!("the daemon refused the reset: {}", ControllerCommand::result_name(r)),
+                r => bail!(
+                    "the daemon refused the reset: {}",
+                    ControllerCommand::result_name(r)
+                ),
             };
         }
         std::thread::sleep(Duration::from_millis(5));

@@ -251,14 +251,18 @@ fn bad_configuration_names_the_field() {
 /// refuses the robot, naming the joint.
 #[test]
 fn a_joint_without_a_finite_velocity_limit_is_refused_by_name() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../robot-model/urdf/panda.urdf");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../robot-model/urdf/panda.urdf"
+    );
     let urdf = std::fs::read_to_string(path).unwrap();
     let limit = r#"<limit lower="-1.7628" upper="1.7628" velocity="2.175" effort="87"/>"#;
     assert_eq!(urdf.matches(limit).count(), 1, "panda_joint2's limit");
-    for edited in [
-        r#"<limit lower="-1.7628" upper="1.7628" velocity="0" effort="87"/>"#,
-        r#"<limit lower="-1.7628" upper="1.7628" effort="87"/>"#,
-    ] {
+    // An absent velocity attribute: urdf-rs's parser refuses the file.
+    let absent = r#"<limit lower="-1.7628" upper="1.7628" effort="87"/>"#;
+    let e = robot_model::Model::from_urdf_str(&urdf.replace(limit, absent), &Default::default());
+    assert!(e.is_err(), "a <limit> without velocity was accepted");
+    for edited in [r#"<limit lower="-1.7628" upper="1.7628" velocity="0" effort="87"/>"#] {
         let model = robot_model::Model::from_urdf_str(
             &urdf.replace(limit, edited),
             &robot_model::LoadOptions::default(),

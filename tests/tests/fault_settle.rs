@@ -68,7 +68,11 @@ fn fault_and_record(robot: &str, seconds: f64) -> (Vec<Sample>, f64) {
     for _ in 0..n {
         env.cycle(None).unwrap();
         let f = env.sensor_frame();
-        assert_eq!(f.mode, ControllerMode::Fault as u32, "{robot}: Fault latched");
+        assert_eq!(
+            f.mode,
+            ControllerMode::Fault as u32,
+            "{robot}: Fault latched"
+        );
         out.push(Sample {
             v: f.v[..nv].to_vec(),
             tau: f.tau_cmd[..nv].to_vec(),
@@ -112,10 +116,7 @@ fn settles(robot: &str) {
     for c in 0..3 {
         let mut run = 0usize;
         for w in judged.windows(3) {
-            let (d0, d1) = (
-                w[1].force[c] - w[0].force[c],
-                w[2].force[c] - w[1].force[c],
-            );
+            let (d0, d1) = (w[1].force[c] - w[0].force[c], w[2].force[c] - w[1].force[c]);
             if d0 * d1 < 0.0 && d0.abs() > 1e-3 && d1.abs() > 1e-3 {
                 alternations += 1;
                 run += 1;
@@ -130,7 +131,10 @@ fn settles(robot: &str) {
          torque step per joint after 0.5 s {worst_step:.4?} N·m (rate limit {rate_step} N·m), \
          {at_limit} at the limit; {alternations} force alternations, longest run {longest_run}"
     );
-    assert_eq!(at_limit, 0, "{robot}: a torque rides the rate limit in Fault");
+    assert_eq!(
+        at_limit, 0,
+        "{robot}: a torque rides the rate limit in Fault"
+    );
     assert!(
         late < 0.01 && late <= early,
         "{robot}: velocities do not decay (first 0.5 s {early}, last 0.5 s {late} rad/s)"

@@ -101,7 +101,10 @@ fn a_restarted_simulator_leaves_the_controller_down_until_a_reset() {
     assert_eq!(s.mode, ControllerMode::HardwareLost as u32, "{s:?}");
     std::thread::sleep(Duration::from_millis(300));
     let late = transport::drain(&torques, |_| {}).unwrap();
-    assert_eq!(late, 0, "{late} torque commands to the restarted hw-sim before a reset");
+    assert_eq!(
+        late, 0,
+        "{late} torque commands to the restarted hw-sim before a reset"
+    );
     assert!(
         transport::drain(&states, |_| {}).unwrap() > 100,
         "the new hw-sim stopped streaming"

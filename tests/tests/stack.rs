@@ -252,7 +252,7 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     // applied once; its repetitions are replays (and soon too old): the
     // controller holds.
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
-    let frozen = action(seq + 1, 0.0, SCHEMA_VERSION, &latest(&frames));
+    let frozen = action(2_000_000, 0.0, SCHEMA_VERSION, &latest(&frames));
     let held = {
         let start = Instant::now();
         let mut hit = None;
@@ -266,7 +266,10 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         }
         hit
     };
-    assert!(held.is_some(), "a frozen policy kept the controller running");
+    assert!(
+        held.is_some(),
+        "a frozen policy kept the controller running"
+    );
     let s = wait_for(&status, Duration::from_secs(2), |s| s.actions_replayed > 0)
         .expect("the replays were not counted");
     assert_eq!(s.mode, ControllerMode::Holding as u32, "{s:?}");
@@ -521,10 +524,8 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     // Every action received is accounted for exactly once. Each answers a
     // frame published a moment before: stale only if the machine stalled
     // for two policy periods (then counted as such).
-    let stale = s.actions_too_old
-        + s.actions_from_future
-        + s.actions_other_episode
-        + s.actions_replayed;
+    let stale =
+        s.actions_too_old + s.actions_from_future + s.actions_other_episode + s.actions_replayed;
     assert_eq!(
         s.actions_accepted + s.actions_rejected + s.actions_ignored + s.actions_overflow + stale,
         N,
@@ -543,7 +544,10 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
         // Another schema is refused on arrival; a bad value only when not
         // dropped as stale before the control law sees it.
         assert!(s.actions_rejected <= bad_schema + bad_value, "{s:?}");
-        assert!(s.actions_rejected + stale >= bad_schema + bad_value, "{s:?}");
+        assert!(
+            s.actions_rejected + stale >= bad_schema + bad_value,
+            "{s:?}"
+        );
         assert_eq!(s.actions_ignored, 0);
     } else {
         // In Fault valid and invalid actions alike are ignored.

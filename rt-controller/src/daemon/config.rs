@@ -230,7 +230,11 @@ impl DaemonConfig {
         within("timing.shutdown_hold_s", t.shutdown_hold_s, 0.0..=60.0)?;
         positive("timing.max_action_age_ms", t.max_action_age_ms)?;
         // Above a second an action is no answer to what the arm does now.
-        within("timing.max_action_age_ms", t.max_action_age_ms, 0.0..=1000.0)?;
+        within(
+            "timing.max_action_age_ms",
+            t.max_action_age_ms,
+            0.0..=1000.0,
+        )?;
         at_least("timing.action_period_steps", t.action_period_steps, 1)?;
         // SCHED_FIFO priorities are 1 to 99.
         within("realtime.priority", self.realtime.priority, 1..=99)?;

@@ -246,25 +246,24 @@ impl<H: Hardware> Daemon<H> {
             return;
         }
         let t_hw = self.state.header.t_hw_ns;
-        let result = if c.header.schema_version != SCHEMA_VERSION
-            || c.command != ControllerCommand::RESET
-        {
-            ControllerCommand::RESULT_UNKNOWN
-        } else if self.hardware_lost {
-            if silent || !self.have_state {
-                ControllerCommand::RESULT_HARDWARE_SILENT
-            } else {
-                self.hardware_lost = false;
+        let result =
+            if c.header.schema_version != SCHEMA_VERSION || c.command != ControllerCommand::RESET {
+                ControllerCommand::RESULT_UNKNOWN
+            } else if self.hardware_lost {
+                if silent || !self.have_state {
+                    ControllerCommand::RESULT_HARDWARE_SILENT
+                } else {
+                    self.hardware_lost = false;
+                    self.queue.clear();
+                    self.control.restart(t_hw);
+                    ControllerCommand::RESULT_CLEARED
+                }
+            } else if self.control.reset(t_hw) {
                 self.queue.clear();
-                self.control.restart(t_hw);
                 ControllerCommand::RESULT_CLEARED
-            }
-        } else if self.control.reset(t_hw) {
-            self.queue.clear();
-            ControllerCommand::RESULT_CLEARED
-        } else {
-            ControllerCommand::RESULT_NO_FAULT
-        };
+            } else {
+                ControllerCommand::RESULT_NO_FAULT
+            };
         if matches!(
             result,
             ControllerCommand::RESULT_HARDWARE_SILENT | ControllerCommand::RESULT_UNKNOWN
@@ -468,11 +467,8 @@ impl<H: Hardware> Daemon<H> {
         );
         let (mode, fault, garbage) = (self.mode() as u32, self.fault_code(), self.garbage());
         let (last_action, realtime) = (self.control.last_action_seq(), self.realtime as u32);
-        let (resets, command_seq, command_result) = (
-            self.control.resets(),
-            self.command_seq,
-            self.command_result,
-        );
+        let (resets, command_seq, command_result) =
+            (self.control.resets(), self.command_seq, self.command_result);
         let sent = transport::try_send_with(&self.status_pub, |m| {
             m.header = header;
             m.cycles = s.cycles;
