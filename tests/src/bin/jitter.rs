@@ -120,7 +120,16 @@ fn main() -> anyhow::Result<()> {
     let dir = args.out.clone();
     std::fs::create_dir_all(&dir)?;
     tests::stack_bins();
-    let _sim = tests::start("hw-sim", &["--namespace", &ns, "--mode", "realtime"], &dir);
+    // The simulated robot below the daemon: at hw-sim's default (70) unless
+    // the daemon runs lower.
+    let sim_prio = (args.priority - 1).clamp(1, 70).to_string();
+    let mut sim_args = vec!["--namespace", ns.as_str(), "--mode", "realtime"];
+    if args.no_realtime {
+        sim_args.push("--no-realtime");
+    } else {
+        sim_args.extend(["--realtime-priority", sim_prio.as_str()]);
+    }
+    let _sim = tests::start("hw-sim", &sim_args, &dir);
     let prio = args.priority.to_string();
     let mut ctl_args = vec!["--namespace", ns.as_str()];
     if args.no_realtime {
@@ -214,6 +223,7 @@ fn main() -> anyhow::Result<()> {
     let cycles = last.cycles - first.cycles;
     let overruns = last.overruns - first.overruns;
     let misses = last.hardware_misses - first.hardware_misses;
+    let skipped = last.hardware_states_skipped - first.hardware_states_skipped;
     println!("\n| µs | samples | p50 | p99 | p99.9 | max | mean |\n|---|---|---|---|---|---|---|");
     println!("{}", row("daemon wake-up latency", &wake));
     println!(
@@ -234,7 +244,7 @@ fn main() -> anyhow::Result<()> {
     println!("{}", row("action → first torque", &latency));
     println!(
         "\ncycles {cycles}, overruns {overruns}, cycles without a new hardware state {misses}, \
-         daemon real-time {}",
+         hardware states skipped {skipped}, daemon real-time {}",
         last.realtime == 1
     );
     println!("(max of the daemon histograms: since the daemon started)");
@@ -245,6 +255,7 @@ fn main() -> anyhow::Result<()> {
         "cycles": cycles,
         "overruns": overruns,
         "hardware_misses": misses,
+        "hardware_states_skipped": skipped,
         "daemon_wakeup_latency": json(&wake),
         "bare_timer_wakeup_latency": json(&bare),
         "compute": json(&compute),
