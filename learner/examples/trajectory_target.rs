@@ -48,7 +48,8 @@ fn trial(target: TrajectoryTarget, peg: PegShape, seed: u64, actions: u32, noise
             }
         }
         for c in 0..ACTION_PERIOD_STEPS {
-            env.cycle(if c == 0 { Some(&a) } else { None }).expect("cycle");
+            env.cycle(if c == 0 { Some(&a) } else { None })
+                .expect("cycle");
             let w = env.sensor_frame().wrench;
             let f = nalgebra::Vector3::new(w[0], w[1], w[2]) - free;
             peak = peak.max(f.norm());
@@ -123,7 +124,10 @@ fn main() {
                 })
             })
             .collect();
-        handles.into_iter().map(|h| h.join().expect("no panic")).collect()
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("no panic"))
+            .collect()
     });
     for (t, rows) in targets.iter().zip(&results) {
         let mut all: Vec<&Trial> = Vec::new();

@@ -356,10 +356,17 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     let b = &ds.stats.balance;
     assert_eq!(*b, recount(&ds));
     assert_eq!(b.total().samples, ds.meta.samples);
-    assert_eq!(b.policy_total(learner::collect::EpisodePolicy::Random).samples, 0);
+    assert_eq!(
+        b.policy_total(learner::collect::EpisodePolicy::Random)
+            .samples,
+        0
+    );
     let done = b.heuristic[hw_sim::Stage::Completed.code() as usize];
     assert!(
-        summary.shards.iter().all(|s| s.stage == hw_sim::Stage::Completed),
+        summary
+            .shards
+            .iter()
+            .all(|s| s.stage == hw_sim::Stage::Completed),
         "{:?}",
         summary.shards
     );
@@ -388,7 +395,10 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
         100.0 * done.moving as f64 / done.samples as f64
     );
     assert!(text.contains(&row), "{row} not in:\n{text}");
-    assert!(text.contains(&format!("| all | all | {} | 100.0 % |", all.samples)), "{text}");
+    assert!(
+        text.contains(&format!("| all | all | {} | 100.0 % |", all.samples)),
+        "{text}"
+    );
 
     // By default a completed episode ends 10 actions after completion.
     let short = test_support::scratch_dir("short");
@@ -408,5 +418,8 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
         assert!(s.states < 79, "{s:?}");
     }
     let rest = b.heuristic[hw_sim::Stage::Completed.code() as usize].samples;
-    assert!(rest <= 2 * (n as u64 + 1), "{rest} samples after completion");
+    assert!(
+        rest <= 2 * (n as u64 + 1),
+        "{rest} samples after completion"
+    );
 }

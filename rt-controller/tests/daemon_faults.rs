@@ -189,7 +189,8 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     assert_eq!(rig.daemon.mode(), ControllerMode::Running);
     assert_eq!(rig.daemon.control.last_action_seq(), 1);
     let t = rig.state.header.t_hw_ns;
-    let edits: [(u64, &dyn Fn(&mut PolicyAction)); 4] = [
+    type Edit<'a> = &'a dyn Fn(&mut PolicyAction);
+    let edits: [(u64, Edit); 4] = [
         (2, &|a| a.header.t_hw_ns = t - age_ns - 1_000_000),
         (3, &|a| a.header.t_hw_ns = t + 5_000_000),
         (4, &|a| a.header.episode = 7),

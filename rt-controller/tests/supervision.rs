@@ -262,21 +262,22 @@ fn a_joint_without_a_finite_velocity_limit_is_refused_by_name() {
     let absent = r#"<limit lower="-1.7628" upper="1.7628" effort="87"/>"#;
     let e = robot_model::Model::from_urdf_str(&urdf.replace(limit, absent), &Default::default());
     assert!(e.is_err(), "a <limit> without velocity was accepted");
-    for edited in [r#"<limit lower="-1.7628" upper="1.7628" velocity="0" effort="87"/>"#] {
-        let model = robot_model::Model::from_urdf_str(
-            &urdf.replace(limit, edited),
-            &robot_model::LoadOptions::default(),
-        )
-        .expect("robot-model accepts it (as unlimited)");
-        assert_eq!(model.velocity_limits()[1], f64::INFINITY);
-        let e = rt_controller::Controller::new(&model, ControllerConfig::default())
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("panda_joint2") && e.contains("velocity limit"),
-            "{edited}: {e}"
-        );
-    }
+    // A zero velocity limit: robot-model reads it as unlimited; the
+    // controller must refuse it.
+    let edited = r#"<limit lower="-1.7628" upper="1.7628" velocity="0" effort="87"/>"#;
+    let model = robot_model::Model::from_urdf_str(
+        &urdf.replace(limit, edited),
+        &robot_model::LoadOptions::default(),
+    )
+    .expect("robot-model accepts it (as unlimited)");
+    assert_eq!(model.velocity_limits()[1], f64::INFINITY);
+    let e = rt_controller::Controller::new(&model, ControllerConfig::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("panda_joint2") && e.contains("velocity limit"),
+        "{edited}: {e}"
+    );
     // The unedited robot is accepted.
     let model = robot_model::Model::from_urdf_str(&urdf, &Default::default()).unwrap();
     rt_controller::Controller::new(&model, ControllerConfig::default()).unwrap();

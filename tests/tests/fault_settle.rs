@@ -27,8 +27,10 @@ struct Sample {
 /// (`max_force_n` lowered to 15 N) faults the controller, then records
 /// `seconds` of the Fault command.
 fn fault_and_record(robot: &str, seconds: f64) -> (Vec<Sample>, f64) {
-    let mut world = WorldConfig::default();
-    world.robot = robot.into();
+    let mut world = WorldConfig {
+        robot: robot.into(),
+        ..Default::default()
+    };
     // The box right under the start pose: 5 cm to the side is its top face,
     // clear of the hole.
     world.task.box_xy_range_m = [0.0, 0.0];
@@ -100,9 +102,9 @@ fn settles(robot: &str) {
     let mut worst_step = vec![0.0f64; nv];
     let mut at_limit = 0usize;
     for w in judged.windows(2) {
-        for i in 0..nv {
+        for (i, worst) in worst_step.iter_mut().enumerate() {
             let d = (w[1].tau[i] - w[0].tau[i]).abs();
-            worst_step[i] = worst_step[i].max(d);
+            *worst = worst.max(d);
             if d >= 0.9 * rate_step {
                 at_limit += 1;
             }
