@@ -85,7 +85,19 @@ pub struct LogError {
     pub path: PathBuf,
     /// What failed.
     #[source]
-    pub source: mcap::McapError,
+    pub source: LogFailure,
+}
+
+/// Why a log could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum LogFailure {
+    /// The MCAP writer or the file failed.
+    #[error(transparent)]
+    Mcap(#[from] mcap::McapError),
+    /// A message that cannot be stored faithfully was refused (nothing of
+    /// it written; the log stays valid).
+    #[error("{0}")]
+    Refused(String),
 }
 
 /// How a log is written.
@@ -283,9 +295,9 @@ impl LogWriter {
     /// Creates `path` (zstd-compressed, chunked, indexed): opens the file,
     /// registers every channel of [`channel_specs`] and flushes them.
     pub fn create_with(path: &Path, opts: LogOptions) -> Result<Self, LogError> {
-        let err = |source| LogError {
+        let err = |source: mcap::McapError| LogError {
             path: path.to_path_buf(),
-            source,
+            source: source.into(),
         };
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir).map_err(|e| err(e.into()))?;
@@ -331,7 +343,7 @@ impl LogWriter {
     fn err(&self, source: mcap::McapError) -> LogError {
         LogError {
             path: self.path.clone(),
-            source,
+            source: source.into(),
         }
     }
 
@@ -346,10 +358,7 @@ impl LogWriter {
         };
         self.w
             .write_to_known_channel(&header, data)
-            .map_err(|e| LogError {
-                path: self.path.clone(),
-                source: e,
-            })?;
+            .map_err(|e| self.err(e))?;
         let period_ns = (self.opts.flush_period_s * 1e9) as u64;
         if log_ns.abs_diff(self.last_flush_ns) >= period_ns {
             self.last_flush_ns = log_ns;
@@ -432,16 +441,16 @@ impl LogWriter {
     pub fn camera(&mut self, m: &CameraFrame) -> Result<(), LogError> {
         let (w, h) = (m.calibration.width as usize, m.calibration.height as usize);
         if w > shared_mem_schema::MAX_IMAGE_WIDTH || h > shared_mem_schema::MAX_IMAGE_HEIGHT {
-            return Err(self.err(mcap::McapError::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                format!(
+            return Err(LogError {
+                path: self.path.clone(),
+                source: LogFailure::Refused(format!(
                     "camera frame {} claims a {w}×{h} image, larger than the {}×{} a message \
                      holds; not logged",
                     m.index,
                     shared_mem_schema::MAX_IMAGE_WIDTH,
                     shared_mem_schema::MAX_IMAGE_HEIGHT
-                ),
-            ))));
+                )),
+            });
         }
         let n = w * h;
         let head = &m.as_bytes()[..std::mem::offset_of!(CameraFrame, rgb)];

@@ -14,6 +14,9 @@ use std::sync::Arc;
 
 const OP_FOOTER: u8 = 0x02;
 const OP_DATA_END: u8 = 0x0F;
+/// Opcodes a data section may hold at top level: header, schema, channel,
+/// message, chunk, message index, attachment, metadata, data end.
+const DATA_SECTION_OPS: [u8; 9] = [0x01, 0x03, 0x04, 0x05, 0x06, 0x07, 0x09, 0x0C, 0x0F];
 const OP_CHUNK: u8 = 0x06;
 /// Largest chunk the reader will decompress: a corrupted size field must
 /// not make it allocate without bound.
@@ -426,6 +429,16 @@ fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
                     }
                 } else {
                     in_summary |= op == OP_DATA_END;
+                    // A record the data section cannot hold is damage (a
+                    // flipped opcode): skipping it as an unknown record
+                    // would skip a whole chunk and salvage past a gap.
+                    if !in_summary && !DATA_SECTION_OPS.contains(&op) {
+                        rep.problem = Some((
+                            offset,
+                            format!("record opcode 0x{op:02x} does not belong in the data section"),
+                        ));
+                        break;
+                    }
                     match mcap::read::parse_record(op, body) {
                         Ok(r) if !in_summary => keep(r, &mut rep),
                         Ok(_) => {}
