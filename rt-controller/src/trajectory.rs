@@ -431,7 +431,10 @@ mod tests {
             assert_eq!(e, ActionEffect::Applied);
         }
         let t = g.target();
-        assert!((t[0] - 0.504).abs() < 1e-12 && (t[2] - 0.298).abs() < 1e-12, "{t:?}");
+        assert!(
+            (t[0] - 0.504).abs() < 1e-12 && (t[2] - 0.298).abs() < 1e-12,
+            "{t:?}"
+        );
         // The measured pose moved on: the next target starts from it.
         let q = Vector3::new(0.52, 0.01, 0.25);
         g.apply_action(&c, [0.001, 0.0, 0.0, 0.0], &q, 3.1, 1.0);

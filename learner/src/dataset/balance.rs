@@ -150,8 +150,17 @@ mod tests {
         assert_eq!(b.total().samples, 5);
         assert_eq!(b.total().moving, 2);
         let t = b.table();
-        assert!(t.contains("| heuristic | completed | 3 | 60.0 % | 100.0 % | 0.0 % |"), "{t}");
-        assert!(t.contains("| all | all | 5 | 100.0 % | 80.0 % | 40.0 % |"), "{t}");
-        assert!(!t.contains("| random | failed"), "empty rows are left out: {t}");
+        assert!(
+            t.contains("| heuristic | completed | 3 | 60.0 % | 100.0 % | 0.0 % |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| all | all | 5 | 100.0 % | 80.0 % | 40.0 % |"),
+            "{t}"
+        );
+        assert!(
+            !t.contains("| random | failed"),
+            "empty rows are left out: {t}"
+        );
     }
 }
