@@ -1,7 +1,7 @@
 //! The scripted heuristic with each trajectory target (`trajectory.target`:
 //! accumulated, measured) over all four pegs and several box poses, in the
 //! fast path: completion rate, time to completion, controller faults and
-//! peak contact force, as a Markdown table (docs/paper-measurements.md).
+//! peak contact force, as a Markdown table (docs/paper.md).
 //!
 //! `cargo run --release -p learner --example trajectory_target -- [seeds]
 //! [actions] [noise_m]`: `seeds` box poses per peg (default 8), episodes of
@@ -9,9 +9,10 @@
 //! Gaussian noise of `noise_m` added to each position step (default 0; the
 //! collection mix uses 0.001).
 
-use hw_sim::{PegShape, Stage, WorldConfig, rng};
+use hw_sim::{PegShape, Stage, WorldConfig};
+use learner::collect::{Mix, MixedPolicy};
 use learner::env::FastEnv;
-use learner::policy::{HeuristicConfig, HeuristicPolicy, TaskGeometry};
+use learner::policy::TaskGeometry;
 use rt_controller::{ControllerConfig, TrajectoryTarget};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 
@@ -34,19 +35,21 @@ fn trial(target: TrajectoryTarget, peg: PegShape, seed: u64, actions: u32, noise
         symmetry: peg.symmetry_order(),
         depth_m: env.world().box_geometry().expect("box").depth,
     };
-    let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
-    let mut noise = rng::seeded(seed, 99);
+    // The collection's heuristic with `noise_m` of noise (0: the bare
+    // heuristic).
+    let mix = Mix {
+        heuristic_fraction: 1.0,
+        heuristic_noise_m: noise_m,
+        end_after_completion: None,
+        ..Mix::default()
+    };
+    let mut policy = MixedPolicy::new(&mix, seed);
     let mut obs = env.step(None).expect("step");
     // Free space: the mean force before anything moves.
     let free = env.wrench.mean_force(32);
     let (mut completed_s, mut fault, mut peak) = (None, None, 0.0f64);
     for _ in 0..actions {
-        let mut a = policy.act(&obs, &env.wrench, &task);
-        if noise_m > 0.0 && !policy.resting() {
-            for x in &mut a[..3] {
-                *x += noise_m * rng::normal(&mut noise);
-            }
-        }
+        let a = policy.act(&obs, &env.wrench, &task);
         for c in 0..ACTION_PERIOD_STEPS {
             env.cycle(if c == 0 { Some(&a) } else { None })
                 .expect("cycle");

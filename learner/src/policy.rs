@@ -143,6 +143,13 @@ pub struct HeuristicConfig {
     pub roll_step_rad: f64,
     /// Downward step per action while descending and inserting, m.
     pub descend_step_m: f64,
+    /// Downward step per action just above a surface (the box's top face,
+    /// the hole's bottom), m: the speed at which the tip may meet it. A
+    /// rigid contact stops the arm within one 1 ms physics step, so the
+    /// wrist reads an impact force of about the arm's effective mass times
+    /// this speed per millisecond (121 N at 3.5 cm/s measured; 0.5 mm per
+    /// 50 ms is 1 cm/s).
+    pub contact_step_m: f64,
     /// Force change (against the free-space reading) that means contact, N.
     pub contact_force_n: f64,
     /// Pressing harder than this backs off instead of pushing on (the
@@ -169,6 +176,7 @@ impl Default for HeuristicConfig {
             roll_tol_rad: 0.03,
             roll_step_rad: 0.05,
             descend_step_m: 0.004,
+            contact_step_m: 0.0005,
             contact_force_n: 4.0,
             max_press_force_n: 15.0,
             bottom_tol_m: 0.002,
@@ -203,7 +211,6 @@ pub struct HeuristicPolicy {
     phase: Phase,
     free_force: Option<Vector3<f64>>,
     stuck: u32,
-    resting: bool,
 }
 
 /// The tip relative to the hole: position in the hole frame and roll
@@ -236,18 +243,12 @@ impl HeuristicPolicy {
             phase: Phase::Approach,
             free_force: None,
             stuck: 0,
-            resting: false,
         }
     }
 
     /// The current phase.
     pub fn phase(&self) -> Phase {
         self.phase
-    }
-
-    /// Whether the last action rests on the hole's bottom (the task done).
-    pub fn resting(&self) -> bool {
-        self.resting
     }
 
     /// Starts over (new episode).
@@ -272,7 +273,6 @@ impl HeuristicPolicy {
         let to_base = |d: Vector3<f64>| task.hole_pose.rotation * d;
         let inserted = s.z < -0.003;
         let at_bottom = self.phase == Phase::Insert && task.depth_m + s.z < c.bottom_tol_m;
-        self.resting = at_bottom;
         let step_hole = match self.phase {
             Phase::Approach => {
                 let goal = Vector3::new(0.0, 0.0, c.above_m);
@@ -310,19 +310,14 @@ impl HeuristicPolicy {
                     Vector3::new(0.0, 0.0, -dz)
                 } else {
                     let xy = clamp_norm(Vector3::new(-s.x, -s.y, 0.0) * gain, 0.002);
-                    // Slow down towards the box's top (above the opening)
-                    // and towards the bottom: a rigid surface met at full
-                    // speed is an impact spike on the wrist sensor that the
-                    // controller faults on (266 N at 8 cm/s measured).
-                    // Over the opening the peg goes in without touching the
-                    // top, so only a misaligned tip slows down for it.
-                    let aligned = s.x.hypot(s.y) < c.align_tol_m;
-                    let to_surface = if s.z > 0.0 && !aligned {
-                        s.z
-                    } else {
-                        to_bottom
-                    };
-                    let dz = (0.25 * to_surface).clamp(0.0005, c.descend_step_m);
+                    // Slow down towards the box's top and towards the
+                    // bottom: a rigid surface met at full speed is an
+                    // impact spike on the wrist sensor that the controller
+                    // faults on (266 N at 8 cm/s measured). Aligned over
+                    // the opening too: the tip is within the clearance of
+                    // the rim, and a little noise puts it on it.
+                    let to_surface = if s.z > 0.0 { s.z } else { to_bottom };
+                    let dz = (0.25 * to_surface).clamp(c.contact_step_m, c.descend_step_m);
                     xy + Vector3::new(0.0, 0.0, -dz)
                 }
             }

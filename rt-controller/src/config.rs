@@ -103,7 +103,7 @@ impl TrajectoryTarget {
 pub struct TrajectoryConfig {
     /// What each step is added to: `"accumulated"` (the previous target,
     /// the default) or `"measured"` (the measured pose, as in the paper).
-    /// docs/paper-measurements.md has the measurement that chose the
+    /// docs/paper.md has the measurement that chose the
     /// default.
     pub target: TrajectoryTarget,
     /// Duration of the quintic towards each new target. The default is two

@@ -39,7 +39,7 @@ pub struct CameraFrame {
 
 /// Image-plane displacement from one frame to the next, px, from which a
 /// robot or peg pixel counts as moving in [`CameraFrame::flow_mask`].
-/// Measured on collected data (docs/paper-measurements.md, "Flow mask"):
+/// Measured on collected data (docs/paper.md, "Flow mask"):
 /// an arm holding still under the controller moves its pixels far less
 /// than this, and a tenth of a pixel is below what a flow label resolves
 /// (the paper predicts flow at 32×32, a quarter of the image's resolution).
