@@ -18,6 +18,7 @@ const OP_DATA_END: u8 = 0x0F;
 /// message, chunk, message index, attachment, metadata, data end.
 const DATA_SECTION_OPS: [u8; 9] = [0x01, 0x03, 0x04, 0x05, 0x06, 0x07, 0x09, 0x0C, 0x0F];
 const OP_CHUNK: u8 = 0x06;
+const OP_MESSAGE: u8 = 0x05;
 /// Largest chunk the reader will decompress: a corrupted size field must
 /// not make it allocate without bound.
 const MAX_CHUNK_BYTES: u64 = 1 << 30;
@@ -436,6 +437,17 @@ fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanReport {
                         rep.problem = Some((
                             offset,
                             format!("record opcode 0x{op:02x} does not belong in the data section"),
+                        ));
+                        break;
+                    }
+                    // A chunked file keeps its messages in chunks: a bare
+                    // message among them is a flipped opcode (a message
+                    // index, whose first field is a real channel id, reads
+                    // as a message of that channel) and must not be salvaged.
+                    if !in_summary && op == OP_MESSAGE && rep.chunks > 0 {
+                        rep.problem = Some((
+                            offset,
+                            "a message record outside the chunks of a chunked file".into(),
                         ));
                         break;
                     }
