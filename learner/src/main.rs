@@ -73,6 +73,106 @@ enum Cmd {
     /// The self-supervised dataset: build from logs, inspect.
     #[command(subcommand)]
     Dataset(DatasetCmd),
+    /// Reinforcement learning on the fast path: train a policy with TRPO,
+    /// evaluate a checkpoint (docs/rl.md).
+    #[command(subcommand)]
+    Policy(PolicyCmd),
+}
+
+#[derive(Debug, Subcommand)]
+enum PolicyCmd {
+    /// Trains with TRPO; writes checkpoint.json, curve.csv, return.png and
+    /// outcomes.png into `--out`.
+    Train {
+        /// Training configuration (TOML; every field defaulted, see
+        /// learner::rl::run::TrainConfig).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Run directory.
+        #[arg(long, default_value = "runs/policy")]
+        out: PathBuf,
+        /// Continue the run in `--out` from its checkpoint.
+        #[arg(long)]
+        resume: bool,
+        /// Environment steps to train for (overrides the configuration).
+        #[arg(long)]
+        env_steps: Option<u64>,
+        /// Peg (overrides the configuration's).
+        #[arg(long, value_enum)]
+        peg: Option<PegShape>,
+    },
+    /// Runs a checkpoint's policy (its mean action) for N episodes: the
+    /// four outcome categories and the normalised episode reward.
+    Eval {
+        /// The checkpoint (a run's checkpoint.json).
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Episodes.
+        #[arg(long, default_value_t = 50)]
+        episodes: usize,
+        /// Seed of the first episode (training uses the run's seed upward).
+        #[arg(long, default_value_t = 1_000_000)]
+        seed: u64,
+        /// Peg (default: the one it was trained on).
+        #[arg(long, value_enum)]
+        peg: Option<PegShape>,
+    },
+}
+
+fn run_policy(cmd: PolicyCmd) -> Result<()> {
+    use learner::rl::reward::Outcome;
+    use learner::rl::run;
+    match cmd {
+        PolicyCmd::Train {
+            config,
+            out,
+            resume,
+            env_steps,
+            peg,
+        } => {
+            let mut cfg = match &config {
+                Some(p) => run::read_config(p)?,
+                None => run::TrainConfig::default(),
+            };
+            if let Some(n) = env_steps {
+                cfg.env_steps = n;
+            }
+            if let Some(p) = peg {
+                cfg.env.world.task.peg = p;
+            }
+            let c = run::train(cfg, &out, resume)?;
+            println!(
+                "{} updates, {} environment steps; checkpoint {}",
+                c.state.iteration,
+                c.state.env_steps,
+                run::checkpoint_path(&out).display()
+            );
+        }
+        PolicyCmd::Eval {
+            checkpoint,
+            episodes,
+            seed,
+            peg,
+        } => {
+            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+            let c = run::read_checkpoint(&checkpoint)?;
+            let mut cfg = c.config;
+            if let Some(p) = peg {
+                cfg.env.world.task.peg = p;
+            }
+            let r = run::evaluate(&c.state.policy, &cfg, episodes, seed)?;
+            println!(
+                "{} episodes ({} peg): normalised reward {:.3}",
+                r.episodes,
+                cfg.env.world.task.peg.name(),
+                r.mean_normalised
+            );
+            for o in Outcome::ALL.into_iter().rev() {
+                println!("  {:<20} {:5.1}%", o.name(), 100.0 * r.outcomes[o.index()]);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `learner run` as a collector (what `learner collect --live` passes).
@@ -523,6 +623,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Log(cmd) => run_log(cmd),
         Cmd::Collect(a) => run_collect(a),
         Cmd::Dataset(c) => run_dataset(c),
+        Cmd::Policy(c) => run_policy(c),
         Cmd::Run {
             episodes: a,
             collect: c,

@@ -1,0 +1,318 @@
+//! The RL environment over the fast path: [`RlEnv`] is one episode at a
+//! time of [`FastEnv`] (hw-sim's world and rt-controller's control cycle at
+//! 1 kHz) acted on at 20 Hz, with the staged reward and the episode's
+//! outcome; [`VecEnv`] steps many of them in parallel on all cores and
+//! observes them in one batch.
+//!
+//! Actions: the policy's 4-vector is clipped to [−1, 1] per component and
+//! scaled by [`ActionScale`] into (Δx, Δy, Δz) in the base frame, m, and
+//! Δroll, rad (`PolicyAction`'s convention); the controller clamps again at
+//! its own limits (1 cm, 0.05 rad), which the defaults stay within.
+//!
+//! An episode ends by truncation after `max_steps` policy steps (500, the
+//! paper's simulation episodes), or terminates early when the controller
+//! faults (a force overload, a joint limit): the arm is then held and the
+//! episode can no longer progress.
+
+use super::observe::ObsView;
+use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
+use crate::env::{EnvError, FastEnv};
+use crate::policy::{Action4, Observation, TaskGeometry};
+use hw_sim::{FieldError, TaskState, WorldConfig};
+use nalgebra::Isometry3;
+use rt_controller::ControllerConfig;
+use serde::{Deserialize, Serialize};
+use shared_mem_schema::Message;
+
+/// The paper's simulation episode length, policy steps.
+pub const PAPER_EPISODE_STEPS: u32 = 500;
+
+/// Why the RL environment failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RlEnvError {
+    /// The fast path could not be built or stepped.
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    /// A configuration value is unusable.
+    #[error("invalid RL configuration: {0}")]
+    Config(#[from] FieldError),
+    /// The world has no task (`task.enabled = false`).
+    #[error("the RL environment needs the peg-in-hole task (task.enabled = true)")]
+    NoTask,
+    /// A batch of the wrong size.
+    #[error("{what}: {got} values, expected {expected}")]
+    Shape {
+        /// Which argument.
+        what: &'static str,
+        /// Values given.
+        got: usize,
+        /// Values expected.
+        expected: usize,
+    },
+    /// Stepped before its reset, or after its episode ended.
+    #[error("environment {0} has no running episode (reset it first)")]
+    NotRunning(usize),
+}
+
+/// The scale of a policy action (docs/rl.md, "Actions").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ActionScale {
+    /// Position step of an action component of 1 (and the most), m.
+    pub max_step_m: f64,
+    /// Roll step of an action component of 1 (and the most), rad.
+    pub max_roll_rad: f64,
+}
+
+impl Default for ActionScale {
+    fn default() -> Self {
+        Self {
+            max_step_m: 0.005,
+            max_roll_rad: 0.05,
+        }
+    }
+}
+
+impl ActionScale {
+    /// The controller's action for a policy output: each component clipped
+    /// to [−1, 1] (a NaN to 0) and scaled.
+    pub fn to_delta(&self, a: &[f64]) -> Action4 {
+        let c = |x: f64| if x.is_nan() { 0.0 } else { x.clamp(-1.0, 1.0) };
+        [
+            c(a[0]) * self.max_step_m,
+            c(a[1]) * self.max_step_m,
+            c(a[2]) * self.max_step_m,
+            c(a[3]) * self.max_roll_rad,
+        ]
+    }
+
+    /// The policy output that asks for `delta` (clipped): the inverse of
+    /// [`ActionScale::to_delta`], for scripted policies run through the env.
+    pub fn from_delta(&self, delta: &Action4) -> [f64; 4] {
+        [
+            (delta[0] / self.max_step_m).clamp(-1.0, 1.0),
+            (delta[1] / self.max_step_m).clamp(-1.0, 1.0),
+            (delta[2] / self.max_step_m).clamp(-1.0, 1.0),
+            (delta[3] / self.max_roll_rad).clamp(-1.0, 1.0),
+        ]
+    }
+}
+
+/// The RL environment's configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RlEnvConfig {
+    /// The simulated world (peg, box ranges, noise, perturbations).
+    pub world: WorldConfig,
+    /// The controller.
+    pub controller: ControllerConfig,
+    /// The staged reward's constants.
+    pub reward: RewardConfig,
+    /// The action's scale.
+    pub action: ActionScale,
+    /// Policy steps per episode before truncation.
+    pub max_steps: u32,
+}
+
+impl Default for RlEnvConfig {
+    fn default() -> Self {
+        Self {
+            world: WorldConfig::default(),
+            controller: ControllerConfig::default(),
+            reward: RewardConfig::default(),
+            action: ActionScale::default(),
+            max_steps: PAPER_EPISODE_STEPS,
+        }
+    }
+}
+
+impl RlEnvConfig {
+    /// Checks the RL environment's own values (the world and the controller
+    /// are checked when built).
+    pub fn validate(&self) -> Result<(), FieldError> {
+        self.reward.validate()?;
+        for (name, v) in [
+            ("action.max_step_m", self.action.max_step_m),
+            ("action.max_roll_rad", self.action.max_roll_rad),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(FieldError::new(name, v, "must be positive and finite"));
+            }
+        }
+        if self.max_steps == 0 {
+            return Err(FieldError::new("max_steps", 0, "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// What one policy step of one environment gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOutcome {
+    /// The staged reward of the state reached.
+    pub reward: f64,
+    /// Its stage.
+    pub stage: RewardStage,
+    /// The episode ended early (a controller fault): no value to bootstrap.
+    pub terminated: bool,
+    /// The episode reached `max_steps`.
+    pub truncated: bool,
+    /// The episode's category so far (the best stage the simulator saw).
+    pub outcome: Outcome,
+    /// Policy steps taken in the episode.
+    pub steps: u32,
+    /// Sum of the episode's rewards so far.
+    pub episode_reward: f64,
+}
+
+impl StepOutcome {
+    /// The episode ended (terminated or truncated).
+    pub fn done(&self) -> bool {
+        self.terminated || self.truncated
+    }
+}
+
+/// One environment.
+pub struct RlEnv {
+    fast: FastEnv,
+    reward: RewardConfig,
+    action: ActionScale,
+    max_steps: u32,
+    geom: RewardGeometry,
+    obs: Option<Observation>,
+    hole: Isometry3<f64>,
+    free_wrench: [f64; 6],
+    steps: u32,
+    episode_reward: f64,
+    running: bool,
+    camera: Option<Box<shared_mem_schema::CameraFrame>>,
+}
+
+impl RlEnv {
+    /// Builds the environment; call [`RlEnv::reset`] before stepping.
+    pub fn new(cfg: &RlEnvConfig) -> Result<Self, RlEnvError> {
+        cfg.validate()?;
+        if !cfg.world.task.enabled {
+            return Err(RlEnvError::NoTask);
+        }
+        let fast = FastEnv::new(cfg.world.clone(), cfg.controller.clone())?;
+        let geom = RewardGeometry {
+            hole_depth_m: cfg.world.task.hole_depth_m,
+            symmetry: cfg.world.task.peg.symmetry_order(),
+        };
+        Ok(Self {
+            fast,
+            reward: cfg.reward.clone(),
+            action: cfg.action.clone(),
+            max_steps: cfg.max_steps,
+            geom,
+            obs: None,
+            hole: Isometry3::identity(),
+            free_wrench: [0.0; 6],
+            steps: 0,
+            episode_reward: 0.0,
+            running: false,
+            camera: None,
+        })
+    }
+
+    /// Starts an episode: the world rebuilt with `seed` (which draws the
+    /// box pose), then one policy period with no action so that the first
+    /// observation has a full wrench window and a settled arm.
+    pub fn reset(&mut self, seed: u64, camera: bool) -> Result<(), RlEnvError> {
+        self.fast.reset(seed)?;
+        let obs = self.fast.step(None)?;
+        self.free_wrench = self.fast.sensor_frame().wrench;
+        self.hole = self.fast.world().hole_pose().ok_or(RlEnvError::NoTask)?;
+        self.obs = Some(obs);
+        self.steps = 0;
+        self.episode_reward = 0.0;
+        self.running = true;
+        self.render(camera);
+        Ok(())
+    }
+
+    fn render(&mut self, camera: bool) {
+        if camera {
+            let msg = self
+                .camera
+                .get_or_insert_with(shared_mem_schema::CameraFrame::boxed_zeroed);
+            self.fast.render_camera(msg);
+        }
+    }
+
+    /// One policy step with the policy output `a` (clipped and scaled by
+    /// the action scale).
+    pub fn step(&mut self, a: &[f64], camera: bool) -> Result<StepOutcome, RlEnvError> {
+        if !self.running {
+            return Err(RlEnvError::NotRunning(0));
+        }
+        let delta = self.action.to_delta(a);
+        let obs = self.fast.step(Some(&delta))?;
+        self.obs = Some(obs);
+        self.steps += 1;
+        let task = *self.task();
+        let (r, stage) = reward(&self.reward, &self.geom, &task);
+        self.episode_reward += r;
+        let terminated = self.fast.sensor_frame().fault_code != 0;
+        let truncated = !terminated && self.steps >= self.max_steps;
+        self.running = !(terminated || truncated);
+        self.render(camera);
+        Ok(StepOutcome {
+            reward: r,
+            stage,
+            terminated,
+            truncated,
+            outcome: Outcome::from_stage(task.best_stage),
+            steps: self.steps,
+            episode_reward: self.episode_reward,
+        })
+    }
+
+    /// The simulator's task state (present: the task is required).
+    pub fn task(&self) -> &TaskState {
+        self.fast.world().task().expect("the task is enabled")
+    }
+
+    /// Where the hole is, as the scripted policies take it.
+    pub fn task_geometry(&self) -> TaskGeometry {
+        TaskGeometry {
+            hole_pose: self.hole,
+            symmetry: self.geom.symmetry,
+            depth_m: self.geom.hole_depth_m,
+        }
+    }
+
+    /// The observation of the last step (None before the first reset).
+    pub fn observation(&self) -> Option<&Observation> {
+        self.obs.as_ref()
+    }
+
+    /// The fast path underneath.
+    pub fn fast(&self) -> &FastEnv {
+        &self.fast
+    }
+
+    /// The action scale.
+    pub fn action_scale(&self) -> &ActionScale {
+        &self.action
+    }
+
+    /// The reward's geometry (hole depth, symmetry).
+    pub fn reward_geometry(&self) -> RewardGeometry {
+        self.geom
+    }
+
+    /// What an observer reads (None before the first reset).
+    pub fn view(&self) -> Option<ObsView<'_>> {
+        Some(ObsView {
+            obs: self.obs.as_ref()?,
+            wrench: &self.fast.wrench,
+            free_wrench: &self.free_wrench,
+            task: self.task(),
+            hole_pose: &self.hole,
+            symmetry: self.geom.symmetry,
+            camera: self.camera.as_deref(),
+        })
+    }
+}

@@ -1,0 +1,22 @@
+//! Reinforcement learning on the fast path (issue 18): the environment
+//! ([`env`], [`vec`]), what the policy observes ([`observe`]), the paper's
+//! staged reward and outcome categories ([`reward`]), TRPO ([`trpo`], with
+//! the small differentiable network of [`mlp`]) and its training loop
+//! ([`train`]). docs/rl.md gives every
+//! constant and setting with its source or reason.
+
+pub mod env;
+pub mod mlp;
+pub mod observe;
+pub mod reward;
+pub mod run;
+pub mod train;
+pub mod trpo;
+pub mod vec;
+
+pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
+pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};
+pub use reward::{Outcome, RewardConfig, RewardStage};
+pub use train::{EpisodeStats, IterationStats, Trainer, TrainerState};
+pub use trpo::{GaussianPolicy, LinearBaseline, TrpoConfig};
+pub use vec::{BatchEnv, VecEnv};

@@ -1,0 +1,126 @@
+//! What the policy sees: an [`Observer`] turns the state of a batch of
+//! environments into one observation vector each.
+//!
+//! Two sources are planned: [`GroundTruth`] (the tip relative to the hole,
+//! velocities and a wrench summary: privileged, the simulator's report, as
+//! the heuristic policy uses) exists now so that the RL code runs end to end;
+//! the frozen representation of issue 17 (its encoder's mean over the
+//! camera, the wrench window and proprioception, encoded in batches) plugs
+//! in as a second implementation, asking for camera frames through
+//! [`Observer::needs_camera`].
+
+use crate::policy::{Observation, WrenchHistory};
+use hw_sim::TaskState;
+use nalgebra::{Isometry3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// One environment's state at a policy step, as an observer reads it.
+pub struct ObsView<'a> {
+    /// The sensor frame's end-effector (peg tip) pose and twist.
+    pub obs: &'a Observation,
+    /// The wrist wrench readings of the last cycles (newest last).
+    pub wrench: &'a WrenchHistory,
+    /// The wrench read in free space at the start of the episode (the
+    /// sensor's bias and the peg's weight), sensor frame.
+    pub free_wrench: &'a [f64; 6],
+    /// The simulator's task state (privileged).
+    pub task: &'a TaskState,
+    /// The hole frame in the base frame (privileged).
+    pub hole_pose: &'a Isometry3<f64>,
+    /// The peg's rotational symmetry order.
+    pub symmetry: u32,
+    /// The camera frame of this step, rendered only when the observer
+    /// asks for it.
+    pub camera: Option<&'a shared_mem_schema::CameraFrame>,
+}
+
+/// Turns environment states into observation vectors, a batch at a time
+/// (a learned encoder is run on a batch).
+pub trait Observer: Send + Sync {
+    /// Length of one observation.
+    fn dim(&self) -> usize;
+    /// Whether [`ObsView::camera`] must be rendered (it costs a ray-cast
+    /// frame per step).
+    fn needs_camera(&self) -> bool {
+        false
+    }
+    /// Writes `views.len()` observations, one after the other, into `out`
+    /// (`views.len() * dim()` values).
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]);
+}
+
+/// Which observer a configuration asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObservationKind {
+    /// [`GroundTruth`].
+    #[default]
+    GroundTruth,
+}
+
+impl ObservationKind {
+    /// The observer.
+    pub fn observer(self) -> std::sync::Arc<dyn Observer> {
+        match self {
+            ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
+        }
+    }
+}
+
+/// Ground-truth state, 14 values, each scaled to about unit size:
+/// the tip's position in the hole frame (/ 0.1 m, 3), its roll relative to
+/// the hole wrapped by the peg's symmetry (/ (π/k), 1), the tip's linear
+/// velocity in the hole frame (/ 0.1 m/s, 3), its roll rate (rad/s, 1), and
+/// the mean wrench of the newest 8 readings less the free-space reading
+/// (force / 10 N, 3; moment / 1 N·m, 3), sensor frame.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GroundTruth;
+
+/// Readings averaged for [`GroundTruth`]'s wrench (8 ms).
+const WRENCH_MEAN_READINGS: usize = 8;
+
+impl GroundTruth {
+    fn one(v: &ObsView<'_>, out: &mut [f64]) {
+        let s = v.task.s_m;
+        let inv = v.hole_pose.rotation.inverse();
+        let lin = inv * Vector3::new(v.obs.ee_twist[0], v.obs.ee_twist[1], v.obs.ee_twist[2]);
+        let ang = inv * Vector3::new(v.obs.ee_twist[3], v.obs.ee_twist[4], v.obs.ee_twist[5]);
+        let k = v.symmetry.max(1) as f64;
+        let mut w = [0.0; 6];
+        let n = WRENCH_MEAN_READINGS.min(v.wrench.len()).max(1);
+        for r in v.wrench.ordered().skip(v.wrench.len().saturating_sub(n)) {
+            for (a, b) in w.iter_mut().zip(r) {
+                *a += b / n as f64;
+            }
+        }
+        let vals = [
+            s.x / 0.1,
+            s.y / 0.1,
+            s.z / 0.1,
+            v.task.s_psi_rad / (std::f64::consts::PI / k),
+            lin.x / 0.1,
+            lin.y / 0.1,
+            lin.z / 0.1,
+            ang.z,
+            (w[0] - v.free_wrench[0]) / 10.0,
+            (w[1] - v.free_wrench[1]) / 10.0,
+            (w[2] - v.free_wrench[2]) / 10.0,
+            w[3] - v.free_wrench[3],
+            w[4] - v.free_wrench[4],
+            w[5] - v.free_wrench[5],
+        ];
+        out.copy_from_slice(&vals);
+    }
+}
+
+impl Observer for GroundTruth {
+    fn dim(&self) -> usize {
+        14
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(14)) {
+            Self::one(v, o);
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! `learner policy train` and `learner policy eval`: a training run over
+//! the vectorised fast path with checkpoints, learning curves (CSV and PNG)
+//! and a progress bar; the evaluation of a checkpoint over N episodes.
+
+use super::env::{RlEnv, RlEnvConfig, RlEnvError};
+use super::observe::ObservationKind;
+use super::reward::{Outcome, normalised_return};
+use super::train::{IterationStats, Trainer, TrainerState};
+use super::trpo::{GaussianPolicy, TrpoConfig};
+use super::vec::{VecEnv, all_cores, par_map};
+use crate::plot::{Chart, Series};
+use crate::progress::Progress;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// A training run's configuration (TOML; every field defaulted).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Seed of the run (policy initialisation, episode seeds, noise).
+    pub seed: u64,
+    /// Environments stepped together.
+    pub num_envs: usize,
+    /// Threads (0: all cores).
+    pub threads: usize,
+    /// Environment steps to train for (the paper: 2000 episodes of 500).
+    pub env_steps: u64,
+    /// A checkpoint every this many updates (and at the end).
+    pub checkpoint_every: u64,
+    /// What the policy observes.
+    pub observation: ObservationKind,
+    /// The environment.
+    pub env: RlEnvConfig,
+    /// TRPO.
+    pub trpo: TrpoConfig,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            num_envs: 4,
+            threads: 0,
+            env_steps: 1_000_000,
+            checkpoint_every: 10,
+            observation: ObservationKind::GroundTruth,
+            env: RlEnvConfig::default(),
+            trpo: TrpoConfig::default(),
+        }
+    }
+}
+
+/// What a checkpoint file holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// The run's configuration.
+    pub config: TrainConfig,
+    /// Policy, baseline and counters.
+    pub state: TrainerState,
+    /// Every update's statistics so far (the learning curves).
+    pub history: Vec<CurvePoint>,
+}
+
+/// One point of the learning curves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CurvePoint {
+    /// Update number.
+    pub iteration: u64,
+    /// Environment steps so far.
+    pub env_steps: u64,
+    /// Episodes finished in the update's batch.
+    pub episodes: usize,
+    /// Their mean reward (NaN: none finished).
+    pub mean_return: f64,
+    /// Their mean normalised reward.
+    pub mean_normalised: f64,
+    /// Share in each outcome category ([`Outcome::ALL`] order).
+    pub outcomes: [f64; 4],
+    /// KL of the update.
+    pub kl: f64,
+    /// Mean σ of the policy.
+    pub mean_std: f64,
+}
+
+impl CurvePoint {
+    fn from_stats(s: &IterationStats) -> Self {
+        Self {
+            iteration: s.iteration,
+            env_steps: s.env_steps,
+            episodes: s.episodes.len(),
+            mean_return: s.mean_return().unwrap_or(f64::NAN),
+            mean_normalised: s.mean_normalised().unwrap_or(f64::NAN),
+            outcomes: s.outcome_shares(),
+            kl: s.update.kl,
+            mean_std: s.mean_std,
+        }
+    }
+}
+
+/// Why a run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The environment or the trainer.
+    #[error(transparent)]
+    Env(#[from] RlEnvError),
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A file's content is not what it should be.
+    #[error("{path}: {detail}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        detail: String,
+    },
+    /// A chart could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
+    move |source| RunError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Reads a training configuration (TOML).
+pub fn read_config(path: &Path) -> Result<TrainConfig, RunError> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    toml::from_str(&text).map_err(|e| RunError::Parse {
+        path: path.into(),
+        detail: e.to_string(),
+    })
+}
+
+/// Reads a checkpoint.
+pub fn read_checkpoint(path: &Path) -> Result<Checkpoint, RunError> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    serde_json::from_str(&text).map_err(|e| RunError::Parse {
+        path: path.into(),
+        detail: e.to_string(),
+    })
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunError> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).map_err(io(&tmp))?;
+    std::fs::rename(&tmp, path).map_err(io(path))
+}
+
+/// The checkpoint file of a run directory.
+pub fn checkpoint_path(out: &Path) -> PathBuf {
+    out.join("checkpoint.json")
+}
+
+/// Trains (or, with `resume`, continues the run in `out`) until the
+/// configured number of environment steps, writing `checkpoint.json`,
+/// `curve.csv`, `return.png` and `outcomes.png` into `out`.
+pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, RunError> {
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let ckpt_path = checkpoint_path(out);
+    let (cfg, state, mut history) = if resume && ckpt_path.exists() {
+        let c = read_checkpoint(&ckpt_path)?;
+        // The file's configuration rules, except the length of the run.
+        let mut kept = c.config;
+        kept.env_steps = cfg.env_steps;
+        (kept, Some(c.state), c.history)
+    } else {
+        (cfg, None, Vec::new())
+    };
+    let env = VecEnv::new(
+        &cfg.env,
+        cfg.num_envs,
+        cfg.observation.observer(),
+        cfg.threads,
+    )?;
+    let mut trainer = match state {
+        Some(s) => Trainer::resume(env, cfg.trpo.clone(), s)?,
+        None => Trainer::new(env, cfg.trpo.clone(), cfg.seed)?,
+    };
+    let progress = Progress::new(cfg.env_steps, "steps");
+    let started = std::time::Instant::now();
+    let mut episodes = 0usize;
+    let save =
+        |trainer: &Trainer<VecEnv>, history: &[CurvePoint]| -> Result<Checkpoint, RunError> {
+            let c = Checkpoint {
+                config: cfg.clone(),
+                state: trainer.state.clone(),
+                history: history.to_vec(),
+            };
+            let json = serde_json::to_vec(&c).map_err(|e| RunError::Parse {
+                path: ckpt_path.clone(),
+                detail: e.to_string(),
+            })?;
+            write_atomic(&ckpt_path, &json)?;
+            write_curves(out, history)?;
+            Ok(c)
+        };
+    while trainer.state.env_steps < cfg.env_steps {
+        let s = trainer.iterate()?;
+        episodes += s.episodes.len();
+        let p = CurvePoint::from_stats(&s);
+        let rate = episodes as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        progress.update(
+            s.env_steps.min(cfg.env_steps),
+            format!(
+                "update {} | {:.2} episodes/s | mean return {:.1} (normalised {:.3}) | completed {:.0}%",
+                s.iteration,
+                rate,
+                p.mean_return,
+                p.mean_normalised,
+                100.0 * p.outcomes[Outcome::CompletedInsertion.index()]
+            ),
+        );
+        history.push(p);
+        if s.iteration.is_multiple_of(cfg.checkpoint_every.max(1)) {
+            save(&trainer, &history)?;
+        }
+    }
+    progress.finish();
+    save(&trainer, &history)
+}
+
+/// Writes `curve.csv` and the two charts of a run.
+pub fn write_curves(out: &Path, history: &[CurvePoint]) -> Result<(), RunError> {
+    let path = out.join("curve.csv");
+    let mut f = std::fs::File::create(&path).map_err(io(&path))?;
+    let mut text = String::from(
+        "iteration,env_steps,episodes,mean_return,mean_normalised,completed_insertion,inserted_into_hole,touched_the_box,failed,kl,mean_std\n",
+    );
+    for p in history {
+        let o = p.outcomes;
+        text += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            p.iteration,
+            p.env_steps,
+            p.episodes,
+            p.mean_return,
+            p.mean_normalised,
+            o[3],
+            o[2],
+            o[1],
+            o[0],
+            p.kl,
+            p.mean_std
+        );
+    }
+    f.write_all(text.as_bytes()).map_err(io(&path))?;
+    let finished: Vec<&CurvePoint> = history.iter().filter(|p| p.episodes > 0).collect();
+    if finished.is_empty() {
+        return Ok(());
+    }
+    let pts = |f: &dyn Fn(&CurvePoint) -> f64| {
+        finished
+            .iter()
+            .map(|p| (p.env_steps as f64, f(p)))
+            .collect::<Vec<_>>()
+    };
+    Chart::new(
+        "TRPO: episode reward",
+        "environment steps (20 Hz policy steps)",
+        "mean normalised episode reward",
+    )
+    .with(Series::line(
+        "mean normalised reward",
+        pts(&|p| p.mean_normalised),
+    ))
+    .write_png(out.join("return.png"))?;
+    let mut chart = Chart::new(
+        "TRPO: outcome of the episodes",
+        "environment steps (20 Hz policy steps)",
+        "share of the update's episodes",
+    );
+    for o in Outcome::ALL.into_iter().rev() {
+        chart = chart.with(Series::line(o.name(), pts(&|p| p.outcomes[o.index()])));
+    }
+    chart.write_png(out.join("outcomes.png"))?;
+    Ok(())
+}
+
+/// The result of an evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    /// Episodes run.
+    pub episodes: usize,
+    /// Share in each outcome category ([`Outcome::ALL`] order).
+    pub outcomes: [f64; 4],
+    /// Mean normalised episode reward.
+    pub mean_normalised: f64,
+    /// Normalised reward of each episode, in seed order.
+    pub normalised: Vec<f64>,
+}
+
+/// Runs `episodes` episodes (seeds `seed`, `seed + 1`, …) of `policy`'s
+/// mean action, spread over `cfg.num_envs` environments on parallel threads
+/// (each runs whole episodes, observing one state at a time).
+pub fn evaluate(
+    policy: &GaussianPolicy,
+    cfg: &TrainConfig,
+    episodes: usize,
+    seed: u64,
+) -> Result<EvalReport, RunError> {
+    let n = cfg.num_envs.clamp(1, episodes.max(1));
+    let observer = cfg.observation.observer();
+    let mut envs = (0..n)
+        .map(|_| RlEnv::new(&cfg.env))
+        .collect::<Result<Vec<_>, _>>()?;
+    let threads = if cfg.threads == 0 {
+        all_cores()
+    } else {
+        cfg.threads
+    };
+    let camera = observer.needs_camera();
+    let dim = observer.dim();
+    let results = par_map(&mut envs, threads, |i, env| {
+        let mut done = Vec::new();
+        let mut obs = vec![0.0; dim];
+        for k in (i..episodes).step_by(n) {
+            env.reset(seed + k as u64, camera)?;
+            loop {
+                observer.observe(&[env.view().expect("reset")], &mut obs);
+                let a = policy.means(&obs);
+                let o = env.step(&a, camera)?;
+                if o.done() {
+                    done.push((k, o));
+                    break;
+                }
+            }
+        }
+        Ok::<_, RlEnvError>(done)
+    });
+    let mut norm = vec![0.0; episodes];
+    let mut outcomes = [0.0; 4];
+    for r in results {
+        for (k, o) in r? {
+            norm[k] = normalised_return(o.episode_reward, cfg.env.max_steps);
+            outcomes[o.outcome.index()] += 1.0 / episodes as f64;
+        }
+    }
+    Ok(EvalReport {
+        episodes,
+        mean_normalised: norm.iter().sum::<f64>() / episodes.max(1) as f64,
+        normalised: norm,
+        outcomes,
+    })
+}

@@ -1,0 +1,304 @@
+//! On-policy rollouts from a [`BatchEnv`] and the TRPO training loop:
+//! collect `batch_steps` steps with the current policy, estimate advantages
+//! (GAE over the baseline's values), fit the baseline, update the policy.
+//!
+//! Episodes continue across updates: a trajectory cut by the end of a batch
+//! is bootstrapped with the baseline's value of its last state, and goes on
+//! in the next batch. Episode seeds are `seed`, `seed + 1`, … in the order
+//! episodes start, and the action noise of update k is drawn from its own
+//! stream, so a run is the same whatever the number of threads.
+
+use super::env::RlEnvError;
+use super::reward::{Outcome, normalised_return};
+use super::trpo::{Batch, GaussianPolicy, LinearBaseline, TrpoConfig, UpdateStats, gae, trpo_step};
+use super::vec::BatchEnv;
+use serde::{Deserialize, Serialize};
+
+/// One finished episode.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeStats {
+    /// The seed it was reset with.
+    pub seed: u64,
+    /// Sum of its rewards.
+    pub reward: f64,
+    /// That sum over the highest attainable (5 per step, full length).
+    pub normalised: f64,
+    /// Its category.
+    pub outcome: Outcome,
+    /// Policy steps it ran.
+    pub steps: u32,
+    /// It ended early (a controller fault).
+    pub terminated: bool,
+}
+
+/// One update of the training loop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationStats {
+    /// Update number, from 1.
+    pub iteration: u64,
+    /// Environment (policy) steps so far.
+    pub env_steps: u64,
+    /// The episodes that ended during this batch.
+    pub episodes: Vec<EpisodeStats>,
+    /// What the TRPO update did.
+    pub update: UpdateStats,
+    /// Mean σ of the policy after the update.
+    pub mean_std: f64,
+}
+
+impl IterationStats {
+    /// Mean episode reward of the batch's finished episodes (None: none
+    /// finished).
+    pub fn mean_return(&self) -> Option<f64> {
+        (!self.episodes.is_empty()).then(|| {
+            self.episodes.iter().map(|e| e.reward).sum::<f64>() / self.episodes.len() as f64
+        })
+    }
+
+    /// Mean normalised episode reward of the finished episodes.
+    pub fn mean_normalised(&self) -> Option<f64> {
+        (!self.episodes.is_empty()).then(|| {
+            self.episodes.iter().map(|e| e.normalised).sum::<f64>() / self.episodes.len() as f64
+        })
+    }
+
+    /// Share of the finished episodes in each category ([`Outcome::ALL`]
+    /// order).
+    pub fn outcome_shares(&self) -> [f64; 4] {
+        let mut s = [0.0; 4];
+        let n = self.episodes.len().max(1) as f64;
+        for e in &self.episodes {
+            s[e.outcome.index()] += 1.0 / n;
+        }
+        s
+    }
+}
+
+/// Samples of one environment's current trajectory segment.
+#[derive(Debug, Clone, Default)]
+struct Segment {
+    obs: Vec<f64>,
+    actions: Vec<f64>,
+    rewards: Vec<f64>,
+    times: Vec<f64>,
+}
+
+/// A batch being collected, with what the baseline needs.
+#[derive(Debug, Default)]
+struct Collected {
+    batch: Batch,
+    /// Step of each sample over the episode length.
+    times: Vec<f64>,
+    /// The baseline's value of each sample's state.
+    values: Vec<f64>,
+}
+
+impl Collected {
+    /// Moves a finished or cut segment in, with its advantages against
+    /// `baseline`; `last` is the state after it and its time (None: the
+    /// episode terminated, nothing to bootstrap).
+    fn finish(
+        &mut self,
+        seg: &mut Segment,
+        last: Option<(&[f64], f64)>,
+        baseline: &LinearBaseline,
+        cfg: &TrpoConfig,
+    ) {
+        if seg.rewards.is_empty() {
+            return;
+        }
+        let values = baseline.predict(&seg.obs, &seg.times);
+        let last_value = last.map_or(0.0, |(o, t)| baseline.predict(o, &[t])[0]);
+        let adv = gae(&seg.rewards, &values, last_value, cfg.gamma, cfg.gae_lambda);
+        self.batch.obs.append(&mut seg.obs);
+        self.batch.actions.append(&mut seg.actions);
+        self.batch.advantages.extend(adv);
+        self.times.append(&mut seg.times);
+        self.values.extend(values);
+        seg.rewards.clear();
+    }
+}
+
+/// The state a run resumes from (a checkpoint).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainerState {
+    /// The policy.
+    pub policy: GaussianPolicy,
+    /// The value baseline.
+    pub baseline: LinearBaseline,
+    /// Updates done.
+    pub iteration: u64,
+    /// Environment steps taken.
+    pub env_steps: u64,
+    /// Episodes started.
+    pub episodes_started: u64,
+    /// Seed of the run.
+    pub seed: u64,
+}
+
+/// The TRPO training loop over a batch of environments.
+pub struct Trainer<E: BatchEnv> {
+    env: E,
+    cfg: TrpoConfig,
+    /// Policy, baseline and counters (what a checkpoint holds).
+    pub state: TrainerState,
+    segments: Vec<Segment>,
+    /// Step within its episode of each environment's current state.
+    t: Vec<u32>,
+    /// Seed of each environment's current episode.
+    seeds: Vec<u64>,
+    /// Environments whose next episode has not started.
+    pending: Vec<bool>,
+}
+
+impl<E: BatchEnv> Trainer<E> {
+    /// A fresh run: a new policy drawn from `seed`.
+    pub fn new(env: E, cfg: TrpoConfig, seed: u64) -> Result<Self, RlEnvError> {
+        cfg.validate()?;
+        let mut rng = hw_sim::rng::seeded(seed, 900);
+        let policy = GaussianPolicy::new(
+            env.obs_dim(),
+            &cfg.hidden,
+            env.act_dim(),
+            cfg.init_log_std,
+            &mut rng,
+        );
+        let state = TrainerState {
+            policy,
+            baseline: LinearBaseline::default(),
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed,
+        };
+        Self::resume(env, cfg, state)
+    }
+
+    /// A run resumed from `state` (its episodes in progress start afresh).
+    pub fn resume(env: E, cfg: TrpoConfig, state: TrainerState) -> Result<Self, RlEnvError> {
+        cfg.validate()?;
+        let n = env.num_envs();
+        if state.policy.sizes.first() != Some(&env.obs_dim())
+            || state.policy.act_dim() != env.act_dim()
+        {
+            return Err(RlEnvError::Shape {
+                what: "policy input (observation size)",
+                got: state.policy.sizes.first().copied().unwrap_or(0),
+                expected: env.obs_dim(),
+            });
+        }
+        Ok(Self {
+            env,
+            cfg,
+            state,
+            segments: vec![Segment::default(); n],
+            t: vec![0; n],
+            seeds: vec![0; n],
+            pending: vec![true; n],
+        })
+    }
+
+    /// The environments.
+    pub fn env(&self) -> &E {
+        &self.env
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TrpoConfig {
+        &self.cfg
+    }
+
+    fn next_seed(&mut self) -> u64 {
+        let s = self.state.seed.wrapping_add(self.state.episodes_started);
+        self.state.episodes_started += 1;
+        s
+    }
+
+    /// Collects one batch and updates the policy.
+    pub fn iterate(&mut self) -> Result<IterationStats, RlEnvError> {
+        let n = self.env.num_envs();
+        let (od, ad) = (self.env.obs_dim(), self.env.act_dim());
+        let max_steps = self.env.max_steps();
+        let horizon = max_steps.max(1) as f64;
+        let mut rng = hw_sim::rng::seeded(self.state.seed, 1000 + self.state.iteration);
+        let mut col = Collected::default();
+        let mut episodes = Vec::new();
+        let mut collected = 0usize;
+        while collected < self.cfg.batch_steps {
+            // Episodes start when they are next stepped, so that a batch
+            // ending with finished episodes leaves nothing half begun (a
+            // checkpoint then resumes exactly).
+            let idle: Vec<usize> = (0..n).filter(|&i| self.pending[i]).collect();
+            let which: Vec<_> = idle.into_iter().map(|i| (i, self.next_seed())).collect();
+            if !which.is_empty() {
+                for &(i, seed) in &which {
+                    self.seeds[i] = seed;
+                    self.t[i] = 0;
+                    self.pending[i] = false;
+                }
+                self.env.reset(&which)?;
+            }
+            let obs = self.env.observations().to_vec();
+            let actions = self.state.policy.sample(&obs, &mut rng);
+            let outcomes = self.env.step(&actions)?.to_vec();
+            collected += n;
+            self.state.env_steps += n as u64;
+            let next_obs = self.env.observations().to_vec();
+            for (i, out) in outcomes.iter().enumerate() {
+                let seg = &mut self.segments[i];
+                seg.obs.extend_from_slice(&obs[i * od..(i + 1) * od]);
+                seg.actions
+                    .extend_from_slice(&actions[i * ad..(i + 1) * ad]);
+                seg.rewards.push(out.reward);
+                seg.times.push(self.t[i] as f64 / horizon);
+                self.t[i] += 1;
+                if out.done() {
+                    let last = (!out.terminated)
+                        .then(|| (&next_obs[i * od..(i + 1) * od], self.t[i] as f64 / horizon));
+                    col.finish(seg, last, &self.state.baseline, &self.cfg);
+                    episodes.push(EpisodeStats {
+                        seed: self.seeds[i],
+                        reward: out.episode_reward,
+                        normalised: normalised_return(out.episode_reward, max_steps),
+                        outcome: out.outcome,
+                        steps: out.steps,
+                        terminated: out.terminated,
+                    });
+                    self.pending[i] = true;
+                }
+            }
+        }
+        // Cut the running segments at the batch's end; they go on next time.
+        let obs = self.env.observations().to_vec();
+        for i in (0..n).filter(|&i| !self.pending[i]) {
+            let last = (&obs[i * od..(i + 1) * od], self.t[i] as f64 / horizon);
+            let mut seg = std::mem::take(&mut self.segments[i]);
+            col.finish(&mut seg, Some(last), &self.state.baseline, &self.cfg);
+        }
+        // The baseline learns the λ-returns (advantage + value) of this batch.
+        let Collected {
+            mut batch,
+            times,
+            values,
+        } = col;
+        let targets: Vec<f64> = batch
+            .advantages
+            .iter()
+            .zip(&values)
+            .map(|(a, v)| a + v)
+            .collect();
+        let update = trpo_step(&mut self.state.policy, &mut batch, &self.cfg);
+        self.state
+            .baseline
+            .fit(&batch.obs, &times, &targets, self.cfg.baseline_ridge);
+        self.state.iteration += 1;
+        let ls = &self.state.policy.log_std;
+        Ok(IterationStats {
+            iteration: self.state.iteration,
+            env_steps: self.state.env_steps,
+            episodes,
+            update,
+            mean_std: ls.iter().map(|l| l.exp()).sum::<f64>() / ls.len() as f64,
+        })
+    }
+}

