@@ -8,7 +8,7 @@ mod daemon_rig;
 use daemon_rig::DaemonRig;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
-use shared_mem_schema::{ControllerStatus, PolicyAction};
+use shared_mem_schema::ControllerStatus;
 
 fn cycle(rig: &mut DaemonRig) {
     let now = mono_now_ns();
@@ -33,7 +33,8 @@ fn queue_overflow_is_counted_apart_from_rejections() {
         // As many as the daemon's subscriber holds: all of them arrive.
         for _ in 0..16 {
             seq += 1;
-            let a = PolicyAction::new(seq, mono_now_ns(), [0.0005, 0.0, 0.0, 0.0]);
+            // Stamped with the episode and the state it answers: fresh.
+            let a = rig.action(seq, [0.0005, 0.0, 0.0, 0.0]);
             transport::send(&rig.actions, &a).unwrap();
         }
     };
