@@ -6,9 +6,9 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
+use shared_mem_schema::ControllerStatus;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
-use shared_mem_schema::ControllerStatus;
 
 fn cycle(rig: &mut DaemonRig) {
     let now = mono_now_ns();

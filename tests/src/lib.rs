@@ -12,6 +12,7 @@ use learner::stack::Managed;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
 
 /// Absolute path of the workspace root, for tests that need the repository's
 /// files (robot descriptions, configuration).
@@ -72,4 +73,27 @@ pub fn start(name: &str, args: &[&str], log_dir: &Path) -> Managed {
     std::fs::create_dir_all(log_dir).expect("log directory");
     Managed::spawn(name, cmd, Some(&log_dir.join(format!("{name}.log"))))
         .unwrap_or_else(|e| panic!("starting {}: {e:#}", bin.display()))
+}
+
+/// Drains `sub` until `pred` holds for a message or `timeout` passes.
+pub fn wait_for<T: shared_mem_schema::Message>(
+    sub: &shared_mem_schema::transport::Sub<T>,
+    timeout: Duration,
+    mut pred: impl FnMut(&T) -> bool,
+) -> Option<T> {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        let mut hit = None;
+        shared_mem_schema::transport::drain(sub, |m| {
+            if hit.is_none() && pred(m) {
+                hit = Some(*m);
+            }
+        })
+        .unwrap();
+        if hit.is_some() {
+            return hit;
+        }
+        std::thread::sleep(Duration::from_micros(300));
+    }
+    None
 }
