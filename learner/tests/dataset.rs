@@ -342,21 +342,28 @@ fn recount(ds: &Dataset) -> dataset::Balance {
     b
 }
 
+/// Builds a dataset from the logs in `logs` into a scratch directory named
+/// `tag`, opens it, and checks its stored balance against a recount.
+fn build_and_recount(logs: &std::path::Path, tag: &str) -> (test_support::ScratchDir, Dataset) {
+    let out = test_support::scratch_dir(tag);
+    let files = dataset::find_logs(&[logs.to_path_buf()]).unwrap();
+    dataset::build(&files, &out, &BuildConfig::default(), 2, |_, r| {
+        r.unwrap();
+    })
+    .unwrap();
+    let ds = Dataset::open(&out).unwrap();
+    assert_eq!(ds.stats.balance, recount(&ds));
+    (out, ds)
+}
+
 #[test]
 fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     // Full 5 s episodes: the heuristic completes (about 3 s) and rests.
     let full = test_support::scratch_dir("full");
     let summary = collect_with(&full, 1.0, 100, None);
     assert!(summary.shards.iter().all(|s| s.states == 99));
-    let out = test_support::scratch_dir("full-ds");
-    let files = dataset::find_logs(&[full.to_path_buf()]).unwrap();
-    dataset::build(&files, &out, &BuildConfig::default(), 2, |_, r| {
-        r.unwrap();
-    })
-    .unwrap();
-    let ds = Dataset::open(&out).unwrap();
+    let (out, ds) = build_and_recount(&full, "full-ds");
     let b = &ds.stats.balance;
-    assert_eq!(*b, recount(&ds));
     assert_eq!(b.total().samples, ds.meta.samples);
     assert_eq!(
         b.policy_total(learner::collect::EpisodePolicy::Random)
@@ -404,15 +411,8 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     let short = test_support::scratch_dir("short");
     let n = Mix::default().end_after_completion.expect("on by default");
     let summary = collect_with(&short, 1.0, 100, Some(n));
-    let out = test_support::scratch_dir("short-ds");
-    let files = dataset::find_logs(&[short.to_path_buf()]).unwrap();
-    dataset::build(&files, &out, &BuildConfig::default(), 2, |_, r| {
-        r.unwrap();
-    })
-    .unwrap();
-    let ds = Dataset::open(&out).unwrap();
+    let (_out, ds) = build_and_recount(&short, "short-ds");
     let b = &ds.stats.balance;
-    assert_eq!(*b, recount(&ds));
     // The same episodes: one that completed early ends early, the others
     // run their length (or complete within its last 10 actions).
     assert!(
