@@ -113,7 +113,6 @@ fn evaluate(trainer: &Trainer<Reach>) -> f64 {
 }
 
 #[test]
-#[ignore = "fails today: the return falls (−10.1 → −12.4) instead of rising; issue 18, under investigation"]
 fn trpo_learns_a_reach_within_30_updates() {
     let cfg = TrpoConfig {
         batch_steps: 400,

@@ -96,7 +96,7 @@ struct Collected {
 impl Collected {
     /// Moves a finished or cut segment in, with its advantages against
     /// `baseline`; `last` is the state after it and its time (None: the
-    /// episode terminated, nothing to bootstrap).
+    /// episode ended, by a fault or at the horizon: nothing to bootstrap).
     fn finish(
         &mut self,
         seg: &mut Segment,
@@ -243,7 +243,6 @@ impl<E: BatchEnv> Trainer<E> {
             let outcomes = self.env.step(&actions)?.to_vec();
             collected += n;
             self.state.env_steps += n as u64;
-            let next_obs = self.env.observations().to_vec();
             for (i, out) in outcomes.iter().enumerate() {
                 let seg = &mut self.segments[i];
                 seg.obs.extend_from_slice(&obs[i * od..(i + 1) * od]);
@@ -253,9 +252,13 @@ impl<E: BatchEnv> Trainer<E> {
                 seg.times.push(self.t[i] as f64 / horizon);
                 self.t[i] += 1;
                 if out.done() {
-                    let last = (!out.terminated)
-                        .then(|| (&next_obs[i * od..(i + 1) * od], self.t[i] as f64 / horizon));
-                    col.finish(seg, last, &self.state.baseline, &self.cfg);
+                    // The episode is over, by a fault or at the horizon: the
+                    // task is a finite-horizon MDP (time is in the
+                    // baseline's features), so nothing follows its last
+                    // step. Bootstrapping at the horizon fed the baseline's
+                    // extrapolation to t = 1 (never fitted) back into its
+                    // own targets, and the learned return fell.
+                    col.finish(seg, None, &self.state.baseline, &self.cfg);
                     episodes.push(EpisodeStats {
                         seed: self.seeds[i],
                         reward: out.episode_reward,
