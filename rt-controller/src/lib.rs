@@ -625,7 +625,7 @@ pub fn step(
         QpOutcome::Solved { .. } => c.qp_solved += 1,
         QpOutcome::Fallback(_) => c.qp_fallbacks += 1,
     }
-    if d.tau_cmd.iter().any(|t| !t.is_finite()) {
+    if !all_finite(d.tau_cmd.iter()) {
         d.supervisor.raise(FaultReason::NonFiniteTorque, now);
         safe_command(model, ctrl, d, Some(v));
         return finish(d, Some(outcome), action_status);
