@@ -5,11 +5,11 @@
 //! dataset and its labels ([`dataset`], [`labels`]), the scripted and random
 //! policies ([`policy`]), the fast-path environment ([`env`]), the live
 //! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]),
-//! charts for people ([`plot`]), the RL environment with TRPO ([`rl`]) and
-//! the command-line interface. Not written yet, each to get its own folder:
-//! the multimodal representation with its baselines and ablations
-//! (`models/`), its training loops (`train/`) and the paper's experiments
-//! (`eval/`); see docs/architecture.md.
+//! charts for people ([`plot`]), the RL environment with TRPO ([`rl`]), the
+//! multimodal representation with its baselines and ablations ([`models`])
+//! and its training and evaluation ([`train`]), and the command-line
+//! interface. Not written yet: the paper's experiments end to end (`eval/`);
+//! see docs/architecture.md.
 //!
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.
@@ -20,9 +20,11 @@ pub mod env;
 pub mod labels;
 pub mod live;
 pub mod log;
+pub mod models;
 pub mod plot;
 pub mod policy;
 pub mod progress;
 pub mod proprio;
 pub mod rl;
 pub mod stack;
+pub mod train;

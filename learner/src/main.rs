@@ -77,6 +77,10 @@ enum Cmd {
     /// evaluate a checkpoint (docs/rl.md).
     #[command(subcommand)]
     Policy(PolicyCmd),
+    /// The multimodal representation: train a model from a dataset,
+    /// evaluate it on its test split (docs/representation.md).
+    #[command(subcommand)]
+    Repr(ReprCmd),
 }
 
 #[derive(Debug, Subcommand)]
@@ -117,6 +121,126 @@ enum PolicyCmd {
         #[arg(long, value_enum)]
         peg: Option<PegShape>,
     },
+}
+
+#[derive(Debug, Subcommand)]
+enum ReprCmd {
+    /// Trains a representation model (docs/representation.md): progress
+    /// bar, per-epoch metrics.csv and curves, checkpoints, and the exported
+    /// model in `--out/model`.
+    Train {
+        /// Model and training configuration (TOML; configs/repr/ has the
+        /// paper's models).
+        #[arg(long)]
+        config: PathBuf,
+        /// The dataset (`learner dataset build`'s output).
+        #[arg(long)]
+        data: PathBuf,
+        /// Run directory.
+        #[arg(long, default_value = "runs/repr")]
+        out: PathBuf,
+        /// Continue the run in `--out` from its checkpoint.
+        #[arg(long)]
+        resume: bool,
+        /// Epochs (overrides the configuration).
+        #[arg(long)]
+        epochs: Option<u32>,
+        /// Where the tensors live.
+        #[arg(long, value_enum, default_value_t = learner::train::DeviceKind::Cpu)]
+        device: learner::train::DeviceKind,
+    },
+    /// Evaluates a trained run on its test split: the appendix table with
+    /// baselines, flow for candidate actions, PCA of z.
+    Eval {
+        /// The training run's directory.
+        #[arg(long)]
+        run: PathBuf,
+        /// The dataset it was trained on.
+        #[arg(long)]
+        data: PathBuf,
+        /// Where the table and pictures go (default: `<run>/eval`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Where the tensors live.
+        #[arg(long, value_enum, default_value_t = learner::train::DeviceKind::Cpu)]
+        device: learner::train::DeviceKind,
+        /// Samples in the PCA picture.
+        #[arg(long, default_value_t = 1500)]
+        pca_samples: usize,
+        /// Images in the flow picture.
+        #[arg(long, default_value_t = 4)]
+        flow_images: usize,
+    },
+}
+
+fn run_repr(cmd: ReprCmd) -> Result<()> {
+    use learner::train::{self, TrainConfig, TrainOptions};
+    match cmd {
+        ReprCmd::Train {
+            config,
+            data,
+            out,
+            resume,
+            epochs,
+            device,
+        } => {
+            let mut cfg = TrainConfig::from_file(&config)?;
+            if let Some(e) = epochs {
+                cfg.train.epochs = e;
+            }
+            let opts = TrainOptions {
+                resume,
+                device,
+                progress: true,
+                ..Default::default()
+            };
+            let s = train::train(
+                &cfg,
+                &data,
+                &out,
+                &opts,
+                &shared_mem_schema::process::termination_requested,
+            )?;
+            for r in &s.rows {
+                println!("{}", r.csv());
+            }
+            if s.finished {
+                println!(
+                    "{} steps, {:.1} samples/s; model in {}",
+                    s.steps,
+                    s.samples_per_s,
+                    s.model_dir.display()
+                );
+            } else {
+                println!(
+                    "stopped after {} steps; `--resume` continues from the checkpoint in {}",
+                    s.steps,
+                    out.display()
+                );
+            }
+        }
+        ReprCmd::Eval {
+            run,
+            data,
+            out,
+            device,
+            pca_samples,
+            flow_images,
+        } => {
+            let out = out.unwrap_or_else(|| run.join("eval"));
+            let r = train::eval::eval(&train::eval::EvalOptions {
+                run,
+                data,
+                out: out.clone(),
+                device,
+                pca_samples,
+                flow_images,
+            })?;
+            println!("{}", r.markdown);
+            println!("written to {}", out.display());
+        }
+    }
+    Ok(())
 }
 
 fn run_policy(cmd: PolicyCmd) -> Result<()> {
@@ -624,6 +748,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Collect(a) => run_collect(a),
         Cmd::Dataset(c) => run_dataset(c),
         Cmd::Policy(c) => run_policy(c),
+        Cmd::Repr(c) => run_repr(c),
         Cmd::Run {
             episodes: a,
             collect: c,

@@ -55,6 +55,8 @@ pub enum Style {
         /// Bar width, in x units.
         bin_width: f64,
     },
+    /// Unconnected dots (a scatter plot).
+    Points,
 }
 
 /// One named series of (x, y) points; its name goes in the legend.
@@ -78,6 +80,15 @@ impl Series {
         }
     }
 
+    /// Unconnected dots at `points`.
+    pub fn points(name: &str, points: Vec<(f64, f64)>) -> Self {
+        Self {
+            name: name.into(),
+            points,
+            style: Style::Points,
+        }
+    }
+
     /// A histogram: `counts[i]` over `[start + i·width, start + (i+1)·width)`.
     pub fn histogram(name: &str, start: f64, width: f64, counts: &[f64]) -> Self {
         Self {
@@ -94,7 +105,7 @@ impl Series {
     /// The x extent it covers (a bar reaches its right edge).
     fn x_extent(&self) -> Option<(f64, f64)> {
         let right = match self.style {
-            Style::Line => 0.0,
+            Style::Line | Style::Points => 0.0,
             Style::Histogram { bin_width } => bin_width,
         };
         let (lo, hi) = self
@@ -289,6 +300,17 @@ where
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
                 });
+            }
+            Style::Points => {
+                ctx.draw_series(
+                    s.points
+                        .iter()
+                        .filter(|p| !log_y || p.1 > 0.0)
+                        .map(|&p| Circle::new(p, 2, color.mix(0.6).filled())),
+                )
+                .map_err(|x| e(&x))?
+                .label(&s.name)
+                .legend(move |(x, y)| Circle::new((x + 12, y), 4, color.filled()));
             }
             Style::Histogram { bin_width } => {
                 // Empty bins draw nothing (and have no place on a log axis).

@@ -23,4 +23,4 @@ pub use geometry::{BodyRef, Class, Geometry, Primitive};
 pub use message::fill_message;
 pub use render::{Camera, CameraFrame, CameraShot, FLOW_MASK_MIN_PX};
 pub use scene::{BodyPoses, prism_geometry, robot_primitives};
-pub use visual::{depth_to_gray, flow_to_rgb};
+pub use visual::{depth_to_gray, flow_colour, flow_to_rgb};

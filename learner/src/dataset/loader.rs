@@ -31,6 +31,9 @@ pub struct LoaderConfig {
     pub negative_fraction: f64,
     /// Drop a last, short batch.
     pub drop_last: bool,
+    /// Episodes to draw from, indexed by dataset-wide episode number
+    /// (`None`: all): how training and test splits stay apart.
+    pub episodes: Option<std::sync::Arc<Vec<bool>>>,
 }
 
 impl Default for LoaderConfig {
@@ -41,6 +44,7 @@ impl Default for LoaderConfig {
             shuffle_blocks: 16,
             negative_fraction: 0.5,
             drop_last: false,
+            episodes: None,
         }
     }
 }
@@ -62,6 +66,13 @@ impl<'a> Loader<'a> {
     pub fn new(ds: &'a Dataset, cfg: LoaderConfig) -> Self {
         let mut rng = rng::seeded(cfg.seed, 31);
         let mut blocks = ds.blocks();
+        if let Some(keep) = &cfg.episodes {
+            // Blocks holding none of the kept episodes are not even read.
+            blocks.retain(|&(s, k)| {
+                let b = &ds.meta.shards[s].1[k];
+                (b.first_id..b.first_id + b.samples as u64).any(|id| ds.keeps(keep, id))
+            });
+        }
         blocks.shuffle(&mut rng);
         let (tx, rx) = std::sync::mpsc::sync_channel(4);
         let dir = ds.dir.clone();
@@ -117,6 +128,11 @@ impl Iterator for Loader<'_> {
             }
             let i = self.rng.random_range(0..self.buffer.len());
             let (id, mut s) = self.buffer.swap_remove(i);
+            if let Some(keep) = &self.cfg.episodes
+                && !self.ds.keeps(keep, id)
+            {
+                continue;
+            }
             let mut paired = 1;
             if rng::unit(&mut self.rng) < self.cfg.negative_fraction
                 && let Some(j) = self.ds.negative_for(id, rng::unit(&mut self.rng))

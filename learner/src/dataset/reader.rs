@@ -158,6 +158,19 @@ impl Dataset {
         (!pool.is_empty()).then(|| pool[((r * pool.len() as f64) as usize).min(pool.len() - 1)])
     }
 
+    /// The dataset-wide episode of sample `id`.
+    pub fn episode_of(&self, id: u64) -> u32 {
+        self.episode_of[id as usize]
+    }
+
+    /// Whether sample `id` belongs to an episode `keep` (indexed by episode
+    /// number) marks.
+    pub fn keeps(&self, keep: &[bool], id: u64) -> bool {
+        keep.get(self.episode_of(id) as usize)
+            .copied()
+            .unwrap_or(false)
+    }
+
     /// Share of samples with a negative available (the pairing ratio).
     pub fn pairing_ratio(&self) -> f64 {
         let with: u64 = self

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The representation benchmark: burn (flex, ours: learner/examples/repr_bench.rs)
+# against PyTorch running the same architecture (bench-anchors/torch-repr/bench.py),
+# alternately, ROUNDS rounds, on the same machine in one run.
+#   training: one Adam step of the Full Model at batch 64, 128×128 px, 2 threads
+#   inference: z means at batch 1 and 64, one thread
+# PyTorch is installed from PyPI into .venv-torch (a benchmark anchor, not a
+# dependency of the project). Results: docs/performance.md.
+# Usage: bench-anchors/repr.sh [ROUNDS] [OUT.jsonl]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROUNDS=${1:-3}
+OUT=${2:-target/repr-bench.jsonl}
+TORCH_VERSION=2.15.0
+VENV=.venv-torch
+if ! "$VENV/bin/python" -c "import torch" >/dev/null 2>&1; then
+    echo "== installing torch $TORCH_VERSION into $VENV"
+    python3 -m venv "$VENV"
+    "$VENV/bin/pip" install --quiet --disable-pip-version-check "torch==$TORCH_VERSION"
+fi
+cargo build --release --quiet -p learner --example repr_bench
+BIN=target/release/examples/repr_bench
+PY="$VENV/bin/python bench-anchors/torch-repr/bench.py"
+: > "$OUT"
+for r in $(seq 1 "$ROUNDS"); do
+    echo "== round $r of $ROUNDS"
+    RAYON_NUM_THREADS=2 $BIN train 64 5 | tee -a "$OUT"
+    $PY train 64 5 2 | tee -a "$OUT"
+    RAYON_NUM_THREADS=1 $BIN infer 1 30 | tee -a "$OUT"
+    $PY infer 1 30 1 | tee -a "$OUT"
+    RAYON_NUM_THREADS=1 $BIN infer 64 5 | tee -a "$OUT"
+    $PY infer 64 5 1 | tee -a "$OUT"
+done
+python3 - "$OUT" <<'PY'
+import json, sys, collections
+rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+by = collections.defaultdict(list)
+for r in rows:
+    key = (r["what"], r["batch"], r["threads"])
+    v = r["samples_per_s"] if r["what"] == "train" else r["per_obs_ms"]
+    by[key + (r["side"],)].append(v)
+print("| what | batch | threads | side | median | range | rounds |")
+print("|---|---|---|---|---|---|---|")
+for k in sorted(by):
+    v = sorted(by[k]); unit = "samples/s" if k[0] == "train" else "ms/observation"
+    print(f"| {k[0]} | {k[1]} | {k[2]} | {k[3]} | {v[len(v)//2]:.3f} {unit} | {v[0]:.3f}–{v[-1]:.3f} | {len(v)} |")
+PY

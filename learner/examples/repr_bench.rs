@@ -1,0 +1,112 @@
+//! Benchmark of the representation (docs/performance.md): one Adam step of
+//! the Full Model (d = 128, 128×128 px) at batch B, or the z means of a
+//! batch (inference), on random inputs of the paper's shapes; the median
+//! over `steps` after warm-up, as one JSON line. The PyTorch anchor
+//! (bench-anchors/torch-repr/bench.py) times the same architecture; the
+//! script bench-anchors/repr.sh runs both alternately.
+//!
+//! Usage: `repr_bench train|infer BATCH STEPS` (threads: RAYON_NUM_THREADS).
+
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::prelude::*;
+use learner::models::losses::{LabelTensors, losses};
+use learner::models::net::tensor;
+use learner::models::{
+    InputTensors, LabelArrays, LossWeights, Modalities, ModelConfig, ReprNet, init,
+};
+use std::time::Instant;
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: repr_bench train|infer BATCH STEPS";
+    let what = args.get(1).expect(usage).clone();
+    let b: usize = args.get(2).expect(usage).parse().expect(usage);
+    let steps: usize = args.get(3).expect(usage).parse().expect(usage);
+    let threads = rayon_threads();
+    let cfg = ModelConfig::default();
+    let (s, d) = (cfg.image_size, cfg.latent_dim);
+    let mut r = hw_sim::rng::seeded(1, 0);
+    let mut randn =
+        |n: usize| -> Vec<f32> { (0..n).map(|_| hw_sim::rng::normal(&mut r) as f32).collect() };
+    let train = what == "train";
+    let dev = if train {
+        Device::flex().autodiff()
+    } else {
+        Device::flex()
+    };
+    let x = InputTensors {
+        rgb: tensor(randn(b * 3 * s * s), [b, 3, s, s], &dev),
+        depth: tensor(randn(b * s * s), [b, 1, s, s], &dev),
+        wrench: tensor(randn(b * 6 * 32), [b, 6, 32], &dev),
+        proprio: tensor(randn(b * 8), [b, 8], &dev),
+    };
+    let mut net = init::seeded(ReprNet::new(&cfg, &dev), 0);
+    let mut times = Vec::new();
+    if train {
+        let sign = |v: Vec<f32>| v.into_iter().map(|x| (x > 0.0) as u8 as f32).collect();
+        let labels = LabelArrays {
+            action: randn(b * 4),
+            flow: randn(b * 2 * s * s),
+            mask: sign(randn(b * s * s)),
+            contact_next: sign(randn(b)),
+            paired: sign(randn(b)),
+            ee_delta: randn(b * 3),
+            rgb01: vec![0.5; b * 3 * s * s],
+            last_wrench: randn(b * 6),
+        };
+        let y = LabelTensors::new(&labels, s, &dev);
+        let eps = tensor(randn(b * d), [b, d], &dev);
+        let w = LossWeights::default();
+        let mut optim = AdamConfig::new().with_beta_1(0.5).init();
+        for i in 0..steps + 2 {
+            let t = Instant::now();
+            let out = net.forward(
+                &cfg,
+                &x,
+                y.action.clone(),
+                Some(eps.clone()),
+                Modalities::ALL,
+            );
+            let l = losses(&out, &y, &x.proprio, &w);
+            let grads = GradientsParams::from_grads(l.total.backward(), &net);
+            net = optim.step(1e-4, net, grads);
+            // Reading a parameter back waits for the step to finish.
+            let _ = l.total.into_scalar::<f32>();
+            if i >= 2 {
+                times.push(t.elapsed().as_secs_f64());
+            }
+        }
+        let step = median(times);
+        println!(
+            "{{\"side\": \"burn-flex\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}}}",
+            b as f64 / step
+        );
+    } else {
+        for i in 0..steps + 3 {
+            let t = Instant::now();
+            let z = net.encode(&cfg, &x, Modalities::ALL).mean;
+            let _ = z.into_data();
+            if i >= 3 {
+                times.push(t.elapsed().as_secs_f64());
+            }
+        }
+        let per = median(times);
+        println!(
+            "{{\"side\": \"burn-flex\", \"what\": \"infer\", \"batch\": {b}, \"threads\": {threads}, \"batch_s\": {per:.6}, \"per_obs_ms\": {:.4}, \"steps\": {steps}}}",
+            1e3 * per / b as f64
+        );
+    }
+}
+
+/// The thread count rayon (and so flex) uses.
+fn rayon_threads() -> usize {
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}

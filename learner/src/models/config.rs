@@ -1,0 +1,225 @@
+//! What a representation model is: its kind, latent size, the modalities it
+//! sees and the weights of its losses. One TOML file per model under
+//! `configs/repr/`; every field has a default, so a file names only what
+//! differs from the paper's Full Model.
+
+use serde::{Deserialize, Serialize};
+
+/// The paper's representation models (sections "Multi-Modal Representation
+/// Model" and "Baseline Representation Models").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// Variational encoders fused by a product of experts, action-conditional
+    /// self-supervised decoders, KL to the prior.
+    #[default]
+    Full,
+    /// Deterministic encoders, concatenation and a two-layer MLP, the same
+    /// decoders, no KL.
+    Deterministic,
+    /// A product-of-experts VAE reconstructing RGB, the last wrench reading
+    /// and proprioception.
+    Reconstruction,
+}
+
+/// Which sensors a model sees. A modality left out contributes no expert to
+/// the product (no input to the concatenation of the deterministic model);
+/// the same switch masks a sensor of a trained model at run time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Modalities {
+    /// RGB camera image.
+    pub rgb: bool,
+    /// Depth image.
+    pub depth: bool,
+    /// The wrist F/T sensor's window (the paper's haptics).
+    pub haptics: bool,
+    /// End-effector pose and velocity.
+    pub proprio: bool,
+}
+
+impl Default for Modalities {
+    fn default() -> Self {
+        Self::ALL
+    }
+}
+
+impl Modalities {
+    /// Every sensor.
+    pub const ALL: Self = Self {
+        rgb: true,
+        depth: true,
+        haptics: true,
+        proprio: true,
+    };
+
+    /// Those of `self` that `other` also has.
+    pub fn and(self, other: Self) -> Self {
+        Self {
+            rgb: self.rgb && other.rgb,
+            depth: self.depth && other.depth,
+            haptics: self.haptics && other.haptics,
+            proprio: self.proprio && other.proprio,
+        }
+    }
+
+    /// Whether none is on.
+    pub fn none(self) -> bool {
+        !(self.rgb || self.depth || self.haptics || self.proprio)
+    }
+
+    /// Names of those on, for messages.
+    pub fn names(self) -> String {
+        let mut v = Vec::new();
+        for (on, name) in [
+            (self.rgb, "rgb"),
+            (self.depth, "depth"),
+            (self.haptics, "haptics"),
+            (self.proprio, "proprio"),
+        ] {
+            if on {
+                v.push(name);
+            }
+        }
+        if v.is_empty() {
+            "none".into()
+        } else {
+            v.join("+")
+        }
+    }
+}
+
+/// Loss weights. The paper does not give them; the defaults are those of the
+/// authors' public code (stanford-iprl-lab/multimodal_representation,
+/// `configs/training_default.yaml`): flow ×10, mask ×1, KL ×0.05, contact ×1,
+/// pairing ×0.5, end-effector ×1. The reconstruction model's three terms
+/// (ours) default to 1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LossWeights {
+    /// Flow endpoint error, px.
+    pub flow: f64,
+    /// Flow mask cross-entropy.
+    pub mask: f64,
+    /// Contact-at-next-step cross-entropy.
+    pub contact: f64,
+    /// Time-alignment cross-entropy (0: the No Pairing ablation).
+    pub pairing: f64,
+    /// Next end-effector position, mean squared error of the normalised
+    /// displacement.
+    pub ee: f64,
+    /// KL divergence of the fused posterior from the standard normal prior
+    /// (ignored by the deterministic model).
+    pub kl: f64,
+    /// Reconstruction: RGB mean squared error (0..1 intensities).
+    pub recon_rgb: f64,
+    /// Reconstruction: last wrench reading, normalised.
+    pub recon_wrench: f64,
+    /// Reconstruction: proprioception, normalised.
+    pub recon_proprio: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self {
+            flow: 10.0,
+            mask: 1.0,
+            contact: 1.0,
+            pairing: 0.5,
+            ee: 1.0,
+            kl: 0.05,
+            recon_rgb: 1.0,
+            recon_wrench: 1.0,
+            recon_proprio: 1.0,
+        }
+    }
+}
+
+/// The architecture of a representation model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelConfig {
+    /// Which model.
+    pub kind: ModelKind,
+    /// Latent size d (the paper: 128; its ablation: 16, 64, 256).
+    pub latent_dim: usize,
+    /// Sensors the model is trained with.
+    pub modalities: Modalities,
+    /// Image side, px (a multiple of 64: six stride-2 layers reach a map of
+    /// side/64). The dataset's images must have it.
+    pub image_size: usize,
+    /// 3×3 convolutions per stage of the VGG-like depth encoder (six stages;
+    /// 3 gives the paper's eighteen layers).
+    pub depth_convs_per_stage: usize,
+    /// Slope of the leaky ReLU (0.1, as the authors' code).
+    pub leaky_slope: f64,
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        Self {
+            kind: ModelKind::Full,
+            latent_dim: 128,
+            modalities: Modalities::ALL,
+            image_size: 128,
+            depth_convs_per_stage: 3,
+            leaky_slope: 0.1,
+        }
+    }
+}
+
+impl ModelConfig {
+    /// Checks the fields, naming the one at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=4096).contains(&self.latent_dim) {
+            return Err(format!(
+                "model.latent_dim = {}: must be in 1..=4096",
+                self.latent_dim
+            ));
+        }
+        if self.image_size == 0 || !self.image_size.is_multiple_of(64) || self.image_size > 1024 {
+            return Err(format!(
+                "model.image_size = {}: must be a positive multiple of 64, at most 1024",
+                self.image_size
+            ));
+        }
+        if !(1..=8).contains(&self.depth_convs_per_stage) {
+            return Err(format!(
+                "model.depth_convs_per_stage = {}: must be in 1..=8",
+                self.depth_convs_per_stage
+            ));
+        }
+        if !(0.0..1.0).contains(&self.leaky_slope) {
+            return Err(format!(
+                "model.leaky_slope = {}: must be in [0, 1)",
+                self.leaky_slope
+            ));
+        }
+        if self.modalities.none() {
+            return Err("model.modalities: at least one modality must be on".into());
+        }
+        Ok(())
+    }
+}
+
+impl LossWeights {
+    /// Checks the fields, naming the one at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, w) in [
+            ("flow", self.flow),
+            ("mask", self.mask),
+            ("contact", self.contact),
+            ("pairing", self.pairing),
+            ("ee", self.ee),
+            ("kl", self.kl),
+            ("recon_rgb", self.recon_rgb),
+            ("recon_wrench", self.recon_wrench),
+            ("recon_proprio", self.recon_proprio),
+        ] {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(format!("loss.{name} = {w}: must be finite and ≥ 0"));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,228 @@
+//! The decoders (paper, "Self-Supervised Predictions and Decoder
+//! Architecture" and "Reconstruction Model"): the action-conditional
+//! feature, the optical flow and mask decoder with skip connections, and the
+//! reconstruction model's decoders.
+
+use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
+use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
+use burn::prelude::*;
+use burn::tensor::activation::sigmoid;
+use burn::tensor::module::interpolate;
+use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+
+/// Width of the action encoding.
+const ACTION_FEATURES: usize = 32;
+
+/// The action-conditional feature: the next action through a two-layer MLP,
+/// concatenated with z, through a two-layer MLP (both with leaky ReLU after
+/// every layer, as the authors' code).
+#[derive(Module, Debug)]
+pub struct ActionFusion {
+    action: Vec<Linear>,
+    fuse: Vec<Linear>,
+}
+
+impl ActionFusion {
+    /// For latent size `d` and actions of 4 values.
+    pub fn new(d: usize, device: &Device) -> Self {
+        Self {
+            action: vec![
+                LinearConfig::new(4, ACTION_FEATURES).init(device),
+                LinearConfig::new(ACTION_FEATURES, ACTION_FEATURES).init(device),
+            ],
+            fuse: vec![
+                LinearConfig::new(d + ACTION_FEATURES, 128).init(device),
+                LinearConfig::new(128, d).init(device),
+            ],
+        }
+    }
+
+    /// (`z` `[B, d]`, the action `[B, 4]`) → `[B, d]`.
+    pub fn forward(&self, z: Tensor<2>, action: Tensor<2>) -> Tensor<2> {
+        let mut a = action;
+        for l in &self.action {
+            a = act(l.forward(a));
+        }
+        let mut h = Tensor::cat(vec![z, a], 1);
+        for l in &self.fuse {
+            h = act(l.forward(h));
+        }
+        h
+    }
+}
+
+fn conv3(cin: usize, cout: usize, device: &Device) -> Conv2d {
+    Conv2dConfig::new([cin, cout], [3, 3])
+        .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+        .init(device)
+}
+
+fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
+    // Kernel 4, stride 2, padding 1: exactly doubles the side.
+    ConvTranspose2dConfig::new([cin, cout], [4, 4])
+        .with_stride([2, 2])
+        .with_padding([1, 1])
+        .init(device)
+}
+
+fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
+    let [_, _, h, w] = x.dims();
+    interpolate(
+        x,
+        InterpolateOptions::new(InterpolateMode::Bilinear)
+            .with_output_size([h * factor, w * factor]),
+    )
+}
+
+/// Channels of the up-convolutions, coarsest first.
+const FLOW_UP: [usize; 4] = [64, 32, 32, 32];
+
+/// The flow decoder: the action-conditional feature tiled over the RGB
+/// encoder's coarsest map, a 1×1 convolution, then four up-convolutions,
+/// each followed by the RGB encoder's map of its size (four skip
+/// connections, FlowNet's refinement). At side S/4 one convolution predicts
+/// the unmasked flow, another the mask; their product (mask through a
+/// sigmoid) is the robot's flow, upsampled ×4 to the image.
+#[derive(Module, Debug)]
+pub struct FlowDecoder {
+    entry: Conv2d,
+    ups: Vec<ConvTranspose2d>,
+    flow: Conv2d,
+    mask: Conv2d,
+}
+
+/// The flow decoder's prediction at full size.
+#[derive(Debug, Clone)]
+pub struct FlowPrediction {
+    /// Masked flow, px, `[B, 2, S, S]`.
+    pub flow: Tensor<4>,
+    /// Mask logits, `[B, 1, S, S]`.
+    pub mask_logits: Tensor<4>,
+}
+
+impl FlowDecoder {
+    /// For latent size `d`.
+    pub fn new(d: usize, device: &Device) -> Self {
+        // Skip maps joined after each up-convolution: the RGB encoder's
+        // layers 5, 4, 3, 2 (sides S/32 … S/4).
+        let skips = [
+            RGB_CHANNELS[4],
+            RGB_CHANNELS[3],
+            RGB_CHANNELS[2],
+            RGB_CHANNELS[1],
+        ];
+        let entry = Conv2dConfig::new([2 * d, FLOW_UP[0]], [1, 1]).init(device);
+        let mut ups = Vec::new();
+        let mut cin = FLOW_UP[0];
+        for (i, &cout) in FLOW_UP.iter().enumerate() {
+            ups.push(up(cin, cout, device));
+            cin = cout + skips[i];
+        }
+        Self {
+            entry,
+            ups,
+            flow: conv3(cin, 2, device),
+            mask: conv3(cin, 1, device),
+        }
+    }
+
+    /// `feature` `[B, d]` and the RGB encoder's six maps (finest first)
+    /// → the prediction.
+    pub fn forward(&self, feature: Tensor<2>, maps: &[Tensor<4>]) -> FlowPrediction {
+        let coarsest = &maps[5];
+        let [b, d, s, _] = coarsest.dims();
+        let tiled = feature.reshape([b, d, 1, 1]).expand([b, d, s, s]);
+        let mut x = act(self
+            .entry
+            .forward(Tensor::cat(vec![coarsest.clone(), tiled], 1)));
+        for (i, u) in self.ups.iter().enumerate() {
+            x = act(u.forward(x));
+            x = Tensor::cat(vec![x, maps[4 - i].clone()], 1);
+        }
+        let mask_logits = self.mask.forward(x.clone());
+        let flow = self.flow.forward(x) * sigmoid(mask_logits.clone());
+        FlowPrediction {
+            flow: upsample(flow, 4),
+            mask_logits: upsample(mask_logits, 4),
+        }
+    }
+}
+
+/// Zero feature maps shaped like the RGB encoder's, for a model whose RGB
+/// input is masked: the flow decoder then works from z alone.
+pub fn zero_maps(b: usize, d: usize, side: usize, device: &Device) -> Vec<Tensor<4>> {
+    let mut s = side;
+    (0..6)
+        .map(|i| {
+            s /= 2;
+            let c = RGB_CHANNELS.get(i).copied().unwrap_or(d);
+            Tensor::zeros([b, c, s, s], device)
+        })
+        .collect()
+}
+
+/// The reconstruction model's decoders: RGB through six convolutions with
+/// upsampling (sigmoid at the end), the last wrench reading and
+/// proprioception through four-layer MLPs.
+#[derive(Module, Debug)]
+pub struct ReconDecoders {
+    rgb_fc: Linear,
+    rgb_convs: Vec<Conv2d>,
+    wrench: Mlp,
+    proprio: Mlp,
+}
+
+/// Channels of the RGB reconstruction's six convolutions.
+const RECON_CHANNELS: [usize; 6] = [64, 64, 32, 32, 16, 3];
+/// Channels of the map the RGB reconstruction starts from.
+const RECON_START: usize = 64;
+
+/// What the reconstruction model predicts.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// RGB in 0..1, `[B, 3, S, S]`.
+    pub rgb: Tensor<4>,
+    /// The last wrench reading, normalised, `[B, 6]`.
+    pub wrench: Tensor<2>,
+    /// Proprioception, normalised, `[B, 8]`.
+    pub proprio: Tensor<2>,
+}
+
+impl ReconDecoders {
+    /// For latent size `d` and images of side `side`.
+    pub fn new(d: usize, side: usize, device: &Device) -> Self {
+        let cells = (side / IMAGE_DOWNSAMPLE).pow(2);
+        let mut cin = RECON_START;
+        let mut rgb_convs = Vec::new();
+        for &cout in &RECON_CHANNELS {
+            rgb_convs.push(conv3(cin, cout, device));
+            cin = cout;
+        }
+        Self {
+            rgb_fc: LinearConfig::new(d, RECON_START * cells).init(device),
+            rgb_convs,
+            wrench: Mlp::new(&[d, 128, 64, 32, 6], device),
+            proprio: Mlp::new(&[d, 128, 64, 32, crate::proprio::PROPRIO], device),
+        }
+    }
+
+    /// `z` `[B, d]` → the reconstruction of images of side `side`.
+    pub fn forward(&self, z: Tensor<2>, side: usize) -> Reconstruction {
+        let [b, _] = z.dims();
+        let s = side / IMAGE_DOWNSAMPLE;
+        let mut x = act(self.rgb_fc.forward(z.clone())).reshape([b, RECON_START, s, s]);
+        let last = self.rgb_convs.len() - 1;
+        for (i, c) in self.rgb_convs.iter().enumerate() {
+            x = c.forward(upsample(x, 2));
+            if i < last {
+                x = act(x);
+            }
+        }
+        Reconstruction {
+            rgb: sigmoid(x),
+            wrench: self.wrench.forward(z.clone()),
+            proprio: self.proprio.forward(z),
+        }
+    }
+}

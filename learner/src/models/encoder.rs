@@ -1,0 +1,67 @@
+//! The inference API: a trained, exported model that turns a batch of
+//! observations into z means, as the live node and the RL environment need
+//! them. Inference never samples: z is the fused posterior's mean (paper,
+//! "Multimodal Input Experiments": the mean is the policy's input).
+
+use super::config::{Modalities, ModelConfig};
+use super::inputs::{InputError, Normaliser, ObservationRef};
+use super::net::{InputTensors, ReprNet};
+use burn::prelude::*;
+use std::path::Path;
+
+/// A trained representation, ready to encode.
+pub struct Encoder {
+    net: ReprNet,
+    config: ModelConfig,
+    normaliser: Normaliser,
+    device: Device,
+    active: Modalities,
+}
+
+impl Encoder {
+    /// Loads the model exported by `learner repr train` (its `model/`
+    /// directory) onto `device` (a plain device: no gradients are kept).
+    pub fn load(dir: &Path, device: &Device) -> crate::train::Result<Self> {
+        let (net, meta) = crate::train::checkpoint::import(dir, device)?;
+        Ok(Self::new(net.valid(), meta.model, meta.normaliser, device))
+    }
+
+    /// From parts in memory.
+    pub fn new(net: ReprNet, config: ModelConfig, normaliser: Normaliser, device: &Device) -> Self {
+        Self {
+            active: config.modalities,
+            net,
+            config,
+            normaliser,
+            device: device.clone(),
+        }
+    }
+
+    /// With the sensors `m` only (a lost sensor's expert is left out of the
+    /// product).
+    pub fn with_modalities(mut self, m: Modalities) -> Self {
+        self.active = self.config.modalities.and(m);
+        self
+    }
+
+    /// Latent size d.
+    pub fn dim(&self) -> usize {
+        self.config.latent_dim
+    }
+
+    /// Image side the model takes, px.
+    pub fn image_size(&self) -> usize {
+        self.config.image_size
+    }
+
+    /// The z means of `obs`, `obs.len()` × d values, row after row.
+    pub fn encode(&self, obs: &[ObservationRef<'_>]) -> Result<Vec<f32>, InputError> {
+        if obs.is_empty() {
+            return Ok(Vec::new());
+        }
+        let a = self.normaliser.inputs(obs, self.config.image_size)?;
+        let x = InputTensors::new(&a, &self.device);
+        let latent = self.net.encode(&self.config, &x, self.active);
+        Ok(latent.mean.try_into_vec_as::<f32>().expect("an f32 tensor"))
+    }
+}

@@ -1,0 +1,31 @@
+//! The self-supervised multimodal representation (paper, "Multi-Modal
+//! Representation Model" and "Baseline Representation Models"), written
+//! with burn: the same code runs on the CPU (`flex`) and, built with the
+//! `cuda` feature, on an NVIDIA GPU.
+//!
+//! - [`config`]: what a model is (kind, latent size, modalities, loss
+//!   weights); one TOML file per model under `configs/repr/`.
+//! - [`inputs`]: samples → normalised arrays (no tensors).
+//! - [`encoders`], [`fusion`], [`decoders`], [`net`]: the network.
+//! - [`init`]: initial weights from our own seeded generator.
+//! - [`losses`]: the losses.
+//! - [`encoder`]: the inference API the live node and the RL environment
+//!   use (a trained model's z means for a batch of observations).
+//!
+//! Training loops, checkpoints and evaluation live in [`crate::train`];
+//! nothing here reads files except the exported model's loader.
+
+pub mod config;
+pub mod decoders;
+pub mod encoder;
+pub mod encoders;
+pub mod fusion;
+pub mod init;
+pub mod inputs;
+pub mod losses;
+pub mod net;
+
+pub use config::{LossWeights, Modalities, ModelConfig, ModelKind};
+pub use encoder::Encoder;
+pub use inputs::{InputArrays, LabelArrays, Normaliser, ObservationRef};
+pub use net::{InputTensors, Outputs, ReprNet};

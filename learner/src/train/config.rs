@@ -1,0 +1,171 @@
+//! The training configuration file: `[model]` ([`ModelConfig`]), `[loss]`
+//! ([`LossWeights`]) and `[train]` ([`TrainSettings`]). Every field has a
+//! default; the files under `configs/repr/` name what differs from the Full
+//! Model.
+
+use super::{Result, TrainError, io_err};
+use crate::models::{LossWeights, ModelConfig, ModelKind};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Optimiser, data and schedule settings. Adam's defaults are the paper's
+/// (appendix, "Hyperparameters for Representation Learning"): learning rate
+/// 1e-4, β₁ 0.5, β₂ 0.999, batch 64, and 20 epochs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainSettings {
+    /// Adam's learning rate.
+    pub lr: f64,
+    /// Adam's β₁.
+    pub beta1: f64,
+    /// Adam's β₂.
+    pub beta2: f64,
+    /// Samples per batch.
+    pub batch: usize,
+    /// Passes over the training split.
+    pub epochs: u32,
+    /// Seed of the initial weights, the split, the shuffles and the noise.
+    pub seed: u64,
+    /// Share of each peg's episodes held out for testing.
+    pub test_fraction: f64,
+    /// Share of samples given another moment's haptics (the pairing
+    /// negatives); 0 for models without the pairing loss.
+    pub negative_fraction: f64,
+    /// Blocks of 32 samples the loader shuffles among.
+    pub shuffle_blocks: usize,
+    /// A checkpoint every this many batches (and at every epoch's end).
+    pub checkpoint_every: u64,
+    /// At most this many training batches per epoch (0: all): a shorter
+    /// run on a large dataset.
+    pub max_batches_per_epoch: u64,
+    /// At most this many test batches per evaluation (0: all).
+    pub max_test_batches: u64,
+}
+
+impl Default for TrainSettings {
+    fn default() -> Self {
+        Self {
+            lr: 1e-4,
+            beta1: 0.5,
+            beta2: 0.999,
+            batch: 64,
+            epochs: 20,
+            seed: 0,
+            test_fraction: 0.2,
+            negative_fraction: 0.5,
+            shuffle_blocks: 16,
+            checkpoint_every: 100,
+            max_batches_per_epoch: 0,
+            max_test_batches: 0,
+        }
+    }
+}
+
+/// A whole training configuration file.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// The model.
+    pub model: ModelConfig,
+    /// Loss weights.
+    pub loss: LossWeights,
+    /// Optimiser and schedule.
+    pub train: TrainSettings,
+}
+
+/// Where the tensors live.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum DeviceKind {
+    /// burn's `flex` CPU backend.
+    #[default]
+    Cpu,
+    /// burn's CUDA backend, GPU 0 (a build with the `cuda` feature).
+    Cuda,
+}
+
+impl DeviceKind {
+    /// The burn device, with automatic differentiation when `autodiff`.
+    pub fn device(self, autodiff: bool) -> std::result::Result<burn::prelude::Device, String> {
+        let d = match self {
+            DeviceKind::Cpu => burn::prelude::Device::flex(),
+            #[cfg(feature = "cuda")]
+            DeviceKind::Cuda => burn::prelude::Device::cuda(0),
+            #[cfg(not(feature = "cuda"))]
+            DeviceKind::Cuda => {
+                return Err(
+                    "this learner was built without CUDA: rebuild with `--features cuda`".into(),
+                );
+            }
+        };
+        Ok(if autodiff { d.autodiff() } else { d })
+    }
+}
+
+impl TrainConfig {
+    /// Reads and validates a configuration file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+        let cfg: Self = toml::from_str(&text).map_err(|e| TrainError::BadFile {
+            path: path.to_path_buf(),
+            what: e.to_string(),
+        })?;
+        cfg.validate().map_err(|what| TrainError::BadFile {
+            path: path.to_path_buf(),
+            what,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Checks every field, naming the one at fault.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        self.model.validate()?;
+        self.loss.validate()?;
+        let t = &self.train;
+        for (name, v) in [("lr", t.lr), ("beta1", t.beta1), ("beta2", t.beta2)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("train.{name} = {v}: must be finite and > 0"));
+            }
+        }
+        if t.beta1 >= 1.0 || t.beta2 >= 1.0 {
+            return Err("train.beta1 and train.beta2 must be below 1".into());
+        }
+        if !(1..=4096).contains(&t.batch) {
+            return Err(format!("train.batch = {}: must be in 1..=4096", t.batch));
+        }
+        if !(1..=10_000).contains(&t.epochs) {
+            return Err(format!("train.epochs = {}: must be in 1..=10000", t.epochs));
+        }
+        if !(0.0..1.0).contains(&t.test_fraction) {
+            return Err(format!(
+                "train.test_fraction = {}: must be in [0, 1)",
+                t.test_fraction
+            ));
+        }
+        if !(0.0..=1.0).contains(&t.negative_fraction) {
+            return Err(format!(
+                "train.negative_fraction = {}: must be in [0, 1]",
+                t.negative_fraction
+            ));
+        }
+        if !(1..=1024).contains(&t.shuffle_blocks) {
+            return Err(format!(
+                "train.shuffle_blocks = {}: must be in 1..=1024",
+                t.shuffle_blocks
+            ));
+        }
+        if t.checkpoint_every == 0 {
+            return Err("train.checkpoint_every = 0: must be at least 1".into());
+        }
+        Ok(())
+    }
+
+    /// The share of pairing negatives the loader draws: none for a model
+    /// that does not learn pairing (they would only corrupt its inputs).
+    pub fn negatives(&self) -> f64 {
+        if self.model.kind == ModelKind::Reconstruction || self.loss.pairing == 0.0 {
+            0.0
+        } else {
+            self.train.negative_fraction
+        }
+    }
+}

@@ -1,0 +1,273 @@
+//! Per-split metrics (the rows of the paper's appendix table of
+//! representation losses), their CSV file and learning curves.
+
+use crate::models::losses::Losses;
+use crate::plot::{Chart, Series};
+use burn::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Sums over the samples of a pass, turned into means by [`Metrics::row`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Samples seen.
+    pub samples: u64,
+    /// Of them time-aligned (the action-conditional losses are over these).
+    pub paired: u64,
+    /// Σ loss × its sample count, per term.
+    sums: Terms,
+    /// Contact predictions right (aligned samples).
+    pub contact_right: u64,
+    /// Contact labels that are 1 (aligned samples).
+    pub contact_positive: u64,
+    /// Pairing predictions right (all samples).
+    pub pairing_right: u64,
+    /// Aligned samples among all (pairing labels that are 1).
+    pub pairing_positive: u64,
+    /// Σ of the zero-flow baseline's endpoint error (aligned samples).
+    pub zero_flow_sum: f64,
+}
+
+/// Reads a JSON null (how serde_json writes NaN: a term the model lacks)
+/// back as NaN.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// One value per loss term (NaN: the model has no such term).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Terms {
+    /// Weighted total.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub total: f64,
+    /// Flow endpoint error, px.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub flow: f64,
+    /// Flow-mask cross-entropy.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub mask: f64,
+    /// Contact cross-entropy.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub contact: f64,
+    /// Pairing cross-entropy.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub pairing: f64,
+    /// End-effector mean squared error, normalised.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub ee: f64,
+    /// KL to the prior.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub kl: f64,
+    /// Reconstruction: RGB.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub recon_rgb: f64,
+    /// Reconstruction: last wrench reading.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub recon_wrench: f64,
+    /// Reconstruction: proprioception.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub recon_proprio: f64,
+}
+
+/// One row of the metrics table: means over a split.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// Epoch (1-based).
+    pub epoch: u32,
+    /// `train` or `test`.
+    pub split: String,
+    /// Samples.
+    pub samples: u64,
+    /// Mean losses (`NaN` where the model has no such term).
+    pub loss: Terms,
+    /// Contact accuracy on aligned samples.
+    pub contact_acc: f64,
+    /// Pairing accuracy.
+    pub pairing_acc: f64,
+    /// The majority class's contact accuracy.
+    pub contact_majority_acc: f64,
+    /// The majority class's pairing accuracy.
+    pub pairing_majority_acc: f64,
+    /// The endpoint error of predicting no flow, px.
+    pub zero_flow_epe: f64,
+}
+
+fn scalar(t: &Tensor<1>) -> f64 {
+    f64::from(t.clone().into_scalar::<f32>())
+}
+
+fn values(t: &Tensor<1>) -> Vec<f32> {
+    t.clone().try_into_vec_as::<f32>().expect("f32 tensor")
+}
+
+impl Metrics {
+    /// Adds a batch: its losses, logits and labels (`paired`, `contact`,
+    /// zero-flow errors: host copies, per sample).
+    pub fn add(
+        &mut self,
+        l: &Losses,
+        out: &crate::models::Outputs,
+        paired: &[f32],
+        contact_next: &[f32],
+        zero_flow_epe: &[f32],
+    ) {
+        let n = paired.len() as u64;
+        let np = paired.iter().filter(|&&p| p > 0.5).count() as u64;
+        self.samples += n;
+        self.paired += np;
+        let (nf, npf) = (n as f64, np as f64);
+        let s = &mut self.sums;
+        s.total += scalar(&l.total) * nf;
+        let add = |acc: &mut f64, t: &Option<Tensor<1>>, k: f64| {
+            if let Some(t) = t {
+                *acc += scalar(t) * k;
+            } else {
+                *acc = f64::NAN;
+            }
+        };
+        add(&mut s.flow, &l.flow, npf);
+        add(&mut s.mask, &l.mask, npf);
+        add(&mut s.contact, &l.contact, npf);
+        add(&mut s.ee, &l.ee, npf);
+        add(&mut s.pairing, &l.pairing, nf);
+        add(&mut s.kl, &l.kl, nf);
+        match &l.recon {
+            Some([r, w, p]) => {
+                s.recon_rgb += scalar(r) * nf;
+                s.recon_wrench += scalar(w) * nf;
+                s.recon_proprio += scalar(p) * nf;
+            }
+            None => {
+                s.recon_rgb = f64::NAN;
+                s.recon_wrench = f64::NAN;
+                s.recon_proprio = f64::NAN;
+            }
+        }
+        for (i, &p) in paired.iter().enumerate() {
+            if p > 0.5 {
+                self.contact_positive += (contact_next[i] > 0.5) as u64;
+                self.zero_flow_sum += zero_flow_epe[i] as f64;
+            }
+        }
+        self.pairing_positive += np;
+        if let Some(c) = &out.contact_logits {
+            for ((x, y), p) in values(c).iter().zip(contact_next).zip(paired) {
+                if *p > 0.5 && (*x > 0.0) == (*y > 0.5) {
+                    self.contact_right += 1;
+                }
+            }
+        }
+        if let Some(c) = &out.pairing_logits {
+            for (x, y) in values(c).iter().zip(paired) {
+                if (*x > 0.0) == (*y > 0.5) {
+                    self.pairing_right += 1;
+                }
+            }
+        }
+    }
+
+    /// The means, as a table row.
+    pub fn row(&self, epoch: u32, split: &str) -> Row {
+        let n = self.samples.max(1) as f64;
+        let np = self.paired.max(1) as f64;
+        let s = &self.sums;
+        let pos = self.contact_positive as f64 / np;
+        let pair_pos = self.pairing_positive as f64 / n;
+        Row {
+            epoch,
+            split: split.into(),
+            samples: self.samples,
+            loss: Terms {
+                total: s.total / n,
+                flow: s.flow / np,
+                mask: s.mask / np,
+                contact: s.contact / np,
+                pairing: s.pairing / n,
+                ee: s.ee / np,
+                kl: s.kl / n,
+                recon_rgb: s.recon_rgb / n,
+                recon_wrench: s.recon_wrench / n,
+                recon_proprio: s.recon_proprio / n,
+            },
+            contact_acc: self.contact_right as f64 / np,
+            pairing_acc: self.pairing_right as f64 / n,
+            contact_majority_acc: pos.max(1.0 - pos),
+            pairing_majority_acc: pair_pos.max(1.0 - pair_pos),
+            zero_flow_epe: self.zero_flow_sum / np,
+        }
+    }
+}
+
+/// The CSV header of [`Row`]s.
+pub const CSV_HEADER: &str = "epoch,split,samples,total,flow_epe_px,mask_bce,contact_bce,contact_acc,pairing_bce,pairing_acc,ee_mse,kl,recon_rgb,recon_wrench,recon_proprio,contact_majority_acc,pairing_majority_acc,zero_flow_epe_px";
+
+impl Row {
+    /// One CSV line (no newline).
+    pub fn csv(&self) -> String {
+        let l = &self.loss;
+        format!(
+            "{},{},{},{:.6},{:.6},{:.6},{:.6},{:.5},{:.6},{:.5},{:.6e},{:.4},{:.6},{:.6},{:.6},{:.5},{:.5},{:.6}",
+            self.epoch,
+            self.split,
+            self.samples,
+            l.total,
+            l.flow,
+            l.mask,
+            l.contact,
+            self.contact_acc,
+            l.pairing,
+            self.pairing_acc,
+            l.ee,
+            l.kl,
+            l.recon_rgb,
+            l.recon_wrench,
+            l.recon_proprio,
+            self.contact_majority_acc,
+            self.pairing_majority_acc,
+            self.zero_flow_epe
+        )
+    }
+}
+
+/// Writes the learning curves of `rows` into `dir`: one PNG per quantity
+/// (train and test against epochs); a quantity the model lacks is skipped.
+pub fn write_curves(
+    rows: &[Row],
+    dir: &Path,
+    title: &str,
+) -> Result<Vec<String>, crate::plot::PlotError> {
+    type Get = fn(&Row) -> f64;
+    let quantities: [(&str, &str, Get); 8] = [
+        ("total", "weighted total loss", |r| r.loss.total),
+        ("flow", "flow endpoint error, px", |r| r.loss.flow),
+        ("ee", "end-effector MSE (normalised)", |r| r.loss.ee),
+        ("contact_loss", "contact cross-entropy", |r| r.loss.contact),
+        ("contact_acc", "contact accuracy", |r| r.contact_acc),
+        ("pairing_loss", "pairing cross-entropy", |r| r.loss.pairing),
+        ("pairing_acc", "pairing accuracy", |r| r.pairing_acc),
+        ("recon_rgb", "RGB reconstruction MSE", |r| r.loss.recon_rgb),
+    ];
+    let mut written = Vec::new();
+    for (name, label, get) in quantities {
+        let mut chart = Chart::new(&format!("{title}: {label}"), "epoch", label);
+        let mut any = false;
+        for split in ["train", "test"] {
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.split == split)
+                .map(|r| (r.epoch as f64, get(r)))
+                .filter(|p| p.1.is_finite())
+                .collect();
+            if !pts.is_empty() {
+                any = true;
+                chart = chart.with(Series::line(split, pts));
+            }
+        }
+        if any {
+            let file = format!("curve_{name}.png");
+            chart.write_png(dir.join(&file))?;
+            written.push(file);
+        }
+    }
+    Ok(written)
+}

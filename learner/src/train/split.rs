@@ -1,0 +1,64 @@
+//! Training and test splits by episode: no episode has samples on both
+//! sides, and the test split is never trained on.
+
+use crate::dataset::Meta;
+use hw_sim::rng;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+
+/// Which episodes are in which split.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Split {
+    /// Episode numbers for training, ascending.
+    pub train: Vec<u32>,
+    /// Episode numbers held out for testing, ascending.
+    pub test: Vec<u32>,
+}
+
+impl Split {
+    /// Draws `test_fraction` of each peg's episodes (at least one where a peg
+    /// has two or more) for testing, seeded; the rest train.
+    pub fn by_episode(meta: &Meta, test_fraction: f64, seed: u64) -> Self {
+        let mut rng = rng::seeded(seed, 47);
+        let mut by_peg: std::collections::BTreeMap<String, Vec<u32>> = Default::default();
+        for e in &meta.episodes {
+            by_peg
+                .entry(format!("{:?}", e.peg))
+                .or_default()
+                .push(e.episode);
+        }
+        let (mut train, mut test) = (Vec::new(), Vec::new());
+        for (_, mut eps) in by_peg {
+            eps.shuffle(&mut rng);
+            let mut k = (test_fraction * eps.len() as f64).round() as usize;
+            if test_fraction > 0.0 && eps.len() >= 2 {
+                k = k.clamp(1, eps.len() - 1);
+            }
+            test.extend_from_slice(&eps[..k.min(eps.len())]);
+            train.extend_from_slice(&eps[k.min(eps.len())..]);
+        }
+        train.sort_unstable();
+        test.sort_unstable();
+        Self { train, test }
+    }
+
+    /// A membership table indexed by episode number, for
+    /// [`crate::dataset::LoaderConfig::episodes`].
+    pub fn table(episodes: &[u32]) -> Vec<bool> {
+        let n = episodes.iter().max().map_or(0, |&m| m as usize + 1);
+        let mut t = vec![false; n];
+        for &e in episodes {
+            t[e as usize] = true;
+        }
+        t
+    }
+
+    /// Samples of the episodes `episodes` in `meta`.
+    pub fn samples(meta: &Meta, episodes: &[u32]) -> u64 {
+        meta.episodes
+            .iter()
+            .filter(|e| episodes.binary_search(&e.episode).is_ok())
+            .map(|e| e.samples)
+            .sum()
+    }
+}

@@ -1,0 +1,288 @@
+//! Training the representation on a real (small) dataset: a fast-mode
+//! collection at 64×64 px, built into a dataset; a short training run whose
+//! losses fall and whose contact accuracy beats the majority class on the
+//! test split; an interrupted run that resumes to the same parameters as an
+//! uninterrupted one; the exported model's encoder and evaluation.
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::*;
+use learner::collect::{CollectConfig, Mix, collect_fast};
+use learner::dataset::{self, BuildConfig, Dataset};
+use learner::log::LogOptions;
+use learner::models::{Encoder, ModelKind, ObservationRef};
+use learner::train::{self, Split, TrainConfig, TrainOptions};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+const SIDE: u32 = 64;
+
+/// One dataset for every test of this file: 8 heuristic episodes of 100
+/// actions (5 s: approach, insertion, and pressing at the bottom, where
+/// contact is), two pegs.
+fn dataset() -> &'static Path {
+    static DIR: OnceLock<(test_support::ScratchDir, PathBuf)> = OnceLock::new();
+    &DIR.get_or_init(|| {
+        let root = test_support::scratch_dir("repr-data");
+        let logs = root.join("logs");
+        let mut world = hw_sim::WorldConfig::default();
+        world.task.enabled = true;
+        world.camera.width = SIDE;
+        world.camera.height = SIDE;
+        let cfg = CollectConfig {
+            out_dir: logs.clone(),
+            states: u64::MAX,
+            episodes: Some(8),
+            episode_actions: 100,
+            pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon],
+            seed: 21,
+            workers: 2,
+            world,
+            controller: rt_controller::ControllerConfig::default(),
+            mix: Mix {
+                heuristic_fraction: 1.0,
+                end_after_completion: None,
+                ..Mix::default()
+            },
+            log: LogOptions {
+                view_rate_hz: 10.0,
+                ..LogOptions::default()
+            },
+        };
+        collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
+        let out = root.join("ds");
+        let files = dataset::find_logs(std::slice::from_ref(&logs)).unwrap();
+        let b = BuildConfig {
+            block_samples: 16,
+            ..BuildConfig::default()
+        };
+        dataset::build(&files, &out, &b, 2, |p, r| {
+            if let Err(e) = r {
+                panic!("{}: {e}", p.display());
+            }
+        })
+        .unwrap();
+        (root, out)
+    })
+    .1
+}
+
+fn small(kind: ModelKind, epochs: u32) -> TrainConfig {
+    let mut c = TrainConfig::default();
+    c.model.kind = kind;
+    c.model.latent_dim = 16;
+    c.model.image_size = SIDE as usize;
+    c.model.depth_convs_per_stage = 1;
+    c.train.batch = 32;
+    c.train.epochs = epochs;
+    c.train.lr = 1e-3;
+    c.train.seed = 3;
+    c.train.test_fraction = 0.25;
+    c.train.shuffle_blocks = 4;
+    c
+}
+
+#[test]
+fn the_split_keeps_every_episode_on_one_side() {
+    let ds = Dataset::open(dataset()).unwrap();
+    let s = Split::by_episode(&ds.meta, 0.25, 3);
+    assert!(!s.test.is_empty() && !s.train.is_empty());
+    for e in &s.test {
+        assert!(!s.train.contains(e), "episode {e} on both sides");
+    }
+    assert_eq!(s.train.len() + s.test.len(), ds.meta.episodes.len());
+    // Each peg has a test episode.
+    for peg in [hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon] {
+        assert!(
+            ds.meta
+                .episodes
+                .iter()
+                .any(|e| e.peg == peg && s.test.contains(&e.episode))
+        );
+    }
+    // The loader restricted to the test episodes yields only theirs.
+    let loader = dataset::Loader::new(
+        &ds,
+        dataset::LoaderConfig {
+            batch: 16,
+            episodes: Some(std::sync::Arc::new(Split::table(&s.test))),
+            ..Default::default()
+        },
+    );
+    let mut n = 0;
+    for b in loader {
+        for smp in b.unwrap().samples {
+            assert!(s.test.contains(&smp.episode));
+            n += 1;
+        }
+    }
+    assert_eq!(n as u64, Split::samples(&ds.meta, &s.test));
+}
+
+#[test]
+fn a_short_run_learns_contact_better_than_the_majority_and_its_losses_fall() {
+    let out = test_support::scratch_dir("repr-run");
+    let cfg = small(ModelKind::Full, 8);
+    let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
+    assert!(s.finished);
+    let train_rows: Vec<_> = s.rows.iter().filter(|r| r.split == "train").collect();
+    let test_rows: Vec<_> = s.rows.iter().filter(|r| r.split == "test").collect();
+    assert_eq!(train_rows.len(), 8);
+    let (first, last) = (train_rows[0], train_rows[7]);
+    eprintln!("first {first:?}\nlast {last:?}\ntest {:?}", test_rows[7]);
+    assert!(last.loss.total < first.loss.total, "total loss fell");
+    assert!(last.loss.flow < first.loss.flow, "flow loss fell");
+    assert!(last.loss.contact < first.loss.contact, "contact loss fell");
+    let t = test_rows[7];
+    assert!(
+        t.contact_acc > t.contact_majority_acc,
+        "test contact accuracy {} vs majority {}",
+        t.contact_acc,
+        t.contact_majority_acc
+    );
+    // The files a run leaves.
+    for f in [
+        "config.toml",
+        "split.json",
+        "metrics.csv",
+        "curve_total.png",
+        "curve_contact_acc.png",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 16);
+    // The exported model encodes observations, the mean of z, batch-size
+    // independent.
+    let dev = burn::prelude::Device::flex();
+    let enc = Encoder::load(&s.model_dir, &dev).unwrap();
+    let ds = Dataset::open(dataset()).unwrap();
+    let smp = ds.read_block(0, 0).unwrap();
+    let obs: Vec<ObservationRef<'_>> = smp.iter().take(5).map(ObservationRef::from).collect();
+    let z = enc.encode(&obs).unwrap();
+    assert_eq!(z.len(), 5 * 16);
+    let z1 = enc.encode(&obs[2..3]).unwrap();
+    for (a, b) in z1.iter().zip(&z[2 * 16..3 * 16]) {
+        assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+    }
+    // A wrong-sized image is refused, naming it.
+    let mut bad = smp[0].clone();
+    bad.rgb.truncate(10);
+    let e = enc
+        .encode(&[ObservationRef::from(&bad)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("rgb"), "{e}");
+
+    // Evaluation: the table with its baselines and the pictures.
+    let eval_dir = out.join("eval");
+    let r = train::eval::eval(&train::eval::EvalOptions {
+        run: out.to_path_buf(),
+        data: dataset().to_path_buf(),
+        out: eval_dir.clone(),
+        device: Default::default(),
+        pca_samples: 200,
+        flow_images: 2,
+    })
+    .unwrap();
+    assert_eq!(r.rows.len(), 5, "all sensors and each one masked");
+    assert!(r.markdown.contains("majority contact acc"));
+    for f in [
+        "table.md",
+        "flow_actions.png",
+        "pca_z_contact.png",
+        "pca_z_policy.png",
+    ] {
+        assert!(eval_dir.join(f).exists(), "{f}");
+    }
+}
+
+/// Every parameter value of a run's exported model, in module order (the
+/// files also hold parameter ids, which differ between runs).
+fn weights(dir: &Path) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0.extend(p.val().try_into_vec_as::<f32>().unwrap());
+        }
+    }
+    let dev = Device::flex();
+    let (net, _) = train::checkpoint::import(&dir.join("model"), &dev).unwrap();
+    let mut c = Collect(Vec::new());
+    net.visit(&mut c);
+    assert!(c.0.len() > 1000);
+    c.0
+}
+
+#[test]
+fn an_interrupted_run_resumes_to_the_same_parameters() {
+    let mut cfg = small(ModelKind::Full, 2);
+    cfg.train.checkpoint_every = 1000;
+    let whole = test_support::scratch_dir("repr-whole");
+    train::train(&cfg, dataset(), &whole, &TrainOptions::default(), &|| false).unwrap();
+    // Interrupted after 3 steps of the first epoch, resumed twice.
+    let parts = test_support::scratch_dir("repr-parts");
+    let stop_at = |n| TrainOptions {
+        stop_after_steps: Some(n),
+        ..Default::default()
+    };
+    let s = train::train(&cfg, dataset(), &parts, &stop_at(3), &|| false).unwrap();
+    assert!(!s.finished);
+    assert_eq!(s.steps, 3);
+    // Starting over into a used directory is refused.
+    let e = train::train(&cfg, dataset(), &parts, &TrainOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("--resume"), "{e}");
+    let resume = |n: Option<u64>| TrainOptions {
+        resume: true,
+        stop_after_steps: n,
+        ..Default::default()
+    };
+    let s = train::train(&cfg, dataset(), &parts, &resume(Some(4)), &|| false).unwrap();
+    assert_eq!(s.steps, 7);
+    let s = train::train(&cfg, dataset(), &parts, &resume(None), &|| false).unwrap();
+    assert!(s.finished);
+    let (a, b) = (weights(&whole), weights(&parts));
+    assert!(a == b, "resumed parameters differ");
+    let a = std::fs::read_to_string(whole.join("metrics.csv")).unwrap();
+    let b = std::fs::read_to_string(parts.join("metrics.csv")).unwrap();
+    assert_eq!(a, b);
+    // Resuming with another configuration is refused.
+    let mut other = cfg.clone();
+    other.train.lr = 0.5;
+    let e = train::train(&other, dataset(), &parts, &resume(None), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("another configuration"), "{e}");
+}
+
+#[test]
+fn the_baselines_train_on_the_same_data() {
+    for kind in [ModelKind::Deterministic, ModelKind::Reconstruction] {
+        let out = test_support::scratch_dir("repr-baseline");
+        let mut cfg = small(kind, 1);
+        cfg.train.max_batches_per_epoch = 3;
+        let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
+        assert!(s.finished, "{kind:?}");
+        let test = s.rows.iter().find(|r| r.split == "test").unwrap();
+        assert!(test.loss.total.is_finite(), "{kind:?}: {test:?}");
+        match kind {
+            ModelKind::Deterministic => {
+                assert!(test.loss.kl.is_nan() && test.loss.flow.is_finite())
+            }
+            _ => assert!(test.loss.recon_rgb.is_finite() && test.loss.flow.is_nan()),
+        }
+    }
+}
+
+#[test]
+fn a_dataset_of_another_image_size_is_refused() {
+    let out = test_support::scratch_dir("repr-mismatch");
+    let mut cfg = small(ModelKind::Full, 1);
+    cfg.model.image_size = 128;
+    let e = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("64×64") && e.contains("image_size"), "{e}");
+}
