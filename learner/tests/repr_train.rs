@@ -286,3 +286,56 @@ fn a_dataset_of_another_image_size_is_refused() {
         .to_string();
     assert!(e.contains("64×64") && e.contains("image_size"), "{e}");
 }
+
+#[test]
+fn the_frozen_representation_observes_the_rl_environment() {
+    use learner::rl::{BatchEnv, ObservationKind, RlEnvConfig, VecEnv};
+    let out = test_support::scratch_dir("repr-observer");
+    let mut cfg = small(ModelKind::Full, 1);
+    cfg.train.max_batches_per_epoch = 2;
+    let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
+    let mut env = RlEnvConfig {
+        max_steps: 20,
+        ..Default::default()
+    };
+    env.world.camera.width = SIDE;
+    env.world.camera.height = SIDE;
+    let kind = ObservationKind::Representation(s.model_dir.clone());
+    let observer = kind.observer().unwrap();
+    assert_eq!(observer.dim(), 16);
+    assert!(observer.needs_camera());
+    let mut v = VecEnv::new(&env, 2, observer, 2).unwrap();
+    v.reset(&[(0, 5), (1, 6)]).unwrap();
+    let first = v.observations().to_vec();
+    assert_eq!(first.len(), 2 * 16);
+    for _ in 0..3 {
+        v.step(&[0.0, 0.0, -1.0, 0.0, 0.5, 0.0, -1.0, 0.0]).unwrap();
+    }
+    let later = v.observations().to_vec();
+    assert!(later.iter().all(|x| x.is_finite()));
+    assert!(
+        later.iter().any(|&x| x != 0.0),
+        "not the zeros of a refused batch"
+    );
+    assert_ne!(first, later, "z follows the arm");
+    // The same observations as the encoder gives for the same inputs: the
+    // two environments differ.
+    assert_ne!(later[..16], later[16..]);
+    // A model directory that is not there is refused, naming it.
+    let e = ObservationKind::Representation(out.join("nowhere"))
+        .observer()
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("nowhere"), "{e}");
+    // A camera of another size than the model's: zeros, counted.
+    let rep = learner::rl::Representation::load(&s.model_dir).unwrap();
+    let mut wide = env.clone();
+    wide.world.camera.width = 128;
+    wide.world.camera.height = 128;
+    let rep = std::sync::Arc::new(rep);
+    let mut v = VecEnv::new(&wide, 1, rep.clone(), 1).unwrap();
+    v.reset(&[(0, 5)]).unwrap();
+    assert!(v.observations().iter().all(|&x| x == 0.0));
+    assert!(rep.rejected() >= 1);
+}

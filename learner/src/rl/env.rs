@@ -36,6 +36,9 @@ pub enum RlEnvError {
     /// A configuration value is unusable.
     #[error("invalid RL configuration: {0}")]
     Config(#[from] FieldError),
+    /// The representation model the observation names could not be loaded.
+    #[error("the observation's representation: {0}")]
+    Representation(String),
     /// The world has no task (`task.enabled = false`).
     #[error("the RL environment needs the peg-in-hole task (task.enabled = true)")]
     NoTask,

@@ -1,5 +1,6 @@
 //! Reinforcement learning on the fast path (issue 18): the environment
-//! ([`env`], [`vec`]), what the policy observes ([`observe`]), the paper's
+//! ([`env`], [`vec`]), what the policy observes ([`observe`], the frozen
+//! representation in [`represent`]), the paper's
 //! staged reward and outcome categories ([`reward`]), TRPO ([`trpo`], with
 //! the small differentiable network of [`mlp`]) and its training loop
 //! ([`train`]). docs/rl.md gives every
@@ -8,6 +9,7 @@
 pub mod env;
 pub mod mlp;
 pub mod observe;
+pub mod represent;
 pub mod reward;
 pub mod run;
 pub mod train;
@@ -16,6 +18,7 @@ pub mod vec;
 
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
 pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};
+pub use represent::Representation;
 pub use reward::{Outcome, RewardConfig, RewardStage};
 pub use train::{EpisodeStats, IterationStats, Trainer, TrainerState};
 pub use trpo::{GaussianPolicy, LinearBaseline, TrpoConfig};

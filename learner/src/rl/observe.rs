@@ -1,13 +1,12 @@
 //! What the policy sees: an [`Observer`] turns the state of a batch of
 //! environments into one observation vector each.
 //!
-//! Two sources are planned: [`GroundTruth`] (the tip relative to the hole,
-//! velocities and a wrench summary: privileged, the simulator's report, as
-//! the heuristic policy uses) exists now so that the RL code runs end to end;
-//! the frozen representation of issue 17 (its encoder's mean over the
-//! camera, the wrench window and proprioception, encoded in batches) plugs
-//! in as a second implementation, asking for camera frames through
-//! [`Observer::needs_camera`].
+//! Two sources: [`GroundTruth`] (the tip relative to the hole, velocities
+//! and a wrench summary: privileged, the simulator's report, as the
+//! heuristic policy uses) and the frozen representation
+//! ([`super::represent::Representation`]: a trained model's z means over the
+//! camera, the wrench window and proprioception, encoded in batches), which
+//! asks for camera frames through [`Observer::needs_camera`].
 
 use crate::policy::{Observation, WrenchHistory};
 use hw_sim::TaskState;
@@ -49,21 +48,29 @@ pub trait Observer: Send + Sync {
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]);
 }
 
-/// Which observer a configuration asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+/// Which observer a configuration asks for: `observation = "ground_truth"`
+/// or `observation = { representation = "runs/full/model" }`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ObservationKind {
     /// [`GroundTruth`].
     #[default]
     GroundTruth,
+    /// The z means of the representation exported into this directory by
+    /// `learner repr train` (its `model/`).
+    Representation(std::path::PathBuf),
 }
 
 impl ObservationKind {
-    /// The observer.
-    pub fn observer(self) -> std::sync::Arc<dyn Observer> {
-        match self {
+    /// The observer (loading a representation's model from its file).
+    pub fn observer(&self) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
+        Ok(match self {
             ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
-        }
+            ObservationKind::Representation(dir) => std::sync::Arc::new(
+                super::represent::Representation::load(dir)
+                    .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
+            ),
+        })
     }
 }
 

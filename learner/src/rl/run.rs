@@ -179,7 +179,7 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
     let env = VecEnv::new(
         &cfg.env,
         cfg.num_envs,
-        cfg.observation.observer(),
+        cfg.observation.observer()?,
         cfg.threads,
     )?;
     let mut trainer = match state {
@@ -309,7 +309,7 @@ pub fn evaluate(
     seed: u64,
 ) -> Result<EvalReport, RunError> {
     let n = cfg.num_envs.clamp(1, episodes.max(1));
-    let observer = cfg.observation.observer();
+    let observer = cfg.observation.observer()?;
     let mut envs = (0..n)
         .map(|_| RlEnv::new(&cfg.env))
         .collect::<Result<Vec<_>, _>>()?;

@@ -1,0 +1,108 @@
+//! The frozen representation as the policy's observation (paper, "Policy
+//! Learning": the policy takes the mean of the learned representation): a
+//! trained model's z means of the camera frame, the wrench window and the
+//! proprioception of every environment, encoded as one batch.
+
+use super::observe::{ObsView, Observer};
+use crate::models::{Encoder, ObservationRef};
+use crate::policy::WRENCH_WINDOW;
+use crate::proprio::PROPRIO;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// z means of an exported representation model.
+pub struct Representation {
+    encoder: Mutex<Encoder>,
+    dim: usize,
+    rejected: AtomicU64,
+}
+
+impl Representation {
+    /// Loads the model `learner repr train` exported into `dir`, for the CPU.
+    pub fn load(dir: &Path) -> crate::train::Result<Self> {
+        let encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
+        Ok(Self::new(encoder))
+    }
+
+    /// Around an encoder in memory.
+    pub fn new(encoder: Encoder) -> Self {
+        Self {
+            dim: encoder.dim(),
+            encoder: Mutex::new(encoder),
+            rejected: AtomicU64::new(0),
+        }
+    }
+
+    /// Batches the encoder refused (a camera frame of another size, a value
+    /// that is not finite): their observations were written as zeros.
+    pub fn rejected(&self) -> u64 {
+        self.rejected.load(Ordering::Relaxed)
+    }
+}
+
+/// The 32×6 wrench window of a view, oldest first; a history shorter than
+/// the window repeats its oldest reading, as the dataset's first samples
+/// of an episode do.
+fn window(v: &ObsView<'_>) -> Vec<f32> {
+    let readings: Vec<&[f64; 6]> = v.wrench.ordered().collect();
+    let mut out = Vec::with_capacity(WRENCH_WINDOW * 6);
+    let missing = WRENCH_WINDOW.saturating_sub(readings.len());
+    let first = readings.first().copied().unwrap_or(&[0.0; 6]);
+    for r in std::iter::repeat_n(first, missing).chain(readings.iter().copied()) {
+        out.extend(r.iter().map(|&x| x as f32));
+    }
+    out
+}
+
+impl Observer for Representation {
+    fn dim(&self) -> usize {
+        self.dim
+    }
+
+    fn needs_camera(&self) -> bool {
+        true
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        let windows: Vec<Vec<f32>> = views.iter().map(window).collect();
+        let proprios: Vec<[f32; PROPRIO]> =
+            views.iter().map(|v| v.obs.proprio.to_array()).collect();
+        let mut obs = Vec::with_capacity(views.len());
+        for (i, v) in views.iter().enumerate() {
+            let Some(cam) = v.camera else {
+                break;
+            };
+            let (w, h) = (
+                cam.calibration.width as usize,
+                cam.calibration.height as usize,
+            );
+            obs.push(ObservationRef {
+                rgb: &cam.rgb[..(3 * w * h).min(cam.rgb.len())],
+                depth: &cam.depth_m[..(w * h).min(cam.depth_m.len())],
+                wrench: &windows[i],
+                proprio: &proprios[i],
+            });
+        }
+        let z = if obs.len() == views.len() {
+            let enc = self.encoder.lock().unwrap_or_else(|e| e.into_inner());
+            enc.encode(&obs).ok()
+        } else {
+            None
+        };
+        match z {
+            Some(z) if z.len() == out.len() => {
+                for (o, x) in out.iter_mut().zip(z) {
+                    *o = x as f64;
+                }
+            }
+            _ => {
+                // `encode` checks sizes (a frame of another size than the
+                // model's) and finiteness; the policy gets zeros and the
+                // count says so.
+                self.rejected.fetch_add(1, Ordering::Relaxed);
+                out.fill(0.0);
+            }
+        }
+    }
+}
