@@ -268,7 +268,7 @@ fn configurations_are_checked_and_the_shipped_files_load() {
         image_size: 100,
         ..ModelConfig::default()
     };
-    assert!(c.validate().unwrap_err().contains("image_size"));
+    assert_eq!(c.validate().unwrap_err().field, "model.image_size");
     c.image_size = 128;
     c.modalities = Modalities {
         rgb: false,
@@ -276,7 +276,7 @@ fn configurations_are_checked_and_the_shipped_files_load() {
         haptics: false,
         proprio: false,
     };
-    assert!(c.validate().unwrap_err().contains("modalities"));
+    assert_eq!(c.validate().unwrap_err().field, "model.modalities");
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/repr");
     let mut n = 0;
     for e in std::fs::read_dir(&dir).unwrap() {

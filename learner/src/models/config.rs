@@ -4,6 +4,7 @@
 //! differs from the paper's Full Model.
 
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::{FieldError, ensure, non_negative, within};
 
 /// The paper's representation models (sections "Multi-Modal Representation
 /// Model" and "Baseline Representation Models").
@@ -151,8 +152,6 @@ pub struct ModelConfig {
     /// 3×3 convolutions per stage of the VGG-like depth encoder (six stages;
     /// 3 gives the paper's eighteen layers).
     pub depth_convs_per_stage: usize,
-    /// Slope of the leaky ReLU (0.1, as the authors' code).
-    pub leaky_slope: f64,
 }
 
 impl Default for ModelConfig {
@@ -163,48 +162,38 @@ impl Default for ModelConfig {
             modalities: Modalities::ALL,
             image_size: 128,
             depth_convs_per_stage: 3,
-            leaky_slope: 0.1,
         }
     }
 }
 
 impl ModelConfig {
     /// Checks the fields, naming the one at fault.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(1..=4096).contains(&self.latent_dim) {
-            return Err(format!(
-                "model.latent_dim = {}: must be in 1..=4096",
-                self.latent_dim
-            ));
-        }
-        if self.image_size == 0 || !self.image_size.is_multiple_of(64) || self.image_size > 1024 {
-            return Err(format!(
-                "model.image_size = {}: must be a positive multiple of 64, at most 1024",
-                self.image_size
-            ));
-        }
-        if !(1..=8).contains(&self.depth_convs_per_stage) {
-            return Err(format!(
-                "model.depth_convs_per_stage = {}: must be in 1..=8",
-                self.depth_convs_per_stage
-            ));
-        }
-        if !(0.0..1.0).contains(&self.leaky_slope) {
-            return Err(format!(
-                "model.leaky_slope = {}: must be in [0, 1)",
-                self.leaky_slope
-            ));
-        }
-        if self.modalities.none() {
-            return Err("model.modalities: at least one modality must be on".into());
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), FieldError> {
+        within("model.latent_dim", self.latent_dim, 1..=4096)?;
+        let s = self.image_size;
+        ensure(
+            s > 0 && s.is_multiple_of(64) && s <= 1024,
+            "model.image_size",
+            s,
+            "must be a positive multiple of 64, at most 1024",
+        )?;
+        within(
+            "model.depth_convs_per_stage",
+            self.depth_convs_per_stage,
+            1..=8,
+        )?;
+        ensure(
+            !self.modalities.none(),
+            "model.modalities",
+            self.modalities.names(),
+            "at least one modality must be on",
+        )
     }
 }
 
 impl LossWeights {
     /// Checks the fields, naming the one at fault.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), FieldError> {
         for (name, w) in [
             ("flow", self.flow),
             ("mask", self.mask),
@@ -216,9 +205,7 @@ impl LossWeights {
             ("recon_wrench", self.recon_wrench),
             ("recon_proprio", self.recon_proprio),
         ] {
-            if !(w.is_finite() && w >= 0.0) {
-                return Err(format!("loss.{name} = {w}: must be finite and ≥ 0"));
-            }
+            non_negative(&format!("loss.{name}"), w)?;
         }
         Ok(())
     }

@@ -137,7 +137,7 @@ pub fn import(dir: &Path, device: &burn::prelude::Device) -> Result<(ReprNet, Ex
         what,
     };
     let meta: ExportMeta = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
-    meta.model.validate().map_err(bad)?;
+    meta.model.validate().map_err(|e| bad(e.to_string()))?;
     meta.normaliser.validate().map_err(bad)?;
     let m = dir.join(MODEL);
     let net = ReprNet::new(&meta.model, device)

@@ -3,9 +3,10 @@
 //! default; the files under `configs/repr/` name what differs from the Full
 //! Model.
 
-use super::{Result, TrainError, io_err};
+use super::{Result, TrainError};
 use crate::models::{LossWeights, ModelConfig, ModelKind};
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::{FieldError, at_least, check, positive, read_toml, within};
 use std::path::Path;
 
 /// Optimiser, data and schedule settings. Adam's defaults are the paper's
@@ -104,59 +105,41 @@ impl DeviceKind {
 impl TrainConfig {
     /// Reads and validates a configuration file.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(io_err(path))?;
-        let cfg: Self = toml::from_str(&text).map_err(|e| TrainError::BadFile {
+        let cfg: Self = read_toml(path)?;
+        cfg.validate().map_err(|e| TrainError::BadFile {
             path: path.to_path_buf(),
             what: e.to_string(),
-        })?;
-        cfg.validate().map_err(|what| TrainError::BadFile {
-            path: path.to_path_buf(),
-            what,
         })?;
         Ok(cfg)
     }
 
     /// Checks every field, naming the one at fault.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    pub fn validate(&self) -> std::result::Result<(), FieldError> {
         self.model.validate()?;
         self.loss.validate()?;
         let t = &self.train;
-        for (name, v) in [("lr", t.lr), ("beta1", t.beta1), ("beta2", t.beta2)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("train.{name} = {v}: must be finite and > 0"));
-            }
+        positive("train.lr", t.lr)?;
+        for (name, b) in [("train.beta1", t.beta1), ("train.beta2", t.beta2)] {
+            check(name, b, b > 0.0 && b < 1.0, "must be in (0, 1)")?;
         }
-        if t.beta1 >= 1.0 || t.beta2 >= 1.0 {
-            return Err("train.beta1 and train.beta2 must be below 1".into());
-        }
-        if !(1..=4096).contains(&t.batch) {
-            return Err(format!("train.batch = {}: must be in 1..=4096", t.batch));
-        }
-        if !(1..=10_000).contains(&t.epochs) {
-            return Err(format!("train.epochs = {}: must be in 1..=10000", t.epochs));
-        }
-        if !(0.0..1.0).contains(&t.test_fraction) {
-            return Err(format!(
-                "train.test_fraction = {}: must be in [0, 1)",
-                t.test_fraction
-            ));
-        }
-        if !(0.0..=1.0).contains(&t.negative_fraction) {
-            return Err(format!(
-                "train.negative_fraction = {}: must be in [0, 1]",
-                t.negative_fraction
-            ));
-        }
-        if !(1..=1024).contains(&t.shuffle_blocks) {
-            return Err(format!(
-                "train.shuffle_blocks = {}: must be in 1..=1024",
-                t.shuffle_blocks
-            ));
-        }
-        if t.checkpoint_every == 0 {
-            return Err("train.checkpoint_every = 0: must be at least 1".into());
-        }
-        Ok(())
+        within("train.batch", t.batch, 1..=4096)?;
+        within("train.epochs", t.epochs, 1..=10_000)?;
+        let f = t.test_fraction;
+        check(
+            "train.test_fraction",
+            f,
+            (0.0..1.0).contains(&f),
+            "must be in [0, 1)",
+        )?;
+        let f = t.negative_fraction;
+        check(
+            "train.negative_fraction",
+            f,
+            (0.0..=1.0).contains(&f),
+            "must be in [0, 1]",
+        )?;
+        within("train.shuffle_blocks", t.shuffle_blocks, 1..=1024)?;
+        at_least("train.checkpoint_every", t.checkpoint_every, 1)
     }
 
     /// The share of pairing negatives the loader draws: none for a model

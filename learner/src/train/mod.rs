@@ -41,6 +41,9 @@ pub enum TrainError {
         /// What is wrong.
         what: String,
     },
+    /// A configuration file that cannot be read or parsed.
+    #[error(transparent)]
+    ConfigFile(#[from] shared_mem_schema::config::ConfigFileError),
     /// The dataset does not fit the model.
     #[error("{0}")]
     Mismatch(String),

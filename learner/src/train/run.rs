@@ -211,9 +211,9 @@ pub fn train(
     opts: &TrainOptions,
     stop: &dyn Fn() -> bool,
 ) -> Result<TrainSummary> {
-    cfg.validate().map_err(|what| TrainError::BadFile {
+    cfg.validate().map_err(|e| TrainError::BadFile {
         path: out.join(files::CONFIG),
-        what,
+        what: e.to_string(),
     })?;
     let ds = Dataset::open(data)?;
     check_dataset(cfg, &ds)?;
