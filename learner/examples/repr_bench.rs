@@ -62,7 +62,7 @@ fn main() {
         let y = LabelTensors::new(&labels, s, &dev);
         let eps = tensor(randn(b * d), [b, d], &dev);
         let w = LossWeights::default();
-        let mut optim = AdamConfig::new().with_beta_1(0.5).init();
+        let mut optim = AdamConfig::new().with_beta_1(0.5).with_epsilon(1e-8).init();
         for i in 0..steps + 2 {
             let t = Instant::now();
             let out = net.forward(

@@ -206,6 +206,17 @@ fn a_short_collection_builds_the_expected_dataset() {
         d.episode = b.episode;
         assert_eq!(&d, b, "sample {k}");
     }
+    // The stage each sample carries (format 4) only rises through an
+    // episode, and the heuristic gets beyond "failed".
+    for w in direct.samples.windows(2) {
+        assert!(
+            w[0].stage <= w[1].stage,
+            "{:?} then {:?}",
+            w[0].stage,
+            w[1].stage
+        );
+    }
+    assert!(direct.samples.last().unwrap().stage > shared_mem_schema::Stage::Failed);
     // Labels are consistent: the next position is where the next sample
     // starts, and the action moved the target the way it says.
     for w in direct.samples.windows(2) {
@@ -281,7 +292,9 @@ fn a_short_collection_builds_the_expected_dataset() {
     std::fs::write(&shard, &old).unwrap();
     let e = Dataset::open(&out).err().unwrap().to_string();
     assert!(
-        e.contains("shard-00001") && e.contains("VTDSHRD1") && e.contains("version 3"),
+        e.contains("shard-00001")
+            && e.contains("VTDSHRD1")
+            && e.contains(&format!("version {}", dataset::FORMAT_VERSION)),
         "{e}"
     );
     std::fs::write(&shard, &bytes).unwrap();

@@ -288,7 +288,18 @@ fn configurations_are_checked_and_the_shipped_files_load() {
         match name.as_str() {
             "deterministic" => assert_eq!(cfg.model.kind, ModelKind::Deterministic),
             "reconstruction" => assert_eq!(cfg.model.kind, ModelKind::Reconstruction),
-            "no_pairing" => assert_eq!(cfg.loss.pairing, 0.0),
+            "no_pairing" => {
+                assert_eq!(cfg.loss.pairing, 0.0);
+                assert!(!cfg.learns_pairing() && cfg.negatives() == 0.0);
+            }
+            // Without haptics a pairing negative (another moment's wrench
+            // window) is invisible: no negatives, no pairing loss.
+            "no_haptics" => {
+                assert!(!cfg.model.modalities.haptics);
+                assert!(!cfg.learns_pairing() && cfg.negatives() == 0.0);
+                assert_eq!(cfg.loss_weights().pairing, 0.0);
+            }
+            "full" => assert!(cfg.learns_pairing() && cfg.negatives() == 0.5),
             "no_rgb" => assert!(!cfg.model.modalities.rgb),
             "d16" => assert_eq!(cfg.model.latent_dim, 16),
             _ => {}

@@ -248,6 +248,13 @@ fn an_interrupted_run_resumes_to_the_same_parameters() {
     let a = std::fs::read_to_string(whole.join("metrics.csv")).unwrap();
     let b = std::fs::read_to_string(parts.join("metrics.csv")).unwrap();
     assert_eq!(a, b);
+    // A finished run is extended by a resume with more epochs (the only
+    // field a resume may change).
+    let mut longer = cfg.clone();
+    longer.train.epochs = 3;
+    let s3 = train::train(&longer, dataset(), &parts, &resume(None), &|| false).unwrap();
+    assert!(s3.finished && s3.steps > s.steps);
+    assert_eq!(s3.rows.len(), 6);
     // Resuming with another configuration is refused.
     let mut other = cfg.clone();
     other.train.lr = 0.5;
@@ -271,7 +278,11 @@ fn the_baselines_train_on_the_same_data() {
             ModelKind::Deterministic => {
                 assert!(test.loss.kl.is_nan() && test.loss.flow.is_finite())
             }
-            _ => assert!(test.loss.recon_rgb.is_finite() && test.loss.flow.is_nan()),
+            _ => {
+                assert!(test.loss.recon_rgb.is_finite() && test.loss.flow.is_nan());
+                // No heads, no accuracies (not a 0 % that reads as measured).
+                assert!(test.contact_acc.is_nan() && test.pairing_acc.is_nan());
+            }
         }
     }
 }
@@ -318,8 +329,7 @@ fn the_frozen_representation_observes_the_rl_environment() {
         "not the zeros of a refused batch"
     );
     assert_ne!(first, later, "z follows the arm");
-    // The same observations as the encoder gives for the same inputs: the
-    // two environments differ.
+    // The two environments (different boxes) are told apart.
     assert_ne!(later[..16], later[16..]);
     // A model directory that is not there is refused, naming it.
     let e = ObservationKind::Representation(out.join("nowhere"))

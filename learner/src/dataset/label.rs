@@ -244,8 +244,9 @@ pub fn episode_samples(
             .map(|k| (ee1[k] - f0.ee_pos_m[k]).powi(2))
             .sum::<f64>()
             .sqrt();
+        let stage = stage_at(f0.header.t_hw_ns);
         tags.push(SampleTags {
-            stage: stage_at(f0.header.t_hw_ns),
+            stage,
             moving: moved > MOVING_M,
         });
         out.push(Sample {
@@ -254,6 +255,7 @@ pub fn episode_samples(
             step: f0.step,
             contact: contact_at(i0),
             contact_next: contact_at(i1),
+            stage,
             rgb: c0.rgb.clone(),
             depth: c0.depth_m.clone(),
             wrench,

@@ -16,6 +16,9 @@ pub struct Sample {
     pub contact: bool,
     /// Label: contact at the next step.
     pub contact_next: bool,
+    /// The best task stage the episode had reached by this frame (format 4;
+    /// for people and evaluation, not an input).
+    pub stage: shared_mem_schema::Stage,
     /// RGB, H×W×3.
     pub rgb: Vec<u8>,
     /// Depth, m, H×W.
@@ -60,7 +63,7 @@ impl Sample {
         out.extend_from_slice(&[
             self.contact as u8,
             self.contact_next as u8,
-            0,
+            self.stage.code() as u8,
             0,
             0,
             0,
@@ -86,6 +89,7 @@ impl Sample {
             step: u64::from_le_bytes(buf[8..16].try_into().expect("8")),
             contact: buf[16] != 0,
             contact_next: buf[17] != 0,
+            stage: shared_mem_schema::Stage::from_code(buf[18] as u32),
             rgb: buf[24..24 + 3 * n].to_vec(),
             depth: vec![0.0; n],
             wrench: vec![0.0; WRENCH_WINDOW * 6],

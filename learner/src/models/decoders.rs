@@ -71,6 +71,7 @@ fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
     interpolate(
         x,
         InterpolateOptions::new(InterpolateMode::Bilinear)
+            .with_align_corners(true)
             .with_output_size([h * factor, w * factor]),
     )
 }

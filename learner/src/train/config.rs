@@ -142,13 +142,33 @@ impl TrainConfig {
         at_least("train.checkpoint_every", t.checkpoint_every, 1)
     }
 
+    /// Whether the model learns time alignment: it needs the pairing loss,
+    /// the haptics (a negative is another moment's wrench window, which a
+    /// model without haptics cannot see) and a predictive kind.
+    pub fn learns_pairing(&self) -> bool {
+        self.model.kind != ModelKind::Reconstruction
+            && self.model.modalities.haptics
+            && self.loss.pairing > 0.0
+            && self.train.negative_fraction > 0.0
+    }
+
     /// The share of pairing negatives the loader draws: none for a model
     /// that does not learn pairing (they would only corrupt its inputs).
     pub fn negatives(&self) -> f64 {
-        if self.model.kind == ModelKind::Reconstruction || self.loss.pairing == 0.0 {
-            0.0
-        } else {
+        if self.learns_pairing() {
             self.train.negative_fraction
+        } else {
+            0.0
         }
+    }
+
+    /// The loss weights as trained: no pairing term where
+    /// [`Self::learns_pairing`] is false.
+    pub fn loss_weights(&self) -> LossWeights {
+        let mut w = self.loss;
+        if !self.learns_pairing() {
+            w.pairing = 0.0;
+        }
+        w
     }
 }

@@ -43,8 +43,8 @@ pub struct EvalReport {
 }
 
 /// Runs the evaluation and writes `table.md`, `flow_actions.png`,
-/// `pca_z_contact.png` and `pca_z_policy.png` (the pictures for predictive
-/// models) into `opts.out`.
+/// `pca_z_contact.png`, `pca_z_stage.png` and `pca_z_policy.png` (the
+/// pictures for predictive models) into `opts.out`.
 pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
     let cfg_path = opts.run.join(files::CONFIG);
     let cfg = TrainConfig::from_file(&cfg_path)?;
@@ -305,8 +305,8 @@ fn flow_picture(
 
 /// The z means of `samples` projected on their two principal components
 /// (faer's symmetric eigendecomposition of the covariance), coloured by
-/// contact at the sample's own step and, in a second picture, by the
-/// episode's policy.
+/// contact at the sample's own step, by the stage its episode had reached,
+/// and by the episode's policy.
 fn pca_picture(
     net: &ReprNet,
     model: &ModelConfig,
@@ -339,6 +339,14 @@ fn pca_picture(
         .with(Series::points("no contact", series(&|s| !s.contact)))
         .with(Series::points("contact", series(&|s| s.contact)));
     chart.write_png(opts.out.join("pca_z_contact.png"))?;
+    let mut chart = Chart::new("z means by the stage reached", "PC 1", "PC 2");
+    for st in shared_mem_schema::Stage::ALL {
+        let pts = series(&|s| s.stage == st);
+        if !pts.is_empty() {
+            chart = chart.with(Series::points(st.name(), pts));
+        }
+    }
+    chart.write_png(opts.out.join("pca_z_stage.png"))?;
     let chart = Chart::new("z means by the episode's policy", "PC 1", "PC 2")
         .with(Series::points(
             "random",

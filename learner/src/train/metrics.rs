@@ -22,6 +22,11 @@ pub struct Metrics {
     pub contact_positive: u64,
     /// Pairing predictions right (all samples).
     pub pairing_right: u64,
+    /// Batches with contact predictions (none: the model has no contact
+    /// head).
+    pub contact_batches: u64,
+    /// Batches with a pairing loss (none: the model does not learn pairing).
+    pub pairing_batches: u64,
     /// Aligned samples among all (pairing labels that are 1).
     pub pairing_positive: u64,
     /// Σ of the zero-flow baseline's endpoint error (aligned samples).
@@ -151,13 +156,15 @@ impl Metrics {
         }
         self.pairing_positive += np;
         if let Some(c) = &out.contact_logits {
+            self.contact_batches += 1;
             for ((x, y), p) in values(c).iter().zip(contact_next).zip(paired) {
                 if *p > 0.5 && (*x > 0.0) == (*y > 0.5) {
                     self.contact_right += 1;
                 }
             }
         }
-        if let Some(c) = &out.pairing_logits {
+        if let (Some(c), Some(_)) = (&out.pairing_logits, &l.pairing) {
+            self.pairing_batches += 1;
             for (x, y) in values(c).iter().zip(paired) {
                 if (*x > 0.0) == (*y > 0.5) {
                     self.pairing_right += 1;
@@ -166,10 +173,12 @@ impl Metrics {
         }
     }
 
-    /// The means, as a table row.
+    /// The means, as a table row (NaN where nothing was measured: no
+    /// samples, or a head the model lacks).
     pub fn row(&self, epoch: u32, split: &str) -> Row {
-        let n = self.samples.max(1) as f64;
-        let np = self.paired.max(1) as f64;
+        let nan_if = |none: bool, x: f64| if none { f64::NAN } else { x };
+        let n = nan_if(self.samples == 0, self.samples as f64);
+        let np = nan_if(self.paired == 0, self.paired as f64);
         let s = &self.sums;
         let pos = self.contact_positive as f64 / np;
         let pair_pos = self.pairing_positive as f64 / n;
@@ -189,8 +198,8 @@ impl Metrics {
                 recon_wrench: s.recon_wrench / n,
                 recon_proprio: s.recon_proprio / n,
             },
-            contact_acc: self.contact_right as f64 / np,
-            pairing_acc: self.pairing_right as f64 / n,
+            contact_acc: nan_if(self.contact_batches == 0, self.contact_right as f64 / np),
+            pairing_acc: nan_if(self.pairing_batches == 0, self.pairing_right as f64 / n),
             contact_majority_acc: pos.max(1.0 - pos),
             pairing_majority_acc: pair_pos.max(1.0 - pair_pos),
             zero_flow_epe: self.zero_flow_sum / np,

@@ -64,19 +64,24 @@ fn start(cfg: &TrainConfig, out: &Path, resume: bool, device: &Device) -> Result
     let optim = AdamConfig::new()
         .with_beta_1(cfg.train.beta1 as f32)
         .with_beta_2(cfg.train.beta2 as f32)
+        // PyTorch's and the paper's Adam (burn's default is 1e-5).
+        .with_epsilon(1e-8)
         .init();
     let cfg_path = out.join(files::CONFIG);
     let text = toml::to_string(cfg).expect("the configuration serialises");
     if resume {
-        let before = std::fs::read_to_string(&cfg_path).map_err(io_err(&cfg_path))?;
-        if before != text {
+        // The same run, but for its length: a resume may extend it.
+        let mut before = TrainConfig::from_file(&cfg_path)?;
+        before.train.epochs = cfg.train.epochs;
+        if &before != cfg {
             return Err(TrainError::BadFile {
                 path: cfg_path,
                 what: "the run was started with another configuration; resume it with that one \
-                       or train into a new directory"
+                       (only train.epochs may change) or train into a new directory"
                     .into(),
             });
         }
+        std::fs::write(&cfg_path, text).map_err(io_err(&cfg_path))?;
         if let Some(t) = checkpoint::load(out, net, optim)? {
             return Ok(t);
         }
@@ -85,7 +90,7 @@ fn start(cfg: &TrainConfig, out: &Path, resume: bool, device: &Device) -> Result
             what: "no checkpoint to resume from".into(),
         });
     }
-    if checkpoint::dir(out).exists() {
+    if checkpoint::dir(out).exists() || out.join("checkpoint.old").exists() {
         return Err(TrainError::BadFile {
             path: checkpoint::dir(out),
             what: "a run is already here: pass --resume to continue it, or choose another --out"
@@ -196,7 +201,7 @@ pub fn evaluate(
         }
         let p = prepare(&b?, norm, cfg.model.image_size, &device)?;
         let out = net.forward(&cfg.model, &p.x, p.y.action.clone(), None, active);
-        let l = losses(&out, &p.y, &p.x.proprio, &cfg.loss);
+        let l = losses(&out, &p.y, &p.x.proprio, &cfg.loss_weights());
         m.add(&l, &out, &p.paired, &p.contact_next, &p.zero_flow_epe);
     }
     Ok(m)
@@ -220,20 +225,27 @@ pub fn train(
     std::fs::create_dir_all(out).map_err(io_err(out))?;
     let device = opts.device.device(true).map_err(TrainError::Mismatch)?;
     let t = &cfg.train;
-    let split = Split::by_episode(&ds.meta, t.test_fraction, t.seed);
+    let norm = Normaliser::from_stats(&ds.stats);
+    norm.validate()
+        .map_err(|what| TrainError::Mismatch(format!("{}: {what}", data.display())))?;
+    let (mut net, mut optim, mut state) = start(cfg, out, opts.resume, &device)?;
+    let split_path = out.join(files::SPLIT);
+    let split = if opts.resume {
+        // The run's own split: a dataset grown since must not move
+        // episodes the model has trained on into the test split.
+        Split::read(&split_path, &ds.meta)?
+    } else {
+        let split = Split::by_episode(&ds.meta, t.test_fraction, t.seed);
+        let json = serde_json::to_vec_pretty(&split).expect("split serialises");
+        std::fs::write(&split_path, json).map_err(io_err(&split_path))?;
+        split
+    };
     if split.train.is_empty() {
         return Err(TrainError::Mismatch(format!(
             "{}: no episode left for training",
             data.display()
         )));
     }
-    let split_path = out.join(files::SPLIT);
-    let json = serde_json::to_vec_pretty(&split).expect("split serialises");
-    std::fs::write(&split_path, json).map_err(io_err(&split_path))?;
-    let norm = Normaliser::from_stats(&ds.stats);
-    norm.validate()
-        .map_err(|what| TrainError::Mismatch(format!("{}: {what}", data.display())))?;
-    let (mut net, mut optim, mut state) = start(cfg, out, opts.resume, &device)?;
 
     let train_table = Arc::new(Split::table(&split.train));
     let train_samples = Split::samples(&ds.meta, &split.train);
@@ -250,6 +262,7 @@ pub fn train(
     let (mut steps_here, mut samples_here) = (0u64, 0u64);
     let started = Instant::now();
     let lr = t.lr;
+    let weights = cfg.loss_weights();
 
     while state.epoch < t.epochs {
         let epoch = state.epoch;
@@ -285,7 +298,7 @@ pub fn train(
                 )
             });
             let pred = net.forward(&cfg.model, &p.x, p.y.action.clone(), eps, Modalities::ALL);
-            let l = losses(&pred, &p.y, &p.x.proprio, &cfg.loss);
+            let l = losses(&pred, &p.y, &p.x.proprio, &weights);
             let total_loss = f64::from(l.total.clone().into_scalar::<f32>());
             if !total_loss.is_finite() {
                 return Err(TrainError::NotFinite {
@@ -334,11 +347,11 @@ pub fn train(
                 });
             }
         }
-        let train_row = state.metrics.row(epoch + 1, "train");
-        let test = evaluate(&net, cfg, &ds, &norm, &split.test, &device, Modalities::ALL)?;
-        let test_row = test.row(epoch + 1, "test");
-        state.rows.push(train_row);
-        state.rows.push(test_row);
+        state.rows.push(state.metrics.row(epoch + 1, "train"));
+        if !split.test.is_empty() {
+            let test = evaluate(&net, cfg, &ds, &norm, &split.test, &device, Modalities::ALL)?;
+            state.rows.push(test.row(epoch + 1, "test"));
+        }
         state.epoch += 1;
         state.batches_done = 0;
         state.metrics = Metrics::default();

@@ -42,6 +42,30 @@ impl Split {
         Self { train, test }
     }
 
+    /// Reads a run's split.json, checking every episode it names is in
+    /// `meta`.
+    pub fn read(path: &std::path::Path, meta: &Meta) -> super::Result<Self> {
+        let bad = |what: String| super::TrainError::BadFile {
+            path: path.to_path_buf(),
+            what,
+        };
+        let text = std::fs::read(path).map_err(super::io_err(path))?;
+        let split: Self = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
+        let known: std::collections::HashSet<u32> =
+            meta.episodes.iter().map(|e| e.episode).collect();
+        if let Some(e) = split
+            .train
+            .iter()
+            .chain(&split.test)
+            .find(|e| !known.contains(e))
+        {
+            return Err(bad(format!(
+                "episode {e} is not in the dataset: another dataset than the run's?"
+            )));
+        }
+        Ok(split)
+    }
+
     /// A membership table indexed by episode number, for
     /// [`crate::dataset::LoaderConfig::episodes`].
     pub fn table(episodes: &[u32]) -> Vec<bool> {
