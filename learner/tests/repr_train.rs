@@ -187,6 +187,11 @@ fn a_short_run_learns_contact_better_than_the_majority_and_its_losses_fall() {
     .unwrap();
     assert_eq!(r.rows.len(), 5, "all sensors and each one masked");
     assert!(r.markdown.contains("majority contact acc"));
+    assert!(
+        r.markdown.contains("epoch 8 (as trained)"),
+        "{}",
+        r.markdown
+    );
     for f in [
         "table.md",
         "flow_actions.png",

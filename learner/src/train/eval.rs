@@ -107,7 +107,8 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
         )?;
         rows.push((name, metrics.row(meta.epochs, "test")));
     }
-    let markdown = table(&cfg, &split, &ds, &rows);
+    let trained = last_train_row(&opts.run)?;
+    let markdown = table(&cfg, &split, &ds, &rows, trained.as_ref());
     let md = opts.out.join("table.md");
     std::fs::write(&md, &markdown).map_err(io_err(&md))?;
     if cfg.model.kind != crate::models::ModelKind::Reconstruction {
@@ -151,7 +152,26 @@ fn pct(x: f64) -> String {
     }
 }
 
-fn table(cfg: &TrainConfig, split: &Split, ds: &Dataset, rows: &[(String, Row)]) -> String {
+/// The last epoch's training row of the run (as trained: sampled z), from
+/// its checkpoint; `None` for a run that finished no epoch.
+fn last_train_row(run: &std::path::Path) -> Result<Option<Row>> {
+    let path = checkpoint::dir(run).join("state.json");
+    let text = std::fs::read(&path).map_err(io_err(&path))?;
+    let state: checkpoint::LoopState =
+        serde_json::from_slice(&text).map_err(|e| TrainError::BadFile {
+            path: path.clone(),
+            what: e.to_string(),
+        })?;
+    Ok(state.rows.into_iter().rev().find(|r| r.split == "train"))
+}
+
+fn table(
+    cfg: &TrainConfig,
+    split: &Split,
+    ds: &Dataset,
+    test: &[(String, Row)],
+    train: Option<&Row>,
+) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -168,7 +188,20 @@ fn table(cfg: &TrainConfig, split: &Split, ds: &Dataset, rows: &[(String, Row)])
         "| sensors | flow EPE, px | zero-flow EPE, px | ee MSE (normalised) | contact loss | contact acc | majority contact acc | pairing loss | pairing acc | majority pairing acc |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
-    for (name, r) in rows {
+    let train_row = train.map(|r| {
+        (
+            format!("train split, epoch {} (as trained)", r.epoch),
+            r.clone(),
+        )
+    });
+    let rows: Vec<(String, Row)> = train_row
+        .into_iter()
+        .chain(
+            test.iter()
+                .map(|(n, r)| (format!("test split, {n}"), r.clone())),
+        )
+        .collect();
+    for (name, r) in &rows {
         let _ = writeln!(
             s,
             "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -188,7 +221,7 @@ fn table(cfg: &TrainConfig, split: &Split, ds: &Dataset, rows: &[(String, Row)])
             s,
             "\n| sensors | RGB MSE | last wrench MSE | proprio MSE |\n|---|---|---|---|"
         );
-        for (name, r) in rows {
+        for (name, r) in &rows {
             let _ = writeln!(
                 s,
                 "| {name} | {} | {} | {} |",
