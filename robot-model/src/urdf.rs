@@ -46,21 +46,64 @@ impl Model {
             path: path.to_path_buf(),
             source,
         })?;
-        let robot = urdf_rs::read_from_string(&text).map_err(|e| ModelError::Parse {
-            path: Some(path.to_path_buf()),
-            message: e.to_string(),
-        })?;
+        let robot = parse(&text, Some(path))?;
         build(&robot, path.parent(), options)
     }
 
     /// Loads a URDF from a string. Relative mesh paths stay unresolved.
     pub fn from_urdf_str(text: &str, options: &LoadOptions) -> Result<Model, ModelError> {
-        let robot = urdf_rs::read_from_string(text).map_err(|e| ModelError::Parse {
-            path: None,
-            message: e.to_string(),
-        })?;
-        build(&robot, None, options)
+        build(&parse(text, None)?, None, options)
     }
+}
+
+/// urdf-rs's parse; where it fails, the joints whose `<limit>` lacks an
+/// attribute it requires are named (its own message gives no location).
+fn parse(text: &str, path: Option<&Path>) -> Result<urdf_rs::Robot, ModelError> {
+    urdf_rs::read_from_string(text).map_err(|e| {
+        let mut message = e.to_string();
+        for (joint, attr) in incomplete_limits(text) {
+            message.push_str(&format!(
+                "; joint `{joint}`: <limit> has no `{attr}` attribute"
+            ));
+        }
+        ModelError::Parse {
+            path: path.map(Path::to_path_buf),
+            message,
+        }
+    })
+}
+
+/// (joint, attribute) for every `<limit>` without `effort` or `velocity`,
+/// which urdf-rs requires.
+fn incomplete_limits(text: &str) -> Vec<(String, &'static str)> {
+    use quick_xml::events::{BytesStart, Event};
+    let value = |e: &BytesStart<'_>, name: &str| {
+        e.try_get_attribute(name)
+            .ok()
+            .flatten()
+            .map(|a| String::from_utf8_lossy(&a.value).into_owned())
+    };
+    let mut reader = quick_xml::Reader::from_str(text);
+    let mut joint: Option<String> = None;
+    let mut out = Vec::new();
+    loop {
+        match reader.read_event() {
+            Ok(Event::Start(e)) if e.name().as_ref() == b"joint" => joint = value(&e, "name"),
+            Ok(Event::End(e)) if e.name().as_ref() == b"joint" => joint = None,
+            Ok(Event::Start(e) | Event::Empty(e)) if e.name().as_ref() == b"limit" => {
+                if let Some(j) = &joint {
+                    for attr in ["effort", "velocity"] {
+                        if value(&e, attr).is_none() {
+                            out.push((j.clone(), attr));
+                        }
+                    }
+                }
+            }
+            Ok(Event::Eof) | Err(_) => break,
+            _ => {}
+        }
+    }
+    out
 }
 
 fn check_finite(element: &str, field: &'static str, values: &[f64]) -> Result<(), ModelError> {

@@ -258,10 +258,17 @@ fn a_joint_without_a_finite_velocity_limit_is_refused_by_name() {
     let urdf = std::fs::read_to_string(path).unwrap();
     let limit = r#"<limit lower="-1.7628" upper="1.7628" velocity="2.175" effort="87"/>"#;
     assert_eq!(urdf.matches(limit).count(), 1, "panda_joint2's limit");
-    // An absent velocity attribute: urdf-rs's parser refuses the file.
+    // An absent velocity attribute: urdf-rs's parser refuses the file, and
+    // the error names the joint.
     let absent = r#"<limit lower="-1.7628" upper="1.7628" effort="87"/>"#;
-    let e = robot_model::Model::from_urdf_str(&urdf.replace(limit, absent), &Default::default());
-    assert!(e.is_err(), "a <limit> without velocity was accepted");
+    let e = robot_model::Model::from_urdf_str(&urdf.replace(limit, absent), &Default::default())
+        .err()
+        .expect("a <limit> without velocity was accepted")
+        .to_string();
+    assert!(
+        e.contains("joint `panda_joint2`: <limit> has no `velocity` attribute"),
+        "{e}"
+    );
     // A zero velocity limit: robot-model reads it as unlimited; the
     // controller must refuse it.
     let edited = r#"<limit lower="-1.7628" upper="1.7628" velocity="0" effort="87"/>"#;
