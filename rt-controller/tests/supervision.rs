@@ -262,8 +262,7 @@ fn a_joint_without_a_finite_velocity_limit_is_refused_by_name() {
     // the error names the joint.
     let absent = r#"<limit lower="-1.7628" upper="1.7628" effort="87"/>"#;
     let e = robot_model::Model::from_urdf_str(&urdf.replace(limit, absent), &Default::default())
-        .err()
-        .expect("a <limit> without velocity was accepted")
+        .expect_err("a <limit> without velocity was accepted")
         .to_string();
     assert!(
         e.contains("joint `panda_joint2`: <limit> has no `velocity` attribute"),
