@@ -354,3 +354,60 @@ fn the_frozen_representation_observes_the_rl_environment() {
     assert!(v.observations().iter().all(|&x| x == 0.0));
     assert!(rep.rejected() >= 1);
 }
+
+#[test]
+fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
+    use std::process::{Command, Stdio};
+    let dir = test_support::scratch_dir("repr-kill");
+    let mut cfg = small(ModelKind::Full, 2);
+    cfg.train.checkpoint_every = 2;
+    let config = dir.join("small.toml");
+    std::fs::write(&config, toml::to_string(&cfg).unwrap()).unwrap();
+    let out = dir.join("run");
+    let cmd = |resume: bool| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_learner"));
+        c.args(["repr", "train", "--config"])
+            .arg(&config)
+            .arg("--data")
+            .arg(dataset())
+            .arg("--out")
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        if resume {
+            c.arg("--resume");
+        }
+        c
+    };
+    let mut child = cmd(false).spawn().unwrap();
+    // Killed (SIGKILL: no chance to checkpoint) once a checkpoint of the
+    // first epoch exists.
+    let state = out.join("checkpoint").join("state.json");
+    let t0 = std::time::Instant::now();
+    let steps_at_kill = loop {
+        if let Ok(text) = std::fs::read(&state) {
+            let s: train::checkpoint::LoopState = serde_json::from_slice(&text).unwrap();
+            if s.steps >= 2 && s.epoch == 0 {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                break s.steps;
+            }
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before a checkpoint"
+        );
+        assert!(t0.elapsed().as_secs() < 300, "no checkpoint within 300 s");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    assert!(!out.join("model").exists(), "killed before the end");
+    // A new run into the same directory is refused; --resume finishes it.
+    assert!(!cmd(false).status().unwrap().success());
+    assert!(cmd(true).status().unwrap().success());
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 4, "{csv}");
+    let s: train::checkpoint::LoopState =
+        serde_json::from_slice(&std::fs::read(&state).unwrap()).unwrap();
+    assert!(s.steps > steps_at_kill && s.epoch == 2);
+    assert!(out.join("model").join("model.json").exists());
+}
