@@ -5,7 +5,9 @@
 //! (bench-anchors/torch-repr/bench.py) times the same architecture; the
 //! script bench-anchors/repr.sh runs both alternately.
 //!
-//! Usage: `repr_bench train|infer BATCH STEPS` (threads: RAYON_NUM_THREADS).
+//! Usage: `repr_bench train|infer BATCH STEPS [DEPTH_CONVS_PER_STAGE]`
+//! (threads: RAYON_NUM_THREADS; the last argument, default 3, measures the
+//! depth encoder's share).
 
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
@@ -23,12 +25,15 @@ fn median(mut xs: Vec<f64>) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: repr_bench train|infer BATCH STEPS";
+    let usage = "usage: repr_bench train|infer BATCH STEPS [DEPTH_CONVS_PER_STAGE]";
     let what = args.get(1).expect(usage).clone();
     let b: usize = args.get(2).expect(usage).parse().expect(usage);
     let steps: usize = args.get(3).expect(usage).parse().expect(usage);
     let threads = rayon_threads();
-    let cfg = ModelConfig::default();
+    let cfg = ModelConfig {
+        depth_convs_per_stage: args.get(4).map_or(3, |v| v.parse().expect(usage)),
+        ..ModelConfig::default()
+    };
     let (s, d) = (cfg.image_size, cfg.latent_dim);
     let mut r = hw_sim::rng::seeded(1, 0);
     let mut randn =
@@ -83,8 +88,9 @@ fn main() {
         }
         let step = median(times);
         println!(
-            "{{\"side\": \"burn-flex\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}}}",
-            b as f64 / step
+            "{{\"side\": \"burn-flex\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}}}",
+            b as f64 / step,
+            cfg.depth_convs_per_stage
         );
     } else {
         for i in 0..steps + 3 {
