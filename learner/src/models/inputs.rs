@@ -66,29 +66,30 @@ impl Normaliser {
         }
     }
 
-    /// Checks every constant is finite and every deviation positive.
+    /// Checks every constant is finite and every deviation positive,
+    /// naming the input at fault.
     pub fn validate(&self) -> Result<(), String> {
-        let all = self
-            .rgb_mean
-            .iter()
-            .chain(std::iter::once(&self.depth_mean))
-            .chain(&self.wrench_mean)
-            .chain(&self.proprio_mean)
-            .chain(&self.action_mean)
-            .chain(&self.ee_delta_mean);
-        if all.clone().any(|x| !x.is_finite()) {
-            return Err("normaliser: a mean is not finite".into());
-        }
-        let stds = self
-            .rgb_std
-            .iter()
-            .chain(std::iter::once(&self.depth_std))
-            .chain(&self.wrench_std)
-            .chain(&self.proprio_std)
-            .chain(&self.action_std)
-            .chain(&self.ee_delta_std);
-        if stds.clone().any(|x| !(x.is_finite() && *x > 0.0)) {
-            return Err("normaliser: a standard deviation is not finite and positive".into());
+        let groups: [(&str, &[f32], &[f32]); 6] = [
+            ("rgb", &self.rgb_mean, &self.rgb_std),
+            (
+                "depth",
+                std::slice::from_ref(&self.depth_mean),
+                std::slice::from_ref(&self.depth_std),
+            ),
+            ("wrench", &self.wrench_mean, &self.wrench_std),
+            ("proprio", &self.proprio_mean, &self.proprio_std),
+            ("action", &self.action_mean, &self.action_std),
+            ("ee_delta", &self.ee_delta_mean, &self.ee_delta_std),
+        ];
+        for (name, means, stds) in groups {
+            if means.iter().any(|x| !x.is_finite()) {
+                return Err(format!("normaliser: a mean of {name} is not finite"));
+            }
+            if stds.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+                return Err(format!(
+                    "normaliser: a standard deviation of {name} is not finite and positive"
+                ));
+            }
         }
         Ok(())
     }
@@ -151,7 +152,8 @@ pub struct LabelArrays {
     pub paired: Vec<f32>,
     /// B×3: next end-effector position minus the current one, normalised.
     pub ee_delta: Vec<f32>,
-    /// Reconstruction targets: B×3×S×S RGB in 0..1.
+    /// Reconstruction targets: B×3×S×S RGB in 0..1 (empty unless asked
+    /// for: only the reconstruction model reads it).
     pub rgb01: Vec<f32>,
     /// Reconstruction targets: B×6, the newest wrench reading, normalised.
     pub last_wrench: Vec<f32>,
@@ -253,8 +255,14 @@ impl Normaliser {
     }
 
     /// The labels of `samples` (`paired[i]`: whether sample i keeps its own
-    /// haptics).
-    pub fn labels(&self, samples: &[Sample], paired: &[u8], side: usize) -> LabelArrays {
+    /// haptics); the RGB reconstruction target only `with_rgb01`.
+    pub fn labels(
+        &self,
+        samples: &[Sample],
+        paired: &[u8],
+        side: usize,
+        with_rgb01: bool,
+    ) -> LabelArrays {
         let n = side * side;
         let b = samples.len();
         let mut out = LabelArrays {
@@ -264,7 +272,7 @@ impl Normaliser {
             contact_next: Vec::with_capacity(b),
             paired: paired.iter().map(|&p| p as f32).collect(),
             ee_delta: Vec::with_capacity(b * 3),
-            rgb01: Vec::with_capacity(b * 3 * n),
+            rgb01: Vec::with_capacity(if with_rgb01 { b * 3 * n } else { 0 }),
             last_wrench: Vec::with_capacity(b * 6),
         };
         for s in samples {
@@ -285,7 +293,7 @@ impl Normaliser {
                 out.ee_delta
                     .push((d - self.ee_delta_mean[k]) / self.ee_delta_std[k]);
             }
-            for c in 0..3 {
+            for c in (0..3).filter(|_| with_rgb01) {
                 out.rgb01
                     .extend(s.rgb[c..].iter().step_by(3).map(|&v| v as f32 / 255.0));
             }

@@ -27,10 +27,13 @@ pub struct LabelTensors {
     pub contact_next: Tensor<1>,
     /// `[B]`.
     pub paired: Tensor<1>,
+    /// Time-aligned samples in the batch (the sum of `paired`, counted on
+    /// the host: no device round trip per step).
+    pub n_paired: f64,
     /// `[B, 3]`, normalised.
     pub ee_delta: Tensor<2>,
-    /// `[B, 3, S, S]`, 0..1.
-    pub rgb01: Tensor<4>,
+    /// `[B, 3, S, S]`, 0..1 (`None` when the arrays carry none).
+    pub rgb01: Option<Tensor<4>>,
     /// `[B, 6]`, normalised.
     pub last_wrench: Tensor<2>,
 }
@@ -45,8 +48,10 @@ impl LabelTensors {
             mask: tensor(a.mask.clone(), [b, 1, side, side], device),
             contact_next: tensor(a.contact_next.clone(), [b], device),
             paired: tensor(a.paired.clone(), [b], device),
+            n_paired: a.paired.iter().map(|&p| p as f64).sum(),
             ee_delta: tensor(a.ee_delta.clone(), [b, 3], device),
-            rgb01: tensor(a.rgb01.clone(), [b, 3, side, side], device),
+            rgb01: (!a.rgb01.is_empty())
+                .then(|| tensor(a.rgb01.clone(), [b, 3, side, side], device)),
             last_wrench: tensor(a.last_wrench.clone(), [b, 6], device),
         }
     }
@@ -110,7 +115,7 @@ pub struct Losses {
 /// `proprio` (the reconstruction target) and weights `w`.
 pub fn losses(out: &Outputs, y: &LabelTensors, proprio: &Tensor<2>, w: &LossWeights) -> Losses {
     let paired = &y.paired;
-    let n_paired = f64::from(paired.clone().sum().into_scalar::<f32>());
+    let n_paired = y.n_paired;
     let mut l = Losses {
         total: Tensor::zeros([1], &paired.device()),
         flow: None,
@@ -174,7 +179,11 @@ pub fn losses(out: &Outputs, y: &LabelTensors, proprio: &Tensor<2>, w: &LossWeig
     }
     if let Some(r) = &out.recon {
         let mse = |a: Tensor<2>, b: Tensor<2>| (a - b).powf_scalar(2.0).mean();
-        let rgb = (r.rgb.clone() - y.rgb01.clone()).powf_scalar(2.0).mean();
+        let target = y
+            .rgb01
+            .clone()
+            .expect("the reconstruction model's labels carry rgb01");
+        let rgb = (r.rgb.clone() - target).powf_scalar(2.0).mean();
         let wr = mse(r.wrench.clone(), y.last_wrench.clone());
         let pr = mse(r.proprio.clone(), proprio.clone());
         terms.push((rgb.clone(), w.recon_rgb));

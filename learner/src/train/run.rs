@@ -129,16 +129,18 @@ pub(crate) struct Prepared {
     pub zero_flow_epe: Vec<f32>,
 }
 
-/// Normalises `b` and uploads it to `device`.
+/// Normalises `b` and uploads it to `device` (with the RGB reconstruction
+/// target when `with_rgb01`).
 pub(crate) fn prepare(
     b: &Batch,
     norm: &Normaliser,
     side: usize,
+    with_rgb01: bool,
     device: &Device,
 ) -> Result<Prepared> {
     let obs: Vec<ObservationRef<'_>> = b.samples.iter().map(ObservationRef::from).collect();
     let inputs = norm.inputs(&obs, side)?;
-    let labels = norm.labels(&b.samples, &b.paired, side);
+    let labels = norm.labels(&b.samples, &b.paired, side, with_rgb01);
     let n = side * side;
     let zero_flow_epe = labels
         .flow
@@ -195,11 +197,12 @@ pub fn evaluate(
         },
     );
     let mut m = Metrics::default();
+    let recon = cfg.model.kind == ModelKind::Reconstruction;
     for (k, b) in loader.enumerate() {
         if cfg.train.max_test_batches > 0 && k as u64 >= cfg.train.max_test_batches {
             break;
         }
-        let p = prepare(&b?, norm, cfg.model.image_size, &device)?;
+        let p = prepare(&b?, norm, cfg.model.image_size, recon, &device)?;
         let out = net.forward(&cfg.model, &p.x, p.y.action.clone(), None, active);
         let l = losses(&out, &p.y, &p.x.proprio, &cfg.loss_weights());
         m.add(&l, &out, &p.paired, &p.contact_next, &p.zero_flow_epe);
@@ -258,6 +261,7 @@ pub fn train(
         .progress
         .then(|| crate::progress::Progress::new(total, "batches"));
     let variational = cfg.model.kind != ModelKind::Deterministic;
+    let recon = cfg.model.kind == ModelKind::Reconstruction;
     let side = cfg.model.image_size;
     let (mut steps_here, mut samples_here) = (0u64, 0u64);
     let started = Instant::now();
@@ -287,7 +291,7 @@ pub fn train(
                 // exactly where the interrupted run stood.
                 continue;
             }
-            let p = prepare(&b?, &norm, side, &device)?;
+            let p = prepare(&b?, &norm, side, recon, &device)?;
             let eps = variational.then(|| {
                 noise(
                     t.seed,
