@@ -1,6 +1,6 @@
 //! `learner`: the policy node and the stack's command-line interface.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use hw_sim::{PegShape, Stage, WorldConfig};
 use learner::live::{self, LiveConfig};
@@ -104,6 +104,9 @@ enum PolicyCmd {
         /// Peg (overrides the configuration's).
         #[arg(long, value_enum)]
         peg: Option<PegShape>,
+        /// Update rule (overrides the configuration's `policy.algorithm`).
+        #[arg(long, value_enum)]
+        algorithm: Option<AlgorithmArg>,
     },
     /// Runs a checkpoint's policy (its mean action) for N episodes: the
     /// four outcome categories and the normalised episode reward.
@@ -117,10 +120,37 @@ enum PolicyCmd {
         /// Seed of the first episode (training uses the run's seed upward).
         #[arg(long, default_value_t = 1_000_000)]
         seed: u64,
-        /// Peg (default: the one it was trained on).
+        /// Peg (default: the one it was trained on). Another peg than the
+        /// training one is the paper's policy transfer.
         #[arg(long, value_enum)]
         peg: Option<PegShape>,
+        /// Random pushes on the last link per episode (hw-sim's
+        /// `perturbations.random_pushes`: 5–20 N for 0.2 s each).
+        #[arg(long, default_value_t = 0)]
+        pushes: u32,
+        /// Random camera occlusions per episode (32-px squares for 1 s).
+        #[arg(long, default_value_t = 0)]
+        occlusions: u32,
+        /// F/T force noise, N (standard deviation per reading).
+        #[arg(long)]
+        force_noise_n: Option<f64>,
+        /// Depth noise, m (standard deviation per pixel).
+        #[arg(long)]
+        depth_noise_m: Option<f64>,
+        /// RGB noise, 8-bit levels (standard deviation per channel).
+        #[arg(long)]
+        rgb_noise: Option<f64>,
+        /// Also write the report as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
+}
+
+/// `--algorithm`'s values.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum AlgorithmArg {
+    Trpo,
+    Ppo,
 }
 
 #[derive(Debug, Subcommand)]
@@ -253,6 +283,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             resume,
             env_steps,
             peg,
+            algorithm,
         } => {
             let mut cfg = match &config {
                 Some(p) => run::read_config(p)?,
@@ -263,6 +294,12 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             }
             if let Some(p) = peg {
                 cfg.env.world.task.peg = p;
+            }
+            if let Some(a) = algorithm {
+                cfg.policy.algorithm = match a {
+                    AlgorithmArg::Trpo => learner::rl::Algorithm::Trpo,
+                    AlgorithmArg::Ppo => learner::rl::Algorithm::Ppo,
+                };
             }
             let c = run::train(cfg, &out, resume)?;
             println!(
@@ -277,22 +314,47 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             episodes,
             seed,
             peg,
+            pushes,
+            occlusions,
+            force_noise_n,
+            depth_noise_m,
+            rgb_noise,
+            json,
         } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             let c = run::read_checkpoint(&checkpoint)?;
+            let trained_on = c.config.env.world.task.peg;
             let mut cfg = c.config;
+            let world = &mut cfg.env.world;
             if let Some(p) = peg {
-                cfg.env.world.task.peg = p;
+                world.task.peg = p;
+            }
+            world.perturbations.random_pushes += pushes;
+            world.perturbations.random_occlusions += occlusions;
+            for (v, field) in [
+                (force_noise_n, &mut world.noise.force_std_n),
+                (depth_noise_m, &mut world.noise.depth_std_m),
+                (rgb_noise, &mut world.noise.rgb_std),
+            ] {
+                if let Some(v) = v {
+                    *field = v;
+                }
             }
             let r = run::evaluate(&c.state.policy, &cfg, episodes, seed)?;
             println!(
-                "{} episodes ({} peg): normalised reward {:.3}",
+                "{} episodes ({} peg, trained on {}): normalised reward {:.3}",
                 r.episodes,
                 cfg.env.world.task.peg.name(),
+                trained_on.name(),
                 r.mean_normalised
             );
             for o in Outcome::ALL.into_iter().rev() {
                 println!("  {:<20} {:5.1}%", o.name(), 100.0 * r.outcomes[o.index()]);
+            }
+            if let Some(path) = json {
+                let text = serde_json::to_string_pretty(&r)?;
+                std::fs::write(&path, text)
+                    .with_context(|| format!("writing {}", path.display()))?;
             }
         }
     }

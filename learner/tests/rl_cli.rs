@@ -14,7 +14,7 @@ checkpoint_every = 1
 [env]
 max_steps = 20
 
-[trpo]
+[policy]
 batch_steps = 40
 hidden = [16, 16]
 "#;
@@ -85,7 +85,7 @@ fn train_resume_and_evaluate() {
 fn a_bad_configuration_is_named() {
     let dir = test_support::scratch_dir("rl-cli-bad");
     let cfg = dir.path().join("bad.toml");
-    std::fs::write(&cfg, "[trpo]\nmax_kl = -1.0\n").unwrap();
+    std::fs::write(&cfg, "[policy.trpo]\nmax_kl = -1.0\n").unwrap();
     let o = learner()
         .args(["policy", "train", "--config"])
         .arg(&cfg)
@@ -95,11 +95,68 @@ fn a_bad_configuration_is_named() {
         .unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("trpo.max_kl"), "{err}");
+    assert!(err.contains("policy.trpo.max_kl"), "{err}");
     let o = learner()
         .args(["policy", "train", "--config"])
         .arg(dir.path().join("missing.toml"))
         .output()
         .unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("missing.toml"));
+}
+
+#[test]
+fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
+    let dir = test_support::scratch_dir("rl-cli-ppo");
+    let cfg = dir.path().join("train.toml");
+    // Episodes of 3 s: hw-sim's random pushes start after 1 s.
+    std::fs::write(
+        &cfg,
+        "seed = 5\nnum_envs = 2\nthreads = 2\nenv_steps = 60\n\n[env]\nmax_steps = 60\n\n\
+         [policy]\nbatch_steps = 60\nhidden = [8]\n\n[policy.ppo]\nminibatch = 16\nepochs = 2\n",
+    )
+    .unwrap();
+    let out = dir.path().join("run");
+    let st = learner()
+        .args(["policy", "train", "--algorithm", "ppo", "--config"])
+        .arg(&cfg)
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
+    assert_eq!(c.config.policy.algorithm, learner::rl::Algorithm::Ppo);
+    // 60 steps in one batch: 2 epochs of 4 minibatches of ≤ 16.
+    assert_eq!(c.state.adam.t, 8);
+    let eval = |extra: &[&str], json: &str| {
+        let path = dir.path().join(json);
+        let o = learner()
+            .args(["policy", "eval", "--episodes", "1", "--peg", "triangle"])
+            .args(extra)
+            .arg("--json")
+            .arg(&path)
+            .arg("--checkpoint")
+            .arg(out.join("checkpoint.json"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        assert!(text.contains("triangle peg, trained on square"), "{text}");
+        let r: learner::rl::run::EvalReport =
+            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(r.episodes, 1);
+        r
+    };
+    let calm = eval(&[], "calm.json");
+    let pushed = eval(&["--pushes", "3", "--force-noise-n", "0.5"], "pushed.json");
+    // The same seed and policy: only the perturbations differ.
+    assert_ne!(calm.normalised, pushed.normalised);
+    let o = learner()
+        .args(["policy", "eval", "--force-noise-n=-1", "--checkpoint"])
+        .arg(out.join("checkpoint.json"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("force_std_n"), "{err}");
 }

@@ -66,6 +66,25 @@ impl Normaliser {
         }
     }
 
+    /// Means 0 and deviations 1: inputs pass unchanged. For benchmarks and
+    /// tests of a model that no dataset has normalised.
+    pub fn identity() -> Self {
+        Self {
+            rgb_mean: [0.0; 3],
+            rgb_std: [1.0; 3],
+            depth_mean: 0.0,
+            depth_std: 1.0,
+            wrench_mean: [0.0; 6],
+            wrench_std: [1.0; 6],
+            proprio_mean: [0.0; PROPRIO],
+            proprio_std: [1.0; PROPRIO],
+            action_mean: [0.0; 4],
+            action_std: [1.0; 4],
+            ee_delta_mean: [0.0; 3],
+            ee_delta_std: [1.0; 3],
+        }
+    }
+
     /// Checks every constant is finite and every deviation positive,
     /// naming the input at fault.
     pub fn validate(&self) -> Result<(), String> {

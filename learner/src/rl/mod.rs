@@ -1,14 +1,17 @@
 //! Reinforcement learning on the fast path (issue 18): the environment
 //! ([`env`], [`vec`]), what the policy observes ([`observe`], the frozen
 //! representation in [`represent`]), the paper's
-//! staged reward and outcome categories ([`reward`]), TRPO ([`trpo`], with
-//! the small differentiable network of [`mlp`]) and its training loop
+//! staged reward and outcome categories ([`reward`]), the Gaussian policy
+//! and value baseline ([`gaussian`], on the small differentiable network of
+//! [`mlp`]), TRPO ([`trpo`]) and PPO ([`ppo`]), and the training loop
 //! ([`train`]). docs/rl.md gives every
 //! constant and setting with its source or reason.
 
 pub mod env;
+pub mod gaussian;
 pub mod mlp;
 pub mod observe;
+pub mod ppo;
 pub mod represent;
 pub mod reward;
 pub mod run;
@@ -17,9 +20,11 @@ pub mod trpo;
 pub mod vec;
 
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
+pub use gaussian::{GaussianPolicy, LinearBaseline};
 pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};
+pub use ppo::PpoConfig;
 pub use represent::Representation;
 pub use reward::{Outcome, RewardConfig, RewardStage};
-pub use train::{EpisodeStats, IterationStats, Trainer, TrainerState};
-pub use trpo::{GaussianPolicy, LinearBaseline, TrpoConfig};
+pub use train::{Algorithm, EpisodeStats, IterationStats, PolicyConfig, Trainer, TrainerState};
+pub use trpo::TrpoConfig;
 pub use vec::{BatchEnv, VecEnv};

@@ -3,10 +3,11 @@
 //! and a progress bar; the evaluation of a checkpoint over N episodes.
 
 use super::env::{RlEnv, RlEnvConfig, RlEnvError};
+use super::gaussian::GaussianPolicy;
 use super::observe::ObservationKind;
 use super::reward::{Outcome, normalised_return};
+use super::train::{Algorithm, PolicyConfig};
 use super::train::{IterationStats, Trainer, TrainerState};
-use super::trpo::{GaussianPolicy, TrpoConfig};
 use super::vec::{VecEnv, all_cores, par_map};
 use crate::plot::{Chart, Series};
 use crate::progress::Progress;
@@ -32,8 +33,8 @@ pub struct TrainConfig {
     pub observation: ObservationKind,
     /// The environment.
     pub env: RlEnvConfig,
-    /// TRPO.
-    pub trpo: TrpoConfig,
+    /// The policy and its learning algorithm.
+    pub policy: PolicyConfig,
 }
 
 impl Default for TrainConfig {
@@ -46,7 +47,7 @@ impl Default for TrainConfig {
             checkpoint_every: 10,
             observation: ObservationKind::GroundTruth,
             env: RlEnvConfig::default(),
-            trpo: TrpoConfig::default(),
+            policy: PolicyConfig::default(),
         }
     }
 }
@@ -71,10 +72,11 @@ pub struct CurvePoint {
     pub env_steps: u64,
     /// Episodes finished in the update's batch.
     pub episodes: usize,
-    /// Their mean reward (NaN: none finished).
-    pub mean_return: f64,
+    /// Their mean reward (None: none finished; JSON has no NaN, so a NaN
+    /// here made the checkpoint unreadable).
+    pub mean_return: Option<f64>,
     /// Their mean normalised reward.
-    pub mean_normalised: f64,
+    pub mean_normalised: Option<f64>,
     /// Share in each outcome category ([`Outcome::ALL`] order).
     pub outcomes: [f64; 4],
     /// KL of the update.
@@ -89,8 +91,8 @@ impl CurvePoint {
             iteration: s.iteration,
             env_steps: s.env_steps,
             episodes: s.episodes.len(),
-            mean_return: s.mean_return().unwrap_or(f64::NAN),
-            mean_normalised: s.mean_normalised().unwrap_or(f64::NAN),
+            mean_return: s.mean_return(),
+            mean_normalised: s.mean_normalised(),
             outcomes: s.outcome_shares(),
             kl: s.update.kl,
             mean_std: s.mean_std,
@@ -183,8 +185,8 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
         cfg.threads,
     )?;
     let mut trainer = match state {
-        Some(s) => Trainer::resume(env, cfg.trpo.clone(), s)?,
-        None => Trainer::new(env, cfg.trpo.clone(), cfg.seed)?,
+        Some(s) => Trainer::resume(env, cfg.policy.clone(), s)?,
+        None => Trainer::new(env, cfg.policy.clone(), cfg.seed)?,
     };
     let progress = Progress::new(cfg.env_steps, "steps");
     let started = std::time::Instant::now();
@@ -201,7 +203,7 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
                 detail: e.to_string(),
             })?;
             write_atomic(&ckpt_path, &json)?;
-            write_curves(out, history)?;
+            write_curves(out, history, cfg.policy.algorithm)?;
             Ok(c)
         };
     while trainer.state.env_steps < cfg.env_steps {
@@ -215,8 +217,8 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
                 "update {} | {:.2} episodes/s | mean return {:.1} (normalised {:.3}) | completed {:.0}%",
                 s.iteration,
                 rate,
-                p.mean_return,
-                p.mean_normalised,
+                p.mean_return.unwrap_or(f64::NAN),
+                p.mean_normalised.unwrap_or(f64::NAN),
                 100.0 * p.outcomes[Outcome::CompletedInsertion.index()]
             ),
         );
@@ -230,7 +232,12 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
 }
 
 /// Writes `curve.csv` and the two charts of a run.
-pub fn write_curves(out: &Path, history: &[CurvePoint]) -> Result<(), RunError> {
+pub fn write_curves(
+    out: &Path,
+    history: &[CurvePoint],
+    algorithm: Algorithm,
+) -> Result<(), RunError> {
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
     let path = out.join("curve.csv");
     let mut f = std::fs::File::create(&path).map_err(io(&path))?;
     let mut text = String::from(
@@ -243,8 +250,8 @@ pub fn write_curves(out: &Path, history: &[CurvePoint]) -> Result<(), RunError> 
             p.iteration,
             p.env_steps,
             p.episodes,
-            p.mean_return,
-            p.mean_normalised,
+            opt(p.mean_return),
+            opt(p.mean_normalised),
             o[3],
             o[2],
             o[1],
@@ -264,18 +271,22 @@ pub fn write_curves(out: &Path, history: &[CurvePoint]) -> Result<(), RunError> 
             .map(|p| (p.env_steps as f64, f(p)))
             .collect::<Vec<_>>()
     };
+    let name = match algorithm {
+        Algorithm::Trpo => "TRPO",
+        Algorithm::Ppo => "PPO",
+    };
     Chart::new(
-        "TRPO: episode reward",
+        &format!("{name}: episode reward"),
         "environment steps (20 Hz policy steps)",
         "mean normalised episode reward",
     )
     .with(Series::line(
         "mean normalised reward",
-        pts(&|p| p.mean_normalised),
+        pts(&|p| p.mean_normalised.unwrap_or(f64::NAN)),
     ))
     .write_png(out.join("return.png"))?;
     let mut chart = Chart::new(
-        "TRPO: outcome of the episodes",
+        &format!("{name}: outcome of the episodes"),
         "environment steps (20 Hz policy steps)",
         "share of the update's episodes",
     );

@@ -1,6 +1,7 @@
-//! On-policy rollouts from a [`BatchEnv`] and the TRPO training loop:
-//! collect `batch_steps` steps with the current policy, estimate advantages
-//! (GAE over the baseline's values), fit the baseline, update the policy.
+//! On-policy rollouts from a [`BatchEnv`] and the training loop: collect
+//! `batch_steps` steps with the current policy, estimate advantages (GAE
+//! over the baseline's values), update the policy (TRPO or PPO), fit the
+//! baseline.
 //!
 //! Episodes continue across updates: a trajectory cut by the end of a batch
 //! is bootstrapped with the baseline's value of its last state, and goes on
@@ -9,10 +10,114 @@
 //! stream, so a run is the same whatever the number of threads.
 
 use super::env::RlEnvError;
+use super::gaussian::{Batch, GaussianPolicy, LinearBaseline, UpdateStats, gae};
+use super::ppo::{Adam, PpoConfig, ppo_update};
 use super::reward::{Outcome, normalised_return};
-use super::trpo::{Batch, GaussianPolicy, LinearBaseline, TrpoConfig, UpdateStats, gae, trpo_step};
+use super::trpo::{TrpoConfig, trpo_step};
 use super::vec::BatchEnv;
+use hw_sim::FieldError;
 use serde::{Deserialize, Serialize};
+
+/// The policy-gradient algorithm of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Algorithm {
+    /// Trust-region policy optimisation, the paper's.
+    #[default]
+    Trpo,
+    /// Proximal policy optimisation (clipped surrogate).
+    Ppo,
+}
+
+/// The policy and its learning (`[policy]`): what both algorithms share,
+/// with each one's own settings in `[policy.trpo]` and `[policy.ppo]`.
+/// Defaults are the paper's appendix (simulation column) and, where it is
+/// silent, pytorch-trpo's, which the paper's implementation was based on
+/// (docs/rl.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PolicyConfig {
+    /// The update rule.
+    pub algorithm: Algorithm,
+    /// Environment steps per policy update (paper: 2000).
+    pub batch_steps: usize,
+    /// Discount γ (paper: 0.995).
+    pub gamma: f64,
+    /// GAE λ (paper: 0.97).
+    pub gae_lambda: f64,
+    /// Hidden layer widths of the policy's MLP (pytorch-trpo: 64, 64).
+    pub hidden: Vec<usize>,
+    /// Initial log σ of every action component (pytorch-trpo: 0).
+    pub init_log_std: f64,
+    /// Ridge regularisation of the baseline's least squares (grown ×10
+    /// while the normal equations are not positive definite).
+    pub baseline_ridge: f64,
+    /// TRPO's settings.
+    pub trpo: TrpoConfig,
+    /// PPO's settings.
+    pub ppo: PpoConfig,
+}
+
+impl Default for PolicyConfig {
+    fn default() -> Self {
+        Self {
+            algorithm: Algorithm::Trpo,
+            batch_steps: 2000,
+            gamma: 0.995,
+            gae_lambda: 0.97,
+            hidden: vec![64, 64],
+            init_log_std: 0.0,
+            baseline_ridge: 1e-5,
+            trpo: TrpoConfig::default(),
+            ppo: PpoConfig::default(),
+        }
+    }
+}
+
+impl PolicyConfig {
+    /// Checks every value, naming the first bad one.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        for (name, v) in [
+            ("policy.gamma", self.gamma),
+            ("policy.gae_lambda", self.gae_lambda),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(FieldError::new(name, v, "must be within [0, 1]"));
+            }
+        }
+        if !(self.baseline_ridge.is_finite() && self.baseline_ridge > 0.0) {
+            return Err(FieldError::new(
+                "policy.baseline_ridge",
+                self.baseline_ridge,
+                "must be positive and finite",
+            ));
+        }
+        if !self.init_log_std.is_finite() {
+            return Err(FieldError::new(
+                "policy.init_log_std",
+                self.init_log_std,
+                "must be finite",
+            ));
+        }
+        if self.batch_steps == 0 {
+            return Err(FieldError::new(
+                "policy.batch_steps",
+                0,
+                "must be at least 1",
+            ));
+        }
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return Err(FieldError::new(
+                "policy.hidden",
+                format!("{:?}", self.hidden),
+                "at least one layer, each at least 1 wide",
+            ));
+        }
+        // Both are checked whichever runs: a resumed run may switch.
+        self.trpo.validate()?;
+        self.ppo.validate()
+    }
+}
 
 /// One finished episode.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -40,7 +145,7 @@ pub struct IterationStats {
     pub env_steps: u64,
     /// The episodes that ended during this batch.
     pub episodes: Vec<EpisodeStats>,
-    /// What the TRPO update did.
+    /// What the policy update did.
     pub update: UpdateStats,
     /// Mean σ of the policy after the update.
     pub mean_std: f64,
@@ -102,7 +207,7 @@ impl Collected {
         seg: &mut Segment,
         last: Option<(&[f64], f64)>,
         baseline: &LinearBaseline,
-        cfg: &TrpoConfig,
+        cfg: &PolicyConfig,
     ) {
         if seg.rewards.is_empty() {
             return;
@@ -134,12 +239,16 @@ pub struct TrainerState {
     pub episodes_started: u64,
     /// Seed of the run.
     pub seed: u64,
+    /// PPO's optimiser (empty for TRPO, which keeps no state between
+    /// updates).
+    #[serde(default)]
+    pub adam: Adam,
 }
 
-/// The TRPO training loop over a batch of environments.
+/// The training loop over a batch of environments.
 pub struct Trainer<E: BatchEnv> {
     env: E,
-    cfg: TrpoConfig,
+    cfg: PolicyConfig,
     /// Policy, baseline and counters (what a checkpoint holds).
     pub state: TrainerState,
     segments: Vec<Segment>,
@@ -153,7 +262,7 @@ pub struct Trainer<E: BatchEnv> {
 
 impl<E: BatchEnv> Trainer<E> {
     /// A fresh run: a new policy drawn from `seed`.
-    pub fn new(env: E, cfg: TrpoConfig, seed: u64) -> Result<Self, RlEnvError> {
+    pub fn new(env: E, cfg: PolicyConfig, seed: u64) -> Result<Self, RlEnvError> {
         cfg.validate()?;
         let mut rng = hw_sim::rng::seeded(seed, 900);
         let policy = GaussianPolicy::new(
@@ -170,12 +279,13 @@ impl<E: BatchEnv> Trainer<E> {
             env_steps: 0,
             episodes_started: 0,
             seed,
+            adam: Adam::default(),
         };
         Self::resume(env, cfg, state)
     }
 
     /// A run resumed from `state` (its episodes in progress start afresh).
-    pub fn resume(env: E, cfg: TrpoConfig, state: TrainerState) -> Result<Self, RlEnvError> {
+    pub fn resume(env: E, cfg: PolicyConfig, state: TrainerState) -> Result<Self, RlEnvError> {
         cfg.validate()?;
         let n = env.num_envs();
         if state.policy.sizes.first() != Some(&env.obs_dim())
@@ -204,7 +314,7 @@ impl<E: BatchEnv> Trainer<E> {
     }
 
     /// The settings.
-    pub fn config(&self) -> &TrpoConfig {
+    pub fn config(&self) -> &PolicyConfig {
         &self.cfg
     }
 
@@ -290,7 +400,21 @@ impl<E: BatchEnv> Trainer<E> {
             .zip(&values)
             .map(|(a, v)| a + v)
             .collect();
-        let update = trpo_step(&mut self.state.policy, &mut batch, &self.cfg);
+        let update = match self.cfg.algorithm {
+            Algorithm::Trpo => trpo_step(&mut self.state.policy, &mut batch, &self.cfg.trpo),
+            Algorithm::Ppo => {
+                // Minibatch order from its own stream: the same run on any
+                // number of threads, and after a resume.
+                let mut order = hw_sim::rng::seeded(self.state.seed, 5000 + self.state.iteration);
+                ppo_update(
+                    &mut self.state.policy,
+                    &mut batch,
+                    &self.cfg.ppo,
+                    &mut self.state.adam,
+                    &mut order,
+                )
+            }
+        };
         self.state
             .baseline
             .fit(&batch.obs, &times, &targets, self.cfg.baseline_ridge);
