@@ -61,6 +61,8 @@ pub enum EpisodePolicy {
     Heuristic,
     /// The bounded random walk.
     Random,
+    /// A trained policy (`learner run --policy`).
+    Learned,
 }
 
 impl EpisodePolicy {
@@ -69,6 +71,7 @@ impl EpisodePolicy {
         match self {
             Self::Heuristic => "heuristic",
             Self::Random => "random",
+            Self::Learned => "learned",
         }
     }
 }
@@ -133,7 +136,8 @@ impl MixedPolicy {
                 a[2] = a[2].max(down);
                 a
             }
-            EpisodePolicy::Random => self.random.act(obs, task),
+            // A mix draws only the two above.
+            EpisodePolicy::Random | EpisodePolicy::Learned => self.random.act(obs, task),
         }
     }
 }

@@ -1,6 +1,8 @@
 //! The live policy node: subscribes to the controller's sensor frames, the
-//! camera and the simulator's episode reports, acts at 20 Hz, publishes the
-//! actions and logs every stream to MCAP, one file per episode.
+//! camera and the simulator's episode reports, acts at 20 Hz (the scripted
+//! heuristic, the collection mix, or a trained policy with its encoder),
+//! publishes the actions and logs every stream to MCAP, one file per
+//! episode.
 //!
 //! Real-time mode acts every 50 ms of wall time on the newest frame, as a
 //! deployed policy does. Lockstep mode answers each action request of a
@@ -11,12 +13,17 @@ use crate::collect::{EpisodePolicy, Mix, MixedPolicy};
 use crate::log::events::{Event, Outcome, Reset};
 use crate::log::gaps::SensorGapCounter;
 use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
-use crate::policy::{HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory};
+use crate::policy::{
+    Action4, HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, WrenchHistory,
+};
 use crate::progress::Progress;
 use crate::proprio::roll_reference;
+use crate::rl::deploy::{TrainedPolicy, task_state};
+use crate::rl::observe::ObsView;
 use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Translation3};
+use shared_mem_schema::Message;
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::rates::ACTION_PERIOD_NS;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
@@ -27,6 +34,7 @@ use shared_mem_schema::{
 };
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// Settings of a live run.
@@ -60,6 +68,8 @@ pub struct LiveConfig {
     pub target_states: Option<u64>,
     /// Log options.
     pub log: LogOptions,
+    /// A trained policy acts instead of the heuristic (`--policy`).
+    pub policy: Option<Arc<TrainedPolicy>>,
 }
 
 impl LiveConfig {
@@ -79,6 +89,7 @@ impl LiveConfig {
             max_actions: None,
             target_states: None,
             log: LogOptions::default(),
+            policy: None,
         }
     }
 }
@@ -215,6 +226,11 @@ struct Seen {
     frames: u64,
     last_frame_wall_ns: u64,
     gaps: SensorGapCounter,
+    /// The episode's latest camera frame (kept only for a policy that
+    /// reads the camera).
+    camera: Option<Box<CameraFrame>>,
+    /// Whether camera frames are kept.
+    keep_camera: bool,
 }
 
 impl PolicyNode {
@@ -283,8 +299,15 @@ impl PolicyNode {
             }
         })?;
         transport::drain(&self.camera, |c| {
-            if c.header.episode == episode
-                && let Some(l) = log.as_deref_mut()
+            if c.header.episode != episode {
+                return;
+            }
+            if seen.keep_camera {
+                // Byte copy: a frame is too large for a stack temporary.
+                let kept = seen.camera.get_or_insert_with(CameraFrame::boxed_zeroed);
+                bytemuck::bytes_of_mut(&mut **kept).copy_from_slice(bytemuck::bytes_of(c));
+            }
+            if let Some(l) = log.as_deref_mut()
                 && let Err(e) = l.camera(c)
             {
                 err = Some(e);
@@ -562,6 +585,9 @@ struct LiveEpisode {
     best_stage: Stage,
     /// Hardware time the peg completed the insertion.
     completed_at: Option<u64>,
+    /// The wrench read at the first action (free space: the sensor's bias
+    /// and the peg's weight), as the RL environment takes it.
+    free_wrench: Option<[f64; 6]>,
 }
 
 impl LiveEpisode {
@@ -588,9 +614,11 @@ impl LiveEpisode {
         let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
         let task = task_geometry(&first, &world);
         let mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
-        let policy = mixed
-            .as_ref()
-            .map_or(EpisodePolicy::Heuristic, |m| m.kind());
+        let policy = match (&cfg.policy, &mixed) {
+            (Some(_), _) => EpisodePolicy::Learned,
+            (None, Some(m)) => m.kind(),
+            (None, None) => EpisodePolicy::Heuristic,
+        };
         let mut config = RunConfig::new(RunMode::Live, world.clone(), policy, episode, seed);
         config.lockstep = Some(cfg.lockstep);
         config.namespace = Some(cfg.namespace.clone());
@@ -626,7 +654,10 @@ impl LiveEpisode {
                 frames: 0,
                 last_frame_wall_ns: mono_now_ns(),
                 gaps: SensorGapCounter::default(),
+                camera: None,
+                keep_camera: cfg.policy.as_ref().is_some_and(|p| p.needs_camera()),
             },
+            free_wrench: None,
             actions: 0,
             next_tick: mono_now_ns(),
             acted_for_step: u64::MAX,
@@ -739,9 +770,13 @@ impl LiveEpisode {
     ) -> Result<(), StackError> {
         let roll_ref = self.seen.roll_ref_rad.expect("set with the first frame");
         let obs = Observation::from_frame(frame, roll_ref);
-        let a = match self.mixed.as_mut() {
-            Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
-            None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),
+        let a = if let Some(p) = &cfg.policy {
+            self.learned(p, &obs, frame)
+        } else {
+            match self.mixed.as_mut() {
+                Some(m) => m.act(&obs, &self.seen.wrench, &self.task),
+                None => self.heuristic.act(&obs, &self.seen.wrench, &self.task),
+            }
         };
         let apply_at = if cfg.lockstep { frame.step + 1 } else { 0 };
         let m = node.send_action(self.episode, frame.header.t_hw_ns, apply_at, a)?;
@@ -753,6 +788,25 @@ impl LiveEpisode {
             self.next_tick = mono_now_ns() + ACTION_PERIOD_NS;
         }
         Ok(())
+    }
+
+    /// The trained policy's action on the state the node has seen: the
+    /// view the RL environment gives it, from the frame, the wrench
+    /// history, the simulator's latest report and the latest camera frame.
+    fn learned(&mut self, p: &TrainedPolicy, obs: &Observation, frame: &SensorFrame) -> Action4 {
+        let free = *self.free_wrench.get_or_insert(frame.wrench);
+        let report = self.seen.report.unwrap_or(self.first);
+        let task = task_state(&report);
+        let view = ObsView {
+            obs,
+            wrench: &self.seen.wrench,
+            free_wrench: &free,
+            task: &task,
+            hole_pose: &self.task.hole_pose,
+            symmetry: self.task.symmetry,
+            camera: self.seen.camera.as_deref(),
+        };
+        p.act(&view)
     }
 
     /// Records the outcome at hardware time `t_end` and closes the log.

@@ -43,6 +43,11 @@ struct EpisodeArgs {
     /// Deterministic lockstep run.
     #[arg(long)]
     lockstep: bool,
+    /// A trained policy acts instead of the heuristic: a `learner policy
+    /// train` checkpoint.json (its representation model, if it observes
+    /// through one, is loaded from the path its run was configured with).
+    #[arg(long)]
+    policy: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -835,6 +840,21 @@ fn run(cli: Cli) -> Result<()> {
             cfg.target_states = c.states;
             cfg.log.foxglove = !c.no_foxglove;
             cfg.log.view_rate_hz = c.view_rate_hz;
+            if let Some(path) = &a.policy {
+                anyhow::ensure!(
+                    cfg.mix.is_none(),
+                    "--policy and --mix-heuristic-fraction exclude each other"
+                );
+                let p = learner::rl::TrainedPolicy::load(path)?;
+                if p.trained_peg() != a.peg {
+                    eprintln!(
+                        "learner: the policy was trained on the {} peg; running it on the {} peg",
+                        p.trained_peg().name(),
+                        a.peg.name()
+                    );
+                }
+                cfg.policy = Some(std::sync::Arc::new(p));
+            }
             let outcomes = live::run(&cfg, |o| {
                 let g = &o.sensor_gaps;
                 let loss = g.sensor.unwrap_or_default();
@@ -884,6 +904,12 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(w) = &a.world {
                 run_args.push("--world".into());
                 run_args.push(w.display().to_string());
+            }
+            if let Some(p) = &a.policy {
+                // Fail here, before any process starts, on a bad file.
+                learner::rl::run::read_checkpoint(p)?;
+                run_args.push("--policy".into());
+                run_args.push(p.display().to_string());
             }
             let status = stack::run(&StackConfig {
                 namespace: a.namespace.clone(),

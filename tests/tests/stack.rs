@@ -693,3 +693,102 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
     }
     assert!(stopping, "no STOPPING notification");
 }
+
+/// A policy checkpoint that centres the tip over the hole of episode
+/// `seed` from the ground truth: hidden unit k = tanh(4·obs[k]) for the
+/// tip's x and y in the hole frame (obs = s/0.1 m), the base-frame step
+/// −R·h (R the hole frame's rotation, from the fast path's world of the same
+/// seed; ×5 mm), no descent and no roll. It acts only through the
+/// observation the live node rebuilds.
+fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
+    use learner::rl::run::{Checkpoint, TrainConfig};
+    use learner::rl::{GaussianPolicy, LinearBaseline, TrainerState};
+    let (obs, hidden, act) = (14, 2, 4);
+    let mut net = vec![0.0; hidden * obs + hidden + act * hidden + act];
+    net[0] = 4.0; // w1[0][0]: s_x
+    net[obs + 1] = 4.0; // w1[1][1]: s_y
+    let mut env = learner::rl::RlEnv::new(&Default::default()).unwrap();
+    env.reset(seed, false).unwrap();
+    let r = env.task_geometry().hole_pose.rotation.to_rotation_matrix();
+    let w2 = hidden * obs + hidden;
+    for i in 0..2 {
+        for j in 0..2 {
+            net[w2 + i * hidden + j] = -r[(i, j)]; // w2[i][j]
+        }
+    }
+    let c = Checkpoint {
+        config: TrainConfig::default(),
+        state: TrainerState {
+            policy: GaussianPolicy {
+                sizes: vec![obs, hidden, act],
+                net,
+                log_std: vec![0.0; act],
+            },
+            baseline: LinearBaseline::default(),
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed: 1,
+            adam: Default::default(),
+        },
+        history: Vec::new(),
+    };
+    let path = dir.join("centring.json");
+    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn a_trained_policy_drives_the_stack_live() {
+    use shared_mem_schema::EpisodeReport;
+    let _g = tests::exclusive();
+    let dir = test_support::scratch_dir("stack-policy");
+    let policy = centring_policy(dir.path(), 4);
+    let out = Command::new(tests::stack_bins().join("learner"))
+        .args(["stack", "--lockstep", "--episodes", "1", "--seed", "4"])
+        .args(["--episode-timeout-s", "3", "--namespace"])
+        .arg(tests::unique_namespace("policy"))
+        .arg("--policy")
+        .arg(&policy)
+        .arg("--log-dir")
+        .arg(dir.path())
+        .output()
+        .expect("running learner stack");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let log = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the episode's log");
+    let reader = learner::log::LogReader::open(&log).unwrap();
+    let config = reader.read_config(None).unwrap();
+    assert_eq!(
+        config[0].1.policy,
+        learner::collect::EpisodePolicy::Learned,
+        "the log names the policy"
+    );
+    let actions = reader
+        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .unwrap();
+    // 3 s at 20 Hz, the first action after one policy period.
+    assert!(actions.len() >= 55, "{} actions", actions.len());
+    for a in &actions {
+        assert_eq!(a.delta_pos_m[2], 0.0, "no descent");
+        assert_eq!(a.delta_roll_rad, 0.0, "no roll");
+        assert!(a.delta_pos_m[0].abs() <= 0.005 && a.delta_pos_m[1].abs() <= 0.005);
+    }
+    let reports = reader
+        .read_raw::<EpisodeReport>(learner::log::topics::EPISODE, None)
+        .unwrap();
+    let horizontal = |r: &EpisodeReport| r.s_m[0].hypot(r.s_m[1]);
+    let (first, last) = (horizontal(&reports[0]), horizontal(reports.last().unwrap()));
+    println!("horizontal distance to the hole: {first:.4} m → {last:.4} m");
+    assert!(first > 0.02, "the episode starts off the hole: {first}");
+    assert!(
+        last < 0.003 && last < 0.2 * first,
+        "the policy centred the tip over the hole: {first} → {last}"
+    );
+}

@@ -50,6 +50,10 @@ pub struct Balance {
     pub heuristic: [StageCounts; 4],
     /// Random episodes.
     pub random: [StageCounts; 4],
+    /// Episodes of a trained policy (absent from datasets built before
+    /// there were any).
+    #[serde(default)]
+    pub learned: [StageCounts; 4],
 }
 
 impl Balance {
@@ -58,6 +62,7 @@ impl Balance {
         let row = match policy {
             EpisodePolicy::Heuristic => &mut self.heuristic,
             EpisodePolicy::Random => &mut self.random,
+            EpisodePolicy::Learned => &mut self.learned,
         };
         let c = &mut row[tags.stage.code() as usize];
         c.samples += 1;
@@ -70,6 +75,7 @@ impl Balance {
         let row = match policy {
             EpisodePolicy::Heuristic => &self.heuristic,
             EpisodePolicy::Random => &self.random,
+            EpisodePolicy::Learned => &self.learned,
         };
         let mut t = StageCounts::default();
         for c in row {
@@ -82,6 +88,7 @@ impl Balance {
     pub fn total(&self) -> StageCounts {
         let mut t = self.policy_total(EpisodePolicy::Heuristic);
         t.add(&self.policy_total(EpisodePolicy::Random));
+        t.add(&self.policy_total(EpisodePolicy::Learned));
         t
     }
 
@@ -112,7 +119,11 @@ impl Balance {
         for (policy, row) in [
             (EpisodePolicy::Heuristic, &self.heuristic),
             (EpisodePolicy::Random, &self.random),
+            (EpisodePolicy::Learned, &self.learned),
         ] {
+            if policy == EpisodePolicy::Learned && self.policy_total(policy).samples == 0 {
+                continue;
+            }
             for stage in Stage::ALL {
                 let c = &row[stage.code() as usize];
                 if c.samples > 0 {

@@ -7,6 +7,7 @@
 //! ([`train`]). docs/rl.md gives every
 //! constant and setting with its source or reason.
 
+pub mod deploy;
 pub mod env;
 pub mod gaussian;
 pub mod mlp;
@@ -19,6 +20,7 @@ pub mod train;
 pub mod trpo;
 pub mod vec;
 
+pub use deploy::TrainedPolicy;
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
 pub use gaussian::{GaussianPolicy, LinearBaseline};
 pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};

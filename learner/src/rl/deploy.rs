@@ -1,0 +1,112 @@
+//! A trained policy outside its training run: loaded from a checkpoint
+//! with the observer it was trained with (ground truth, or the frozen
+//! representation it names) and its action scale, it turns one state into
+//! the controller's action: the Gaussian's mean, clipped and scaled as the
+//! environment did. The live policy node (`learner run --policy`) acts
+//! through it.
+
+use super::env::ActionScale;
+use super::gaussian::GaussianPolicy;
+use super::observe::{ObsView, Observer};
+use super::run::{RunError, read_checkpoint};
+use crate::policy::Action4;
+use hw_sim::{PegShape, Stage, TaskState};
+use nalgebra::Vector3;
+use shared_mem_schema::EpisodeReport;
+use std::path::Path;
+use std::sync::Arc;
+
+/// A policy and what it needs to act.
+pub struct TrainedPolicy {
+    policy: GaussianPolicy,
+    observer: Arc<dyn Observer>,
+    scale: ActionScale,
+    peg: PegShape,
+}
+
+impl std::fmt::Debug for TrainedPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TrainedPolicy")
+            .field("sizes", &self.policy.sizes)
+            .field("observation_dim", &self.observer.dim())
+            .field("scale", &self.scale)
+            .field("peg", &self.peg)
+            .finish()
+    }
+}
+
+impl TrainedPolicy {
+    /// Loads `checkpoint` (a run's checkpoint.json) and its observer (a
+    /// representation's model is loaded from the directory the run was
+    /// configured with).
+    pub fn load(checkpoint: &Path) -> Result<Self, RunError> {
+        let c = read_checkpoint(checkpoint)?;
+        let observer = c.config.observation.observer()?;
+        Self::new(
+            c.state.policy,
+            observer,
+            c.config.env.action,
+            c.config.env.world.task.peg,
+        )
+        .map_err(|detail| RunError::Parse {
+            path: checkpoint.to_path_buf(),
+            detail,
+        })
+    }
+
+    /// From its parts; refused when the policy's input is not the
+    /// observer's output.
+    pub fn new(
+        policy: GaussianPolicy,
+        observer: Arc<dyn Observer>,
+        scale: ActionScale,
+        peg: PegShape,
+    ) -> Result<Self, String> {
+        let input = policy.sizes.first().copied().unwrap_or(0);
+        if input != observer.dim() || policy.act_dim() != 4 {
+            return Err(format!(
+                "the policy takes {input} inputs and gives {} actions; its observer gives {} \
+                 values and the controller takes 4",
+                policy.act_dim(),
+                observer.dim()
+            ));
+        }
+        Ok(Self {
+            policy,
+            observer,
+            scale,
+            peg,
+        })
+    }
+
+    /// Whether the observer reads the camera.
+    pub fn needs_camera(&self) -> bool {
+        self.observer.needs_camera()
+    }
+
+    /// The peg it was trained on.
+    pub fn trained_peg(&self) -> PegShape {
+        self.peg
+    }
+
+    /// The action for one state: the mean, clipped to [−1, 1] and scaled.
+    pub fn act(&self, view: &ObsView<'_>) -> Action4 {
+        let mut obs = vec![0.0; self.observer.dim()];
+        self.observer.observe(std::slice::from_ref(view), &mut obs);
+        self.scale.to_delta(&self.policy.means(&obs))
+    }
+}
+
+/// The simulator's task state as an episode report carries it (the live
+/// node's view of what the fast path reads from the world directly).
+pub fn task_state(r: &EpisodeReport) -> TaskState {
+    let stage_now = r.stage_now();
+    TaskState {
+        s_m: Vector3::from(r.s_m),
+        s_psi_rad: r.s_psi_rad,
+        in_contact: r.in_contact != 0,
+        in_hole: stage_now >= Stage::Inserted,
+        stage_now,
+        best_stage: r.best_stage(),
+    }
+}
