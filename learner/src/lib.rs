@@ -17,6 +17,7 @@
 pub mod collect;
 pub mod dataset;
 pub mod env;
+pub mod experiment;
 pub mod labels;
 pub mod live;
 pub mod log;

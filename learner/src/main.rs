@@ -86,6 +86,20 @@ enum Cmd {
     /// evaluate it on its test split (docs/representation.md).
     #[command(subcommand)]
     Repr(ReprCmd),
+    /// The paper's ablations end to end: dataset → representation →
+    /// policy → evaluation per variant, a results table and charts next to
+    /// the paper's numbers (docs/experiments.md). Resumes where it stopped.
+    Experiment {
+        /// The experiment (TOML; see configs/experiments/).
+        #[arg(long)]
+        config: PathBuf,
+        /// Its directory (default: runs/experiments/<config's file stem>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Run only this variant (repeatable).
+        #[arg(long)]
+        only: Vec<String>,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -816,6 +830,31 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Dataset(c) => run_dataset(c),
         Cmd::Policy(c) => run_policy(c),
         Cmd::Repr(c) => run_repr(c),
+        Cmd::Experiment { config, out, only } => {
+            use learner::experiment::{ExperimentConfig, RunOptions, run};
+            let cfg = ExperimentConfig::from_file(&config)?;
+            let out = out.unwrap_or_else(|| {
+                let stem = config
+                    .file_stem()
+                    .map_or("experiment".into(), |s| s.to_string_lossy().into_owned());
+                PathBuf::from("runs/experiments").join(stem)
+            });
+            let rows = run(
+                &cfg,
+                &out,
+                &RunOptions {
+                    only,
+                    progress: true,
+                },
+                &shared_mem_schema::process::termination_requested,
+            )?;
+            print!(
+                "{}",
+                std::fs::read_to_string(out.join("results.md")).unwrap_or_default()
+            );
+            println!("{} results in {}", rows.len(), out.display());
+            Ok(())
+        }
         Cmd::Run {
             episodes: a,
             collect: c,

@@ -89,6 +89,20 @@ impl Series {
         }
     }
 
+    /// Bars for categories: value `i` over `[i + offset, i + offset +
+    /// width)` (with [`Chart::with_categories`], category `i` sits at x = i).
+    pub fn bars(name: &str, values: &[f64], offset: f64, width: f64) -> Self {
+        Self {
+            name: name.into(),
+            points: values
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| (i as f64 + offset, v))
+                .collect(),
+            style: Style::Histogram { bin_width: width },
+        }
+    }
+
     /// A histogram: `counts[i]` over `[start + i·width, start + (i+1)·width)`.
     pub fn histogram(name: &str, start: f64, width: f64, counts: &[f64]) -> Self {
         Self {
@@ -133,6 +147,9 @@ pub struct Chart {
     pub size: (u32, u32),
     /// The series, drawn in order.
     pub series: Vec<Series>,
+    /// Names of the x axis's categories (at x = 0, 1, …): the ticks show
+    /// them instead of numbers. Empty: a numeric axis.
+    pub categories: Vec<String>,
 }
 
 impl Chart {
@@ -145,7 +162,15 @@ impl Chart {
             log_y: false,
             size: (1000, 560),
             series: Vec::new(),
+            categories: Vec::new(),
         }
+    }
+
+    /// With a categorical x axis: `names[i]` at x = i, the range one half
+    /// beyond the first and last.
+    pub fn with_categories(mut self, names: Vec<String>) -> Self {
+        self.categories = names;
+        self
     }
 
     /// With a logarithmic y axis.
@@ -194,6 +219,9 @@ impl Chart {
 
     /// The x range covering every series (0..1 when there is none).
     fn x_range(&self) -> Range<f64> {
+        if !self.categories.is_empty() {
+            return -0.5..self.categories.len() as f64 - 0.5;
+        }
         let (lo, hi) = self
             .series
             .iter()
@@ -268,6 +296,24 @@ where
     Y::CoordDescType: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
     let e = |err: &dyn std::fmt::Display| err.to_string();
+    // A category's name at its integer x, nothing between.
+    let category = |v: &f64| {
+        let i = v.round();
+        if (v - i).abs() < 1e-6 && i >= 0.0 {
+            chart
+                .categories
+                .get(i as usize)
+                .cloned()
+                .unwrap_or_default()
+        } else {
+            String::new()
+        }
+    };
+    let x_format: &dyn Fn(&f64) -> String = if chart.categories.is_empty() {
+        &tick_label
+    } else {
+        &category
+    };
     let mut ctx = ChartBuilder::on(root)
         .caption(&chart.title, (FAMILY, 26))
         .margin(18)
@@ -280,7 +326,12 @@ where
         .y_desc(&chart.y_label)
         .axis_desc_style((FAMILY, 20))
         .label_style((FAMILY, 16))
-        .x_label_formatter(&tick_label)
+        .x_label_formatter(x_format)
+        .x_labels(if chart.categories.is_empty() {
+            10
+        } else {
+            chart.categories.len()
+        })
         .y_label_formatter(&tick_label)
         .bold_line_style(RGBColor(215, 215, 215))
         .light_line_style(RGBColor(240, 240, 240))

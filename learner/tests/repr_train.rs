@@ -411,3 +411,104 @@ fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
     assert!(s.steps > steps_at_kill && s.epoch == 2);
     assert!(out.join("model").join("model.json").exists());
 }
+
+/// `learner experiment` end to end at a tiny scale: a representation
+/// variant and the ground-truth reference, each trained and evaluated on
+/// two pegs (one of them a transfer); a second invocation finds every stage
+/// done and redoes none.
+#[test]
+fn an_experiment_runs_every_stage_and_resumes() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    let dir = test_support::scratch_dir("experiment");
+    let repr = dir.join("repr.toml");
+    std::fs::write(
+        &repr,
+        format!(
+            "[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n\
+             depth_convs_per_stage = 1\n\n[train]\nbatch = 32\nepochs = 3\nlr = 1e-3\n\
+             test_fraction = 0.25\nshuffle_blocks = 4\n"
+        ),
+    )
+    .unwrap();
+    let policy = dir.join("policy.toml");
+    std::fs::write(
+        &policy,
+        format!(
+            "num_envs = 2\nthreads = 2\nenv_steps = 400\n\n[env]\nmax_steps = 20\n\n\
+             [env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+             [policy]\nbatch_steps = 40\nhidden = [8]\n"
+        ),
+    )
+    .unwrap();
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
+             [policy]\nconfig = {:?}\nenv_steps = 40\n\n\
+             [eval]\nepisodes = 2\npegs = [\"square\", \"hexagon\"]\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {:?}\npaper_completed = 0.78\n\n\
+             [[variant]]\nname = \"ground-truth\"\n",
+            dataset(),
+            policy,
+            repr
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    let out = dir.join("out");
+    let opts = RunOptions::default();
+    let rows = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(rows.len(), 4, "two variants × two pegs");
+    assert_eq!(rows[0].variant, "Full");
+    assert_eq!(rows[0].paper_completed, Some(0.78));
+    for r in &rows {
+        assert_eq!(r.report.episodes, 2);
+        assert!((r.report.outcomes.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    }
+    // The variant's policy observed its representation's z (d = 16).
+    let c = learner::rl::run::read_checkpoint(&out.join("Full/policy/checkpoint.json")).unwrap();
+    assert_eq!(c.state.policy.sizes[0], 16);
+    assert_eq!(c.state.env_steps, 40);
+    let gt = learner::rl::run::read_checkpoint(&out.join("ground-truth/policy/checkpoint.json"))
+        .unwrap();
+    assert_eq!(gt.state.policy.sizes[0], 14);
+    for f in [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "completed-square.png",
+        "completed-hexagon.png",
+        "Full/repr/model/model.json",
+        "Full/eval-hexagon.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 4, "{md}");
+    assert!(
+        md.contains("| Full | hexagon | 2 |") && md.contains("| 78% |"),
+        "{md}"
+    );
+    let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    assert_eq!(stages.lines().count(), 1 + 2 + 4, "{stages}");
+    // Again: everything is on file.
+    let again = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(again, rows);
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        stages
+    );
+    // A name that is not a variant is refused.
+    let e = run(
+        &cfg,
+        &out,
+        &RunOptions {
+            only: vec!["Fu11".into()],
+            ..Default::default()
+        },
+        &|| false,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("Fu11"), "{e}");
+}

@@ -133,12 +133,13 @@ pub fn per_joint(field: &str, values: &[f64], n_joints: usize) -> Result<(), Fie
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigFileError {
     /// The file could not be read.
-    #[error("cannot read the configuration {}: {source}", path.display())]
+    #[error("cannot read the configuration {}: {reason}", path.display())]
     Read {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a `source`: chained error
+        /// printers would say it twice).
+        reason: std::io::Error,
     },
     /// The TOML is malformed, has an unknown field or a wrong type.
     #[error("configuration {}: {message}", path.display())]
@@ -161,9 +162,9 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &Path) -> Result<T, C
 /// Reads and parses a TOML configuration file (values are not validated:
 /// that is the configuration's own `validate`).
 pub fn read_toml<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Read {
+    let text = std::fs::read_to_string(path).map_err(|reason| ConfigFileError::Read {
         path: path.to_path_buf(),
-        source,
+        reason,
     })?;
     parse_toml(&text, path)
 }

@@ -1,0 +1,517 @@
+//! `learner experiment`: the paper's ablations end to end. For each
+//! variant (a representation configuration, or the ground truth): the
+//! dataset (collected and built once, shared), the representation trained
+//! on it, a policy trained on its frozen z means, and the evaluation of that
+//! policy on each evaluation peg; then one results table and bar charts of
+//! the completed-insertion share next to the paper's numbers.
+//!
+//! Every stage leaves its output in the experiment's directory and is
+//! skipped when that output is complete, so an interrupted experiment
+//! resumes where it stopped (the representation and the policy also resume
+//! mid-run from their own checkpoints). The scale — states, epochs,
+//! environment steps, episodes — is the configuration's: one file for this
+//! machine, one for a GPU machine at the paper's scale.
+
+use crate::collect::{self, CollectConfig, Mix};
+use crate::dataset::{self, BuildConfig, Dataset};
+use crate::log::LogOptions;
+use crate::plot::{Chart, Series};
+use crate::rl::observe::ObservationKind;
+use crate::rl::reward::Outcome;
+use crate::rl::run::{self as policy_run, EvalReport};
+use crate::train::{self, DeviceKind, TrainOptions};
+use anyhow::{Context, Result, bail, ensure};
+use hw_sim::{PegShape, WorldConfig};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// An experiment (TOML; see configs/experiments/).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// The dataset every representation trains on.
+    pub data: DataStage,
+    /// The representation stage.
+    #[serde(default)]
+    pub representation: ReprStage,
+    /// The policy stage.
+    #[serde(default)]
+    pub policy: PolicyStage,
+    /// The evaluation.
+    #[serde(default)]
+    pub eval: EvalStage,
+    /// The variants compared.
+    pub variant: Vec<Variant>,
+}
+
+/// Where the dataset is, and how to make it when it is not there.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataStage {
+    /// The built dataset (used as it is when it opens).
+    pub dataset: PathBuf,
+    /// When it is absent: collect this many 20 Hz states on the fast path
+    /// (all pegs, the default heuristic/random mix) and build it. 0: a
+    /// missing dataset is an error.
+    #[serde(default)]
+    pub collect_states: u64,
+    /// Seed of the collection's first episode.
+    #[serde(default = "one")]
+    pub collect_seed: u64,
+}
+
+fn one() -> u64 {
+    1
+}
+
+/// Representation training, shared by the variants.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReprStage {
+    /// Epochs (overrides each variant's configuration; the paper: 20).
+    pub epochs: Option<u32>,
+    /// Batch size (overrides each variant's configuration).
+    pub batch_size: Option<usize>,
+    /// Run on the GPU (a build with the `cuda` feature).
+    pub cuda: bool,
+}
+
+/// Policy training, shared by the variants.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PolicyStage {
+    /// The base training configuration (`learner policy train`'s; absent:
+    /// its defaults, the paper's TRPO). Its observation is replaced by the
+    /// variant's.
+    pub config: Option<PathBuf>,
+    /// Environment steps (overrides the base; the paper: 1M).
+    pub env_steps: Option<u64>,
+}
+
+/// The evaluation of every policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalStage {
+    /// Episodes per policy and peg (the paper: 50).
+    pub episodes: usize,
+    /// Seed of the first evaluation episode (training seeds start at the
+    /// run's seed; these are far from them).
+    pub seed: u64,
+    /// Pegs evaluated on (absent: the one the policy trained on). Another
+    /// peg than the training one is the paper's transfer.
+    pub pegs: Vec<PegShape>,
+}
+
+impl Default for EvalStage {
+    fn default() -> Self {
+        Self {
+            episodes: 50,
+            seed: 1_000_000,
+            pegs: Vec::new(),
+        }
+    }
+}
+
+/// One compared model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Variant {
+    /// Its name in tables and charts (also its directory).
+    pub name: String,
+    /// The representation's training configuration; absent: the policy
+    /// observes the privileged ground truth (a reference, not in the paper).
+    pub representation: Option<PathBuf>,
+    /// The paper's completed-insertion share for it, where the paper's text
+    /// gives one (0..1).
+    pub paper_completed: Option<f64>,
+}
+
+/// One row of the results: a variant on one peg.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ResultRow {
+    /// The variant.
+    pub variant: String,
+    /// The evaluation peg.
+    pub peg: PegShape,
+    /// The evaluation.
+    pub report: EvalReport,
+    /// The paper's completed-insertion share.
+    pub paper_completed: Option<f64>,
+}
+
+impl ExperimentConfig {
+    /// Reads and checks a configuration file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let cfg: Self = shared_mem_schema::config::read_toml(path)?;
+        cfg.validate()
+            .with_context(|| format!("{}", path.display()))?;
+        Ok(cfg)
+    }
+
+    /// Checks the values, naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        ensure!(!self.variant.is_empty(), "variant: at least one is needed");
+        ensure!(self.eval.episodes > 0, "eval.episodes: must be at least 1");
+        for (i, v) in self.variant.iter().enumerate() {
+            ensure!(
+                !v.name.is_empty()
+                    && v.name
+                        .chars()
+                        .all(|c| c.is_ascii_alphanumeric() || "-_.=".contains(c)),
+                "variant[{i}].name `{}`: letters, digits and - _ . = only (it names a directory)",
+                v.name
+            );
+            if let Some(p) = v.paper_completed {
+                ensure!(
+                    (0.0..=1.0).contains(&p),
+                    "variant[{i}].paper_completed {p}: must be within 0..1"
+                );
+            }
+            ensure!(
+                !self.variant[..i].iter().any(|w| w.name == v.name),
+                "variant[{i}].name `{}`: used twice",
+                v.name
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Options of one invocation.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Run only the variants of these names (empty: all).
+    pub only: Vec<String>,
+    /// Show progress bars.
+    pub progress: bool,
+}
+
+/// Runs (or resumes) the experiment into `out`; returns its rows, also
+/// written to `results.md`, `results.csv`, `results.json` and a chart per
+/// evaluation peg.
+pub fn run(
+    cfg: &ExperimentConfig,
+    out: &Path,
+    opts: &RunOptions,
+    stop: &dyn Fn() -> bool,
+) -> Result<Vec<ResultRow>> {
+    cfg.validate()?;
+    for name in &opts.only {
+        ensure!(
+            cfg.variant.iter().any(|v| &v.name == name),
+            "--only {name}: no such variant"
+        );
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut log = StageLog::open(out)?;
+    let data = ensure_dataset(&cfg.data, out, &mut log)?;
+    let mut rows = Vec::new();
+    for v in &cfg.variant {
+        if !opts.only.is_empty() && !opts.only.contains(&v.name) {
+            continue;
+        }
+        let dir = out.join(&v.name);
+        let observation = match &v.representation {
+            None => ObservationKind::GroundTruth,
+            Some(repr_cfg) => {
+                let model = representation(cfg, v, repr_cfg, &data, &dir, opts, stop, &mut log)?;
+                ObservationKind::Representation(model)
+            }
+        };
+        if stop() {
+            bail!("stopped; run the same command again to resume");
+        }
+        let policy_dir = dir.join("policy");
+        let mut pcfg = match &cfg.policy.config {
+            Some(p) => policy_run::read_config(p)?,
+            None => policy_run::TrainConfig::default(),
+        };
+        pcfg.observation = observation;
+        if let Some(n) = cfg.policy.env_steps {
+            pcfg.env_steps = n;
+        }
+        let trained = policy_run::checkpoint_path(&policy_dir);
+        let done = trained.exists()
+            && policy_run::read_checkpoint(&trained)?.state.env_steps >= pcfg.env_steps;
+        if !done {
+            log.start(&format!("{}: policy ({} steps)", v.name, pcfg.env_steps));
+            policy_run::train(pcfg.clone(), &policy_dir, true)?;
+            log.end()?;
+        }
+        let ckpt = policy_run::read_checkpoint(&trained)?;
+        let pegs = if cfg.eval.pegs.is_empty() {
+            vec![ckpt.config.env.world.task.peg]
+        } else {
+            cfg.eval.pegs.clone()
+        };
+        for peg in pegs {
+            let path = dir.join(format!("eval-{}.json", peg.name()));
+            let report = match read_report(&path, cfg.eval.episodes)? {
+                Some(r) => r,
+                None => {
+                    log.start(&format!(
+                        "{}: evaluation on the {} peg ({} episodes)",
+                        v.name,
+                        peg.name(),
+                        cfg.eval.episodes
+                    ));
+                    let mut ecfg = ckpt.config.clone();
+                    ecfg.env.world.task.peg = peg;
+                    let r = policy_run::evaluate(
+                        &ckpt.state.policy,
+                        &ecfg,
+                        cfg.eval.episodes,
+                        cfg.eval.seed,
+                    )?;
+                    std::fs::write(&path, serde_json::to_vec_pretty(&r)?)
+                        .with_context(|| format!("writing {}", path.display()))?;
+                    log.end()?;
+                    r
+                }
+            };
+            rows.push(ResultRow {
+                variant: v.name.clone(),
+                peg,
+                report,
+                paper_completed: v.paper_completed,
+            });
+        }
+    }
+    write_results(out, &rows)?;
+    Ok(rows)
+}
+
+/// The dataset: opened where it is, or collected and built there.
+fn ensure_dataset(d: &DataStage, out: &Path, log: &mut StageLog) -> Result<PathBuf> {
+    if d.dataset.join("meta.json").exists() {
+        Dataset::open(&d.dataset)
+            .with_context(|| format!("opening the dataset {}", d.dataset.display()))?;
+        return Ok(d.dataset.clone());
+    }
+    ensure!(
+        d.collect_states > 0,
+        "data.dataset {}: no dataset there, and data.collect_states is 0",
+        d.dataset.display()
+    );
+    let logs = out.join("collect");
+    log.start(&format!("dataset: collecting {} states", d.collect_states));
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let ccfg = CollectConfig {
+        out_dir: logs.clone(),
+        states: d.collect_states,
+        episodes: None,
+        episode_actions: 100,
+        pegs: PegShape::ALL.to_vec(),
+        seed: d.collect_seed,
+        workers,
+        world: WorldConfig::default(),
+        controller: rt_controller::ControllerConfig::default(),
+        mix: Mix::default(),
+        log: LogOptions {
+            foxglove: false,
+            ..Default::default()
+        },
+    };
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    collect::collect_fast(&ccfg, &stop)?;
+    let files = dataset::find_logs(std::slice::from_ref(&logs))?;
+    let mut skipped = Vec::new();
+    dataset::build(
+        &files,
+        &d.dataset,
+        &BuildConfig::default(),
+        workers,
+        |p, r| {
+            if let Err(e) = r {
+                skipped.push(format!("{}: {e}", p.display()));
+            }
+        },
+    )?;
+    for s in &skipped {
+        eprintln!("experiment: skipped {s}");
+    }
+    log.end()?;
+    Ok(d.dataset.clone())
+}
+
+/// Trains (or resumes) a variant's representation; returns its exported
+/// model's directory.
+#[allow(clippy::too_many_arguments)]
+fn representation(
+    cfg: &ExperimentConfig,
+    v: &Variant,
+    repr_cfg: &Path,
+    data: &Path,
+    dir: &Path,
+    opts: &RunOptions,
+    stop: &dyn Fn() -> bool,
+    log: &mut StageLog,
+) -> Result<PathBuf> {
+    let out = dir.join("repr");
+    let model = out.join(train::run::files::MODEL_DIR);
+    if model.join("model.json").exists() {
+        return Ok(model);
+    }
+    let mut tcfg =
+        train::TrainConfig::from_file(repr_cfg).with_context(|| format!("variant {}", v.name))?;
+    if let Some(e) = cfg.representation.epochs {
+        tcfg.train.epochs = e;
+    }
+    if let Some(b) = cfg.representation.batch_size {
+        tcfg.train.batch = b;
+    }
+    log.start(&format!(
+        "{}: representation ({} epochs)",
+        v.name, tcfg.train.epochs
+    ));
+    let resume = train::checkpoint::dir(&out).exists();
+    let t = train::train(
+        &tcfg,
+        data,
+        &out,
+        &TrainOptions {
+            resume,
+            device: if cfg.representation.cuda {
+                DeviceKind::Cuda
+            } else {
+                DeviceKind::Cpu
+            },
+            progress: opts.progress,
+            ..Default::default()
+        },
+        stop,
+    )?;
+    if !t.finished {
+        bail!(
+            "stopped during the representation of {}; run the same command again to resume",
+            v.name
+        );
+    }
+    log.end()?;
+    Ok(t.model_dir)
+}
+
+/// A finished evaluation of `episodes` episodes, if one is on file.
+fn read_report(path: &Path, episodes: usize) -> Result<Option<EvalReport>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let r: EvalReport = serde_json::from_slice(
+        &std::fs::read(path).with_context(|| format!("reading {}", path.display()))?,
+    )
+    .with_context(|| format!("{}: not an evaluation report", path.display()))?;
+    Ok((r.episodes == episodes).then_some(r))
+}
+
+/// Writes `results.md`, `results.csv`, `results.json` and
+/// `completed-<peg>.png`.
+pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
+    let pct = |x: f64| format!("{:.0}%", 100.0 * x);
+    let mut md = String::from(
+        "| variant | peg | episodes | completed insertion | inserted into hole | touched the box | failed | normalised reward | paper: completed |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut csv = String::from(
+        "variant,peg,episodes,completed_insertion,inserted_into_hole,touched_the_box,failed,normalised_reward,paper_completed\n",
+    );
+    for r in rows {
+        let o = r.report.outcomes;
+        let c = |x: Outcome| o[x.index()];
+        md += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {:.3} | {} |\n",
+            r.variant,
+            r.peg.name(),
+            r.report.episodes,
+            pct(c(Outcome::CompletedInsertion)),
+            pct(c(Outcome::InsertedIntoHole)),
+            pct(c(Outcome::TouchedBox)),
+            pct(c(Outcome::Failed)),
+            r.report.mean_normalised,
+            r.paper_completed.map_or("–".into(), pct)
+        );
+        csv += &format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            r.variant,
+            r.peg.name(),
+            r.report.episodes,
+            c(Outcome::CompletedInsertion),
+            c(Outcome::InsertedIntoHole),
+            c(Outcome::TouchedBox),
+            c(Outcome::Failed),
+            r.report.mean_normalised,
+            r.paper_completed.map_or(String::new(), |p| p.to_string())
+        );
+    }
+    let write = |name: &str, text: &str| {
+        let p = out.join(name);
+        std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+    };
+    write("results.md", &md)?;
+    write("results.csv", &csv)?;
+    write("results.json", &serde_json::to_string_pretty(rows)?)?;
+    let mut pegs: Vec<PegShape> = rows.iter().map(|r| r.peg).collect();
+    pegs.dedup();
+    for peg in pegs {
+        let here: Vec<&ResultRow> = rows.iter().filter(|r| r.peg == peg).collect();
+        let names: Vec<String> = here.iter().map(|r| r.variant.clone()).collect();
+        let ours: Vec<f64> = here
+            .iter()
+            .map(|r| 100.0 * r.report.outcomes[Outcome::CompletedInsertion.index()])
+            .collect();
+        let paper: Vec<f64> = here
+            .iter()
+            .map(|r| r.paper_completed.map_or(0.0, |p| 100.0 * p))
+            .collect();
+        Chart::new(
+            &format!("Completed insertions, {} peg", peg.name()),
+            "representation the policy observes",
+            "completed insertion (% of evaluation episodes)",
+        )
+        .with_categories(names)
+        .with(Series::bars("ours", &ours, -0.4, 0.4))
+        .with(Series::bars(
+            "paper (where its text gives it)",
+            &paper,
+            0.0,
+            0.4,
+        ))
+        .write_png(out.join(format!("completed-{}.png", peg.name())))?;
+    }
+    Ok(())
+}
+
+/// Appends each stage's wall time to `stages.log` (the scale of a run is
+/// only half its story without them).
+struct StageLog {
+    path: PathBuf,
+    current: Option<(String, Instant)>,
+}
+
+impl StageLog {
+    fn open(out: &Path) -> Result<Self> {
+        Ok(Self {
+            path: out.join("stages.log"),
+            current: None,
+        })
+    }
+
+    fn start(&mut self, what: &str) {
+        eprintln!("experiment: {what}");
+        self.current = Some((what.to_string(), Instant::now()));
+    }
+
+    fn end(&mut self) -> Result<()> {
+        use std::io::Write;
+        if let Some((what, t)) = self.current.take() {
+            let mut f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&self.path)
+                .with_context(|| format!("writing {}", self.path.display()))?;
+            writeln!(f, "{what}: {:.1} s", t.elapsed().as_secs_f64())
+                .with_context(|| format!("writing {}", self.path.display()))?;
+        }
+        Ok(())
+    }
+}
