@@ -72,7 +72,7 @@ pub struct ReprStage {
     /// Epochs (overrides each variant's configuration; the paper: 20).
     pub epochs: Option<u32>,
     /// Batch size (overrides each variant's configuration).
-    pub batch_size: Option<usize>,
+    pub batch: Option<usize>,
     /// Run on the GPU (a build with the `cuda` feature).
     pub cuda: bool,
 }
@@ -127,6 +127,20 @@ pub struct Variant {
     pub paper_completed: Option<f64>,
 }
 
+/// An evaluation on file, with what it evaluated: it is reused only for
+/// the same policy (the same update of the same run), seed and length.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct StoredEval {
+    /// The update of the policy evaluated.
+    policy_iteration: u64,
+    /// The run's environment steps when it was evaluated.
+    run_env_steps: u64,
+    /// Seed of the first episode.
+    seed: u64,
+    /// The evaluation.
+    report: EvalReport,
+}
+
 /// One row of the results: a variant on one peg.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ResultRow {
@@ -136,7 +150,8 @@ pub struct ResultRow {
     pub peg: PegShape,
     /// The evaluation.
     pub report: EvalReport,
-    /// The paper's completed-insertion share.
+    /// The paper's completed-insertion share (on the training peg only:
+    /// the paper's ablation numbers are not transfer numbers).
     pub paper_completed: Option<f64>,
 }
 
@@ -156,10 +171,12 @@ impl ExperimentConfig {
         for (i, v) in self.variant.iter().enumerate() {
             ensure!(
                 !v.name.is_empty()
+                    && !v.name.starts_with('.')
                     && v.name
                         .chars()
                         .all(|c| c.is_ascii_alphanumeric() || "-_.=".contains(c)),
-                "variant[{i}].name `{}`: letters, digits and - _ . = only (it names a directory)",
+                "variant[{i}].name `{}`: letters, digits and - _ . = only, not starting with a \
+                 dot (it names a directory)",
                 v.name
             );
             if let Some(p) = v.paper_completed {
@@ -194,7 +211,7 @@ pub fn run(
     cfg: &ExperimentConfig,
     out: &Path,
     opts: &RunOptions,
-    stop: &dyn Fn() -> bool,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<Vec<ResultRow>> {
     cfg.validate()?;
     for name in &opts.only {
@@ -205,7 +222,7 @@ pub fn run(
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut log = StageLog::open(out)?;
-    let data = ensure_dataset(&cfg.data, out, &mut log)?;
+    let data = ensure_dataset(&cfg.data, out, &mut log, stop)?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
         if !opts.only.is_empty() && !opts.only.contains(&v.name) {
@@ -236,54 +253,101 @@ pub fn run(
             && policy_run::read_checkpoint(&trained)?.state.env_steps >= pcfg.env_steps;
         if !done {
             log.start(&format!("{}: policy ({} steps)", v.name, pcfg.env_steps));
-            policy_run::train(pcfg.clone(), &policy_dir, true)?;
+            let c = policy_run::train(pcfg.clone(), &policy_dir, true, stop)?;
+            if c.state.env_steps < pcfg.env_steps {
+                bail!(
+                    "stopped during the policy of {}; run the same command again to resume",
+                    v.name
+                );
+            }
             log.end()?;
         }
         let ckpt = policy_run::read_checkpoint(&trained)?;
+        let trained_peg = ckpt.config.env.world.task.peg;
+        // The paper evaluates the best checkpoint logged in training.
+        let (policy, which) = ckpt.chosen_policy(false);
+        let policy_iteration = ckpt
+            .best
+            .as_ref()
+            .map_or(ckpt.state.iteration, |b| b.iteration);
         let pegs = if cfg.eval.pegs.is_empty() {
-            vec![ckpt.config.env.world.task.peg]
+            vec![trained_peg]
         } else {
             cfg.eval.pegs.clone()
         };
         for peg in pegs {
             let path = dir.join(format!("eval-{}.json", peg.name()));
-            let report = match read_report(&path, cfg.eval.episodes)? {
-                Some(r) => r,
+            let wanted = |e: &StoredEval| {
+                e.policy_iteration == policy_iteration
+                    && e.run_env_steps == ckpt.state.env_steps
+                    && e.seed == cfg.eval.seed
+                    && e.report.episodes == cfg.eval.episodes
+            };
+            let report = match read_eval(&path)?.filter(wanted) {
+                Some(e) => e.report,
                 None => {
                     log.start(&format!(
-                        "{}: evaluation on the {} peg ({} episodes)",
+                        "{}: evaluation of {which} on the {} peg ({} episodes)",
                         v.name,
                         peg.name(),
                         cfg.eval.episodes
                     ));
                     let mut ecfg = ckpt.config.clone();
                     ecfg.env.world.task.peg = peg;
-                    let r = policy_run::evaluate(
-                        &ckpt.state.policy,
+                    let report = policy_run::evaluate(
+                        policy,
                         &ecfg,
                         cfg.eval.episodes,
                         cfg.eval.seed,
+                        stop,
                     )?;
-                    std::fs::write(&path, serde_json::to_vec_pretty(&r)?)
+                    let e = StoredEval {
+                        policy_iteration,
+                        run_env_steps: ckpt.state.env_steps,
+                        seed: cfg.eval.seed,
+                        report,
+                    };
+                    std::fs::write(&path, serde_json::to_vec_pretty(&e)?)
                         .with_context(|| format!("writing {}", path.display()))?;
                     log.end()?;
-                    r
+                    e.report
                 }
             };
             rows.push(ResultRow {
                 variant: v.name.clone(),
                 peg,
                 report,
-                paper_completed: v.paper_completed,
+                paper_completed: v.paper_completed.filter(|_| peg == trained_peg),
             });
         }
+    }
+    // A partial invocation (--only) keeps the other variants' rows on file.
+    if !opts.only.is_empty()
+        && let Ok(text) = std::fs::read(out.join("results.json"))
+        && let Ok(old) = serde_json::from_slice::<Vec<ResultRow>>(&text)
+    {
+        let mut merged = Vec::new();
+        for v in &cfg.variant {
+            let from: &[ResultRow] = if opts.only.contains(&v.name) {
+                &rows
+            } else {
+                &old
+            };
+            merged.extend(from.iter().filter(|r| r.variant == v.name).cloned());
+        }
+        rows = merged;
     }
     write_results(out, &rows)?;
     Ok(rows)
 }
 
 /// The dataset: opened where it is, or collected and built there.
-fn ensure_dataset(d: &DataStage, out: &Path, log: &mut StageLog) -> Result<PathBuf> {
+fn ensure_dataset(
+    d: &DataStage,
+    out: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<PathBuf> {
     if d.dataset.join("meta.json").exists() {
         Dataset::open(&d.dataset)
             .with_context(|| format!("opening the dataset {}", d.dataset.display()))?;
@@ -313,8 +377,30 @@ fn ensure_dataset(d: &DataStage, out: &Path, log: &mut StageLog) -> Result<PathB
             ..Default::default()
         },
     };
-    let stop = std::sync::atomic::AtomicBool::new(false);
-    collect::collect_fast(&ccfg, &stop)?;
+    // The workers finish their episodes' files and stop when `stop` turns.
+    let halt = std::sync::atomic::AtomicBool::new(false);
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let collected = std::thread::scope(|s| {
+        s.spawn(|| {
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                if stop() {
+                    halt.store(true, std::sync::atomic::Ordering::Relaxed);
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+        });
+        let r = collect::collect_fast(&ccfg, &halt);
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        r
+    });
+    collected?;
+    if halt.load(std::sync::atomic::Ordering::Relaxed) {
+        bail!(
+            "stopped during the collection into {}; run the same command again to collect anew",
+            logs.display()
+        );
+    }
     let files = dataset::find_logs(std::slice::from_ref(&logs))?;
     let mut skipped = Vec::new();
     dataset::build(
@@ -345,7 +431,7 @@ fn representation(
     data: &Path,
     dir: &Path,
     opts: &RunOptions,
-    stop: &dyn Fn() -> bool,
+    stop: &(dyn Fn() -> bool + Sync),
     log: &mut StageLog,
 ) -> Result<PathBuf> {
     let out = dir.join("repr");
@@ -358,7 +444,7 @@ fn representation(
     if let Some(e) = cfg.representation.epochs {
         tcfg.train.epochs = e;
     }
-    if let Some(b) = cfg.representation.batch_size {
+    if let Some(b) = cfg.representation.batch {
         tcfg.train.batch = b;
     }
     log.start(&format!(
@@ -392,16 +478,20 @@ fn representation(
     Ok(t.model_dir)
 }
 
-/// A finished evaluation of `episodes` episodes, if one is on file.
-fn read_report(path: &Path, episodes: usize) -> Result<Option<EvalReport>> {
+/// The evaluation on file at `path`, if any (one that does not parse is
+/// done again, with a warning).
+fn read_eval(path: &Path) -> Result<Option<StoredEval>> {
     if !path.exists() {
         return Ok(None);
     }
-    let r: EvalReport = serde_json::from_slice(
-        &std::fs::read(path).with_context(|| format!("reading {}", path.display()))?,
-    )
-    .with_context(|| format!("{}: not an evaluation report", path.display()))?;
-    Ok((r.episodes == episodes).then_some(r))
+    let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    match serde_json::from_slice(&text) {
+        Ok(e) => Ok(Some(e)),
+        Err(e) => {
+            eprintln!("experiment: {}: {e}; evaluating again", path.display());
+            Ok(None)
+        }
+    }
 }
 
 /// Writes `results.md`, `results.csv`, `results.json` and
@@ -450,8 +540,12 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
     write("results.md", &md)?;
     write("results.csv", &csv)?;
     write("results.json", &serde_json::to_string_pretty(rows)?)?;
-    let mut pegs: Vec<PegShape> = rows.iter().map(|r| r.peg).collect();
-    pegs.dedup();
+    let mut pegs: Vec<PegShape> = Vec::new();
+    for r in rows {
+        if !pegs.contains(&r.peg) {
+            pegs.push(r.peg);
+        }
+    }
     for peg in pegs {
         let here: Vec<&ResultRow> = rows.iter().filter(|r| r.peg == peg).collect();
         let names: Vec<String> = here.iter().map(|r| r.variant.clone()).collect();

@@ -5,11 +5,12 @@
 //! dataset and its labels ([`dataset`], [`labels`]), the scripted and random
 //! policies ([`policy`]), the fast-path environment ([`env`]), the live
 //! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]),
-//! charts for people ([`plot`]), the RL environment with TRPO ([`rl`]), the
-//! multimodal representation with its baselines and ablations ([`models`])
-//! and its training and evaluation ([`train`]), and the command-line
-//! interface. Not written yet: the paper's experiments end to end (`eval/`);
-//! see docs/architecture.md.
+//! charts for people ([`plot`]), the RL environment with TRPO and PPO and
+//! the trained policy's deployment ([`rl`]), the multimodal representation
+//! with its baselines and ablations ([`models`]) and its training and
+//! evaluation ([`train`]), the paper's experiments end to end
+//! ([`experiment`]), and the command-line interface; see
+//! docs/architecture.md.
 //!
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.

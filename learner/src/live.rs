@@ -585,8 +585,9 @@ struct LiveEpisode {
     best_stage: Stage,
     /// Hardware time the peg completed the insertion.
     completed_at: Option<u64>,
-    /// The wrench read at the first action (free space: the sensor's bias
-    /// and the peg's weight), as the RL environment takes it.
+    /// The wrench read at the first action after one policy period of the
+    /// episode (free space: the sensor's bias and the peg's weight), as the
+    /// RL environment takes it.
     free_wrench: Option<[f64; 6]>,
 }
 
@@ -794,7 +795,17 @@ impl LiveEpisode {
     /// view the RL environment gives it, from the frame, the wrench
     /// history, the simulator's latest report and the latest camera frame.
     fn learned(&mut self, p: &TrainedPolicy, obs: &Observation, frame: &SensorFrame) -> Action4 {
-        let free = *self.free_wrench.get_or_insert(frame.wrench);
+        // Fixed once the arm has rested a policy period, as the RL
+        // environment takes it (real-time mode acts from the first frame).
+        let free = match self.free_wrench {
+            Some(w) => w,
+            None => {
+                if self.seen.frames >= ACTION_PERIOD_STEPS {
+                    self.free_wrench = Some(frame.wrench);
+                }
+                frame.wrench
+            }
+        };
         let report = self.seen.report.unwrap_or(self.first);
         let task = task_state(&report);
         let view = ObsView {

@@ -143,8 +143,9 @@ enum PolicyCmd {
         /// training one is the paper's policy transfer.
         #[arg(long, value_enum)]
         peg: Option<PegShape>,
-        /// Random pushes on the last link per episode (hw-sim's
-        /// `perturbations.random_pushes`: 5–20 N for 0.2 s each).
+        /// Random pushes on the last link per episode (sets hw-sim's
+        /// `perturbations.random_pushes`: 5–20 N for 0.2 s each, starting
+        /// within 1–20 s).
         #[arg(long, default_value_t = 0)]
         pushes: u32,
         /// Random camera occlusions per episode (32-px squares for 1 s).
@@ -162,6 +163,10 @@ enum PolicyCmd {
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Evaluate the last policy instead of the best one logged in
+        /// training (the paper's choice, the default).
+        #[arg(long)]
+        last: bool,
     },
 }
 
@@ -320,7 +325,12 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
                     AlgorithmArg::Ppo => learner::rl::Algorithm::Ppo,
                 };
             }
-            let c = run::train(cfg, &out, resume)?;
+            let c = run::train(
+                cfg,
+                &out,
+                resume,
+                &shared_mem_schema::process::termination_requested,
+            )?;
             println!(
                 "{} updates, {} environment steps; checkpoint {}",
                 c.state.iteration,
@@ -339,17 +349,22 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             depth_noise_m,
             rgb_noise,
             json,
+            last,
         } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             let c = run::read_checkpoint(&checkpoint)?;
             let trained_on = c.config.env.world.task.peg;
-            let mut cfg = c.config;
+            let mut cfg = c.config.clone();
             let world = &mut cfg.env.world;
             if let Some(p) = peg {
                 world.task.peg = p;
             }
-            world.perturbations.random_pushes += pushes;
-            world.perturbations.random_occlusions += occlusions;
+            if pushes > 0 {
+                world.perturbations.random_pushes = pushes;
+            }
+            if occlusions > 0 {
+                world.perturbations.random_occlusions = occlusions;
+            }
             for (v, field) in [
                 (force_noise_n, &mut world.noise.force_std_n),
                 (depth_noise_m, &mut world.noise.depth_std_m),
@@ -359,7 +374,15 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
                     *field = v;
                 }
             }
-            let r = run::evaluate(&c.state.policy, &cfg, episodes, seed)?;
+            let (policy, which) = c.chosen_policy(last);
+            println!("evaluating {which}");
+            let r = run::evaluate(
+                policy,
+                &cfg,
+                episodes,
+                seed,
+                &shared_mem_schema::process::termination_requested,
+            )?;
             println!(
                 "{} episodes ({} peg, trained on {}): normalised reward {:.3}",
                 r.episodes,
@@ -884,7 +907,8 @@ fn run(cli: Cli) -> Result<()> {
                     cfg.mix.is_none(),
                     "--policy and --mix-heuristic-fraction exclude each other"
                 );
-                let p = learner::rl::TrainedPolicy::load(path)?;
+                let (p, which) = learner::rl::TrainedPolicy::load(path, false)?;
+                eprintln!("learner: acting with {which} of {}", path.display());
                 if p.trained_peg() != a.peg {
                     eprintln!(
                         "learner: the policy was trained on the {} peg; running it on the {} peg",
@@ -945,8 +969,9 @@ fn run(cli: Cli) -> Result<()> {
                 run_args.push(w.display().to_string());
             }
             if let Some(p) = &a.policy {
-                // Fail here, before any process starts, on a bad file.
-                learner::rl::run::read_checkpoint(p)?;
+                // Fail here, before any process starts, on a bad file or a
+                // representation model that does not load.
+                learner::rl::TrainedPolicy::load(p, false)?;
                 run_args.push("--policy".into());
                 run_args.push(p.display().to_string());
             }

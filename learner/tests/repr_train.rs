@@ -499,6 +499,31 @@ fn an_experiment_runs_every_stage_and_resumes() {
         std::fs::read_to_string(out.join("stages.log")).unwrap(),
         stages
     );
+    // Another evaluation seed for one variant: only its evaluations are
+    // done again, and the other variant's rows stay in the results.
+    let mut reseeded = cfg.clone();
+    reseeded.eval.seed = 7;
+    let only_gt = RunOptions {
+        only: vec!["ground-truth".into()],
+        ..Default::default()
+    };
+    let mixed = run(&reseeded, &out, &only_gt, &|| false).unwrap();
+    assert_eq!(mixed.len(), 4);
+    assert_eq!(mixed[..2], rows[..2], "the Full rows are kept from file");
+    let stages2 = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    assert_eq!(stages2.lines().count(), 7 + 2, "{stages2}");
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 4, "{md}");
+    // The paper's number belongs to the training peg, not to transfer.
+    assert_eq!(rows[1].peg, hw_sim::PegShape::Hexagon);
+    assert_eq!(rows[1].paper_completed, None);
+    // Stopped (Ctrl-C) in a fresh directory: an error that says so, and
+    // the same call afterwards finishes.
+    let fresh = dir.join("stopped");
+    let e = run(&cfg, &fresh, &only_gt, &|| true).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let resumed = run(&cfg, &fresh, &only_gt, &|| false).unwrap();
+    assert_eq!(resumed.len(), 2);
     // A name that is not a variant is refused.
     let e = run(
         &cfg,

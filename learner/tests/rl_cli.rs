@@ -63,6 +63,19 @@ fn train_resume_and_evaluate() {
     assert_eq!(c.state.iteration, 3);
     assert_eq!(c.state.env_steps, 120);
     assert_eq!(c.history.len(), 3);
+    // A checkpoint after every update: the best policy is that of the
+    // update whose episodes earned most.
+    let best = c.best.as_ref().expect("episodes ended");
+    let top = c
+        .history
+        .iter()
+        .filter_map(|p| p.mean_normalised)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert_eq!(best.mean_normalised, top);
+    assert_eq!(
+        Some(best.mean_normalised),
+        c.history[best.iteration as usize - 1].mean_normalised
+    );
     let o = learner()
         .args(["policy", "eval", "--episodes", "2", "--checkpoint"])
         .arg(out.join("checkpoint.json"))
@@ -108,10 +121,10 @@ fn a_bad_configuration_is_named() {
 fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     let dir = test_support::scratch_dir("rl-cli-ppo");
     let cfg = dir.path().join("train.toml");
-    // Episodes of 3 s: hw-sim's random pushes start after 1 s.
+    // Episodes of 20 s: hw-sim's random pushes start within 1–20 s.
     std::fs::write(
         &cfg,
-        "seed = 5\nnum_envs = 2\nthreads = 2\nenv_steps = 60\n\n[env]\nmax_steps = 60\n\n\
+        "seed = 5\nnum_envs = 2\nthreads = 2\nenv_steps = 60\n\n[env]\nmax_steps = 400\n\n\
          [policy]\nbatch_steps = 60\nhidden = [8]\n\n[policy.ppo]\nminibatch = 16\nepochs = 2\n",
     )
     .unwrap();
@@ -126,6 +139,9 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert!(st.success());
     let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
     assert_eq!(c.config.policy.algorithm, learner::rl::Algorithm::Ppo);
+    // No episode of 400 steps ended in 60: no training result, no best
+    // policy yet (evaluation then takes the last).
+    assert!(c.best.is_none());
     // 60 steps in one batch: 2 epochs of 4 minibatches of ≤ 16.
     assert_eq!(c.state.adam.t, 8);
     let eval = |extra: &[&str], json: &str| {
@@ -148,9 +164,13 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
         r
     };
     let calm = eval(&[], "calm.json");
-    let pushed = eval(&["--pushes", "3", "--force-noise-n", "0.5"], "pushed.json");
-    // The same seed and policy: only the perturbations differ.
-    assert_ne!(calm.normalised, pushed.normalised);
+    let again = eval(&[], "again.json");
+    assert_eq!(calm, again, "an evaluation is repeatable");
+    // The same seed and policy: only the perturbation differs.
+    let pushed = eval(&["--pushes", "3"], "pushed.json");
+    assert_ne!(calm.normalised, pushed.normalised, "pushes");
+    let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
+    assert_ne!(calm.normalised, noisy.normalised, "force noise");
     let o = learner()
         .args(["policy", "eval", "--force-noise-n=-1", "--checkpoint"])
         .arg(out.join("checkpoint.json"))

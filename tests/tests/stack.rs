@@ -732,6 +732,7 @@ fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
             adam: Default::default(),
         },
         history: Vec::new(),
+        best: None,
     };
     let path = dir.join("centring.json");
     std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();

@@ -36,18 +36,21 @@ impl std::fmt::Debug for TrainedPolicy {
 }
 
 impl TrainedPolicy {
-    /// Loads `checkpoint` (a run's checkpoint.json) and its observer (a
-    /// representation's model is loaded from the directory the run was
-    /// configured with).
-    pub fn load(checkpoint: &Path) -> Result<Self, RunError> {
+    /// Loads `checkpoint` (a run's checkpoint.json): its best logged policy
+    /// unless `last` ([`super::run::Checkpoint::chosen_policy`]), and its
+    /// observer (a representation's model is loaded from the directory the
+    /// run was configured with). Returns the line saying which policy.
+    pub fn load(checkpoint: &Path, last: bool) -> Result<(Self, String), RunError> {
         let c = read_checkpoint(checkpoint)?;
         let observer = c.config.observation.observer()?;
+        let (policy, which) = c.chosen_policy(last);
         Self::new(
-            c.state.policy,
+            policy.clone(),
             observer,
             c.config.env.action,
             c.config.env.world.task.peg,
         )
+        .map(|p| (p, which))
         .map_err(|detail| RunError::Parse {
             path: checkpoint.to_path_buf(),
             detail,

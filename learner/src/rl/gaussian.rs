@@ -144,8 +144,8 @@ pub struct Batch {
     /// The actions drawn (before the environment's clipping), batch ×
     /// action size.
     pub actions: Vec<f64>,
-    /// Advantages (normalised to zero mean and unit spread by
-    /// [`trpo_step`]).
+    /// Advantages (normalised to zero mean and unit spread by the update,
+    /// TRPO's or PPO's).
     pub advantages: Vec<f64>,
 }
 

@@ -61,6 +61,61 @@ pub struct Checkpoint {
     pub state: TrainerState,
     /// Every update's statistics so far (the learning curves).
     pub history: Vec<CurvePoint>,
+    /// The best policy logged so far: the paper evaluates "the best
+    /// performing checkpoint that was logged during training based on the
+    /// training results" (absent in checkpoints older than this field).
+    #[serde(default)]
+    pub best: Option<BestPolicy>,
+}
+
+/// The policy of the checkpoint with the highest training reward.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BestPolicy {
+    /// The update it was saved at.
+    pub iteration: u64,
+    /// Environment steps then.
+    pub env_steps: u64,
+    /// The mean normalised reward of the episodes that ended since the
+    /// checkpoint before it (its training result).
+    pub mean_normalised: f64,
+    /// The policy.
+    pub policy: GaussianPolicy,
+}
+
+impl Checkpoint {
+    /// The policy to evaluate or deploy: the best logged one (the paper's
+    /// choice) unless `last`, or when there is none yet; with a line
+    /// saying which.
+    pub fn chosen_policy(&self, last: bool) -> (&GaussianPolicy, String) {
+        match (&self.best, last) {
+            (Some(b), false) => (
+                &b.policy,
+                format!(
+                    "the best logged policy (update {}, {} steps, training reward {:.3})",
+                    b.iteration, b.env_steps, b.mean_normalised
+                ),
+            ),
+            _ => (
+                &self.state.policy,
+                format!(
+                    "the last policy (update {}, {} steps)",
+                    self.state.iteration, self.state.env_steps
+                ),
+            ),
+        }
+    }
+}
+
+/// The episode-weighted mean normalised reward of `points` (None: no
+/// episode ended in them).
+fn window_mean(points: &[CurvePoint]) -> Option<f64> {
+    let (sum, n) = points
+        .iter()
+        .fold((0.0, 0usize), |(s, n), p| match p.mean_normalised {
+            Some(m) => (s + m * p.episodes as f64, n + p.episodes),
+            None => (s, n),
+        });
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// One point of the learning curves.
@@ -125,6 +180,9 @@ pub enum RunError {
     /// A chart could not be drawn.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// Stopped (Ctrl-C) before it was done.
+    #[error("stopped before the evaluation was done")]
+    Stopped,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
@@ -165,18 +223,34 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
 
 /// Trains (or, with `resume`, continues the run in `out`) until the
 /// configured number of environment steps, writing `checkpoint.json`,
-/// `curve.csv`, `return.png` and `outcomes.png` into `out`.
-pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, RunError> {
+/// `curve.csv`, `return.png` and `outcomes.png` into `out`. When `stop`
+/// turns true (Ctrl-C) the update in progress finishes, a checkpoint is
+/// written and the run returns early: its `state.env_steps` is then below
+/// `config.env_steps`.
+pub fn train(
+    cfg: TrainConfig,
+    out: &Path,
+    resume: bool,
+    stop: &dyn Fn() -> bool,
+) -> Result<Checkpoint, RunError> {
     std::fs::create_dir_all(out).map_err(io(out))?;
     let ckpt_path = checkpoint_path(out);
-    let (cfg, state, mut history) = if resume && ckpt_path.exists() {
+    let (cfg, state, mut history, mut best) = if resume && ckpt_path.exists() {
         let c = read_checkpoint(&ckpt_path)?;
-        // The file's configuration rules, except the length of the run.
+        // The file's configuration rules, except the length of the run: a
+        // run is one experiment, and its curves one configuration's.
         let mut kept = c.config;
         kept.env_steps = cfg.env_steps;
-        (kept, Some(c.state), c.history)
+        if kept != cfg {
+            eprintln!(
+                "learner: resuming {} with the configuration it started with; the one given \
+                 differs in more than env_steps and is not used",
+                ckpt_path.display()
+            );
+        }
+        (kept, Some(c.state), c.history, c.best)
     } else {
-        (cfg, None, Vec::new())
+        (cfg, None, Vec::new(), None)
     };
     let env = VecEnv::new(
         &cfg.env,
@@ -191,12 +265,26 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
     let progress = Progress::new(cfg.env_steps, "steps");
     let started = std::time::Instant::now();
     let mut episodes = 0usize;
-    let save =
+    // Updates already covered by the best-policy bookkeeping.
+    let mut judged = history.len();
+    let mut save =
         |trainer: &Trainer<VecEnv>, history: &[CurvePoint]| -> Result<Checkpoint, RunError> {
+            if let Some(m) = window_mean(&history[judged.min(history.len())..])
+                && best.as_ref().is_none_or(|b| m > b.mean_normalised)
+            {
+                best = Some(BestPolicy {
+                    iteration: trainer.state.iteration,
+                    env_steps: trainer.state.env_steps,
+                    mean_normalised: m,
+                    policy: trainer.state.policy.clone(),
+                });
+            }
+            judged = history.len();
             let c = Checkpoint {
                 config: cfg.clone(),
                 state: trainer.state.clone(),
                 history: history.to_vec(),
+                best: best.clone(),
             };
             let json = serde_json::to_vec(&c).map_err(|e| RunError::Parse {
                 path: ckpt_path.clone(),
@@ -207,6 +295,14 @@ pub fn train(cfg: TrainConfig, out: &Path, resume: bool) -> Result<Checkpoint, R
             Ok(c)
         };
     while trainer.state.env_steps < cfg.env_steps {
+        if stop() {
+            progress.finish();
+            eprintln!(
+                "learner: stopped at {} environment steps; --resume continues",
+                trainer.state.env_steps
+            );
+            break;
+        }
         let s = trainer.iterate()?;
         episodes += s.episodes.len();
         let p = CurvePoint::from_stats(&s);
@@ -318,6 +414,7 @@ pub fn evaluate(
     cfg: &TrainConfig,
     episodes: usize,
     seed: u64,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<EvalReport, RunError> {
     let n = cfg.num_envs.clamp(1, episodes.max(1));
     let observer = cfg.observation.observer()?;
@@ -335,6 +432,9 @@ pub fn evaluate(
         let mut done = Vec::new();
         let mut obs = vec![0.0; dim];
         for k in (i..episodes).step_by(n) {
+            if stop() {
+                break;
+            }
             env.reset(seed + k as u64, camera)?;
             loop {
                 observer.observe(&[env.view().expect("reset")], &mut obs);
@@ -350,11 +450,16 @@ pub fn evaluate(
     });
     let mut norm = vec![0.0; episodes];
     let mut outcomes = [0.0; 4];
+    let mut done = 0;
     for r in results {
         for (k, o) in r? {
+            done += 1;
             norm[k] = normalised_return(o.episode_reward, cfg.env.max_steps);
             outcomes[o.outcome.index()] += 1.0 / episodes as f64;
         }
+    }
+    if done < episodes {
+        return Err(RunError::Stopped);
     }
     Ok(EvalReport {
         episodes,

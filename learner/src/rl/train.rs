@@ -113,7 +113,8 @@ impl PolicyConfig {
                 "at least one layer, each at least 1 wide",
             ));
         }
-        // Both are checked whichever runs: a resumed run may switch.
+        // Both are checked whichever runs: a configuration is valid or not
+        // as a whole.
         self.trpo.validate()?;
         self.ppo.validate()
     }
@@ -405,7 +406,9 @@ impl<E: BatchEnv> Trainer<E> {
             Algorithm::Ppo => {
                 // Minibatch order from its own stream: the same run on any
                 // number of threads, and after a resume.
-                let mut order = hw_sim::rng::seeded(self.state.seed, 5000 + self.state.iteration);
+                // (Stream 2³² + k: apart from the action noise's 1000 + k.)
+                let mut order =
+                    hw_sim::rng::seeded(self.state.seed, (2 << 32) + self.state.iteration);
                 ppo_update(
                     &mut self.state.policy,
                     &mut batch,
