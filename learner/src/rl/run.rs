@@ -361,10 +361,17 @@ pub fn write_curves(
     if finished.is_empty() {
         return Ok(());
     }
+    // Episode-weighted means over the last SMOOTH updates: an update ends
+    // only a few episodes (the paper's four), too few for a share.
+    const SMOOTH: usize = 20;
     let pts = |f: &dyn Fn(&CurvePoint) -> f64| {
-        finished
-            .iter()
-            .map(|p| (p.env_steps as f64, f(p)))
+        (0..finished.len())
+            .map(|i| {
+                let w = &finished[i.saturating_sub(SMOOTH - 1)..=i];
+                let n: usize = w.iter().map(|p| p.episodes).sum();
+                let m = w.iter().map(|p| f(p) * p.episodes as f64).sum::<f64>() / n as f64;
+                (finished[i].env_steps as f64, m)
+            })
             .collect::<Vec<_>>()
     };
     let name = match algorithm {
@@ -374,7 +381,7 @@ pub fn write_curves(
     Chart::new(
         &format!("{name}: episode reward"),
         "environment steps (20 Hz policy steps)",
-        "mean normalised episode reward",
+        "mean normalised episode reward (last 20 updates)",
     )
     .with(Series::line(
         "mean normalised reward",
@@ -384,7 +391,7 @@ pub fn write_curves(
     let mut chart = Chart::new(
         &format!("{name}: outcome of the episodes"),
         "environment steps (20 Hz policy steps)",
-        "share of the update's episodes",
+        "share of the episodes of the last 20 updates",
     );
     for o in Outcome::ALL.into_iter().rev() {
         chart = chart.with(Series::line(o.name(), pts(&|p| p.outcomes[o.index()])));
