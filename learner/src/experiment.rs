@@ -555,7 +555,7 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
             .collect();
         let paper: Vec<f64> = here
             .iter()
-            .map(|r| r.paper_completed.map_or(0.0, |p| 100.0 * p))
+            .map(|r| r.paper_completed.map_or(f64::NAN, |p| 100.0 * p))
             .collect();
         Chart::new(
             &format!("Completed insertions, {} peg", peg.name()),

@@ -7,6 +7,7 @@
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::{AsRangedCoord, Ranged, ValueFormatter};
 use plotters::prelude::*;
+use plotters::style::text_anchor;
 use std::ops::Range;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -57,6 +58,12 @@ pub enum Style {
     },
     /// Unconnected dots (a scatter plot).
     Points,
+    /// Separate bars of this width starting at each point's x, each
+    /// outlined and labelled with its value (categorical bar charts).
+    Bars {
+        /// Bar width, in x units.
+        width: f64,
+    },
 }
 
 /// One named series of (x, y) points; its name goes in the legend.
@@ -99,7 +106,7 @@ impl Series {
                 .enumerate()
                 .map(|(i, &v)| (i as f64 + offset, v))
                 .collect(),
-            style: Style::Histogram { bin_width: width },
+            style: Style::Bars { width },
         }
     }
 
@@ -121,6 +128,7 @@ impl Series {
         let right = match self.style {
             Style::Line | Style::Points => 0.0,
             Style::Histogram { bin_width } => bin_width,
+            Style::Bars { width } => width,
         };
         let (lo, hi) = self
             .points
@@ -363,6 +371,21 @@ where
                 .label(&s.name)
                 .legend(move |(x, y)| Circle::new((x + 12, y), 4, color.filled()));
             }
+            Style::Bars { width } => {
+                let bars = s
+                    .points
+                    .iter()
+                    .filter(|p| p.1.is_finite() && (!log_y || p.1 > 0.0))
+                    .map(|&(x0, c)| {
+                        Rectangle::new([(x0, y_floor), (x0 + width, c)], color.mix(0.5).filled())
+                    });
+                ctx.draw_series(bars)
+                    .map_err(|x| e(&x))?
+                    .label(&s.name)
+                    .legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 7), (x + 24, y + 7)], color.mix(0.6).filled())
+                    });
+            }
             Style::Histogram { bin_width } => {
                 // Empty bins draw nothing (and have no place on a log axis).
                 let shown = |c: f64| if log_y { c > 0.0 } else { c != 0.0 };
@@ -387,6 +410,32 @@ where
                     .map_err(|x| e(&x))?;
             }
         }
+    }
+    for (i, s) in chart.series.iter().enumerate() {
+        let Style::Bars { width } = s.style else {
+            continue;
+        };
+        let color = PALETTE[i % PALETTE.len()];
+        let shown = |c: f64| c.is_finite() && (!log_y || c > 0.0);
+        ctx.draw_series(s.points.iter().filter(|p| shown(p.1)).map(|&(x0, c)| {
+            Rectangle::new([(x0, y_floor), (x0 + width, c)], color.stroke_width(1))
+        }))
+        .map_err(|x| e(&x))?;
+        // The value above each bar: a bar of 0 is otherwise invisible.
+        ctx.draw_series(s.points.iter().filter(|p| shown(p.1)).map(|&(x0, c)| {
+            Text::new(
+                tick_label(&((c * 10.0).round() / 10.0)),
+                (x0 + 0.5 * width, c),
+                (FAMILY, 16)
+                    .into_font()
+                    .color(&BLACK)
+                    .pos(text_anchor::Pos::new(
+                        text_anchor::HPos::Center,
+                        text_anchor::VPos::Bottom,
+                    )),
+            )
+        }))
+        .map_err(|x| e(&x))?;
     }
     ctx.configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
