@@ -16,6 +16,8 @@ pub struct Progress {
     unit: &'static str,
     /// Last plain line, when stderr is not a terminal.
     plain: Option<Mutex<Instant>>,
+    /// Where this run started (a resumed job starts part-way).
+    start: std::sync::atomic::AtomicU64,
 }
 
 impl Progress {
@@ -39,7 +41,21 @@ impl Progress {
                 .progress_chars("#>."),
         );
         let plain = (!tty).then(|| Mutex::new(Instant::now()));
-        Self { bar, unit, plain }
+        Self {
+            bar,
+            unit,
+            plain,
+            start: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+
+    /// Starts from `done` (a resumed job): the rate counts only what is
+    /// done from here on.
+    pub fn resume_at(&self, done: u64) {
+        self.bar.set_position(done);
+        self.bar.reset_eta();
+        self.bar.reset_elapsed();
+        self.start.store(done, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// Sets the work done and a short note (e.g. "12 episodes").
@@ -76,7 +92,10 @@ impl Progress {
             b.length().unwrap_or(0),
             self.unit,
             b.message(),
-            b.per_sec(),
+            b.position()
+                .saturating_sub(self.start.load(std::sync::atomic::Ordering::Relaxed))
+                as f64
+                / b.elapsed().as_secs_f64().max(1e-3),
             b.elapsed().as_secs_f64(),
         )
     }

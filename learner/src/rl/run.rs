@@ -263,6 +263,7 @@ pub fn train(
         None => Trainer::new(env, cfg.policy.clone(), cfg.seed)?,
     };
     let progress = Progress::new(cfg.env_steps, "steps");
+    progress.resume_at(trainer.state.env_steps);
     let started = std::time::Instant::now();
     let mut episodes = 0usize;
     // Updates already covered by the best-policy bookkeeping.
