@@ -793,3 +793,100 @@ fn a_trained_policy_drives_the_stack_live() {
         "the policy centred the tip over the hole: {first} → {last}"
     );
 }
+
+/// A representation policy live: an untrained Full Model (d = 16, the
+/// camera's 128 px) exported as `learner repr train` exports one, and a
+/// random policy on its z means. The run must act every policy step, and
+/// its actions must change as the scene does: without camera frames the
+/// representation gives zeros, and the actions would all be the same.
+#[test]
+fn a_representation_policy_drives_the_stack_live() {
+    use learner::models::{ModelConfig, Normaliser, ReprNet, init};
+    use learner::rl::observe::ObservationKind;
+    use learner::rl::run::{Checkpoint, TrainConfig};
+    use learner::rl::{GaussianPolicy, LinearBaseline, TrainerState};
+    let _g = tests::exclusive();
+    let dir = test_support::scratch_dir("stack-repr-policy");
+    let model_dir = dir.join("model");
+    let model = ModelConfig {
+        latent_dim: 16,
+        depth_convs_per_stage: 1,
+        ..ModelConfig::default()
+    };
+    let dev = burn::prelude::Device::flex();
+    let net = init::seeded(ReprNet::new(&model, &dev), 5);
+    learner::train::checkpoint::export(
+        &model_dir,
+        &net,
+        &learner::train::checkpoint::ExportMeta {
+            model: model.clone(),
+            normaliser: Normaliser::identity(),
+            dataset: "none (untrained)".into(),
+            epochs: 0,
+        },
+    )
+    .unwrap();
+    let mut rng = hw_sim::rng::seeded(9, 0);
+    let mut policy = GaussianPolicy::new(16, &[8], 4, 0.0, &mut rng);
+    // Larger output weights than a fresh policy's: actions that follow z.
+    for w in &mut policy.net {
+        *w *= 10.0;
+    }
+    let c = Checkpoint {
+        config: TrainConfig {
+            observation: ObservationKind::Representation(model_dir.clone()),
+            ..TrainConfig::default()
+        },
+        state: TrainerState {
+            policy,
+            baseline: LinearBaseline::default(),
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed: 1,
+            adam: Default::default(),
+        },
+        history: Vec::new(),
+        best: None,
+    };
+    let ckpt = dir.join("policy.json");
+    std::fs::write(&ckpt, serde_json::to_vec(&c).unwrap()).unwrap();
+    let out = Command::new(tests::stack_bins().join("learner"))
+        .args(["stack", "--lockstep", "--episodes", "1", "--seed", "2"])
+        .args(["--episode-timeout-s", "2", "--namespace"])
+        .arg(tests::unique_namespace("repr-policy"))
+        .arg("--policy")
+        .arg(&ckpt)
+        .arg("--log-dir")
+        .arg(dir.path())
+        .output()
+        .expect("running learner stack");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let log = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the episode's log");
+    let reader = learner::log::LogReader::open(&log).unwrap();
+    let actions = reader
+        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .unwrap();
+    assert!(actions.len() >= 35, "{} actions", actions.len());
+    let distinct = |k: usize| {
+        let mut v: Vec<f64> = actions[1..].iter().map(|a| a.delta_pos_m[k]).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v.len()
+    };
+    assert!(
+        distinct(0) > 5 && distinct(1) > 5,
+        "the actions do not follow the scene: {:?}",
+        &actions[..5]
+            .iter()
+            .map(|a| a.delta_pos_m)
+            .collect::<Vec<_>>()
+    );
+}
