@@ -533,6 +533,7 @@ pub fn run(
     let mut outcomes = Vec::new();
     let progress = cfg.target_states.map(|t| Progress::new(t, "states"));
     let mut total_actions = 0u64;
+    let mut rejected_before = 0;
     for i in 0..cfg.episodes {
         if termination_requested() || cfg.target_states.is_some_and(|t| total_actions >= t) {
             break;
@@ -545,6 +546,18 @@ pub fn run(
                 p.update(total, format!("{done} episodes"));
             }
         })?;
+        if let Some(p) = &cfg.policy {
+            let rejected = p.rejected();
+            if rejected > rejected_before {
+                eprintln!(
+                    "learner: episode {}: {} observations could not be encoded (no camera \
+                     frame yet, or one of another size); the policy saw zeros for them",
+                    outcome.episode,
+                    rejected - rejected_before
+                );
+            }
+            rejected_before = rejected;
+        }
         on_outcome(&outcome);
         outcomes.push(outcome);
     }

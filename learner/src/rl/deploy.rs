@@ -87,6 +87,12 @@ impl TrainedPolicy {
         self.observer.needs_camera()
     }
 
+    /// Observations the observer could not make and gave as zeros so far
+    /// (a camera frame missing or of another size, a value not finite).
+    pub fn rejected(&self) -> u64 {
+        self.observer.rejected()
+    }
+
     /// The peg it was trained on.
     pub fn trained_peg(&self) -> PegShape {
         self.peg

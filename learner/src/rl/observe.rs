@@ -46,6 +46,11 @@ pub trait Observer: Send + Sync {
     /// Writes `views.len()` observations, one after the other, into `out`
     /// (`views.len() * dim()` values).
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]);
+    /// Batches it could not observe and wrote as zeros (a learned
+    /// encoder's refusals; 0 for an observer that never refuses).
+    fn rejected(&self) -> u64 {
+        0
+    }
 }
 
 /// Which observer a configuration asks for: `observation = "ground_truth"`

@@ -60,6 +60,10 @@ impl Observer for Representation {
         self.dim
     }
 
+    fn rejected(&self) -> u64 {
+        Representation::rejected(self)
+    }
+
     fn needs_camera(&self) -> bool {
         true
     }
