@@ -694,6 +694,71 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
     assert!(stopping, "no STOPPING notification");
 }
 
+/// Writes a policy checkpoint of `policy` observing `observation` (the
+/// rest of the run's configuration at its defaults) as `dir/name`.
+fn policy_checkpoint(
+    dir: &std::path::Path,
+    name: &str,
+    policy: learner::rl::GaussianPolicy,
+    observation: learner::rl::observe::ObservationKind,
+) -> std::path::PathBuf {
+    use learner::rl::run::{Checkpoint, TrainConfig};
+    use learner::rl::{LinearBaseline, TrainerState};
+    let c = Checkpoint {
+        config: TrainConfig {
+            observation,
+            ..TrainConfig::default()
+        },
+        state: TrainerState {
+            policy,
+            baseline: LinearBaseline::default(),
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed: 1,
+            adam: Default::default(),
+        },
+        history: Vec::new(),
+        best: None,
+    };
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+    path
+}
+
+/// Runs one lockstep episode of `seed` and `seconds` through the stack
+/// with the policy `checkpoint`; returns the episode's log.
+fn policy_episode(
+    dir: &std::path::Path,
+    checkpoint: &std::path::Path,
+    seed: u64,
+    seconds: u32,
+) -> learner::log::LogReader {
+    let out = Command::new(tests::stack_bins().join("learner"))
+        .args(["stack", "--lockstep", "--episodes", "1", "--seed"])
+        .arg(seed.to_string())
+        .arg("--episode-timeout-s")
+        .arg(seconds.to_string())
+        .arg("--namespace")
+        .arg(tests::unique_namespace("policy"))
+        .arg("--policy")
+        .arg(checkpoint)
+        .arg("--log-dir")
+        .arg(dir)
+        .output()
+        .expect("running learner stack");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let log = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the episode's log");
+    learner::log::LogReader::open(&log).unwrap()
+}
+
 /// A policy checkpoint that centres the tip over the hole of episode
 /// `seed` from the ground truth: hidden unit k = tanh(4·obs[k]) for the
 /// tip's x and y in the hole frame (obs = s/0.1 m), the base-frame step
@@ -701,8 +766,6 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
 /// seed; ×5 mm), no descent and no roll. It acts only through the
 /// observation the live node rebuilds.
 fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
-    use learner::rl::run::{Checkpoint, TrainConfig};
-    use learner::rl::{GaussianPolicy, LinearBaseline, TrainerState};
     let (obs, hidden, act) = (14, 2, 4);
     let mut net = vec![0.0; hidden * obs + hidden + act * hidden + act];
     net[0] = 4.0; // w1[0][0]: s_x
@@ -716,27 +779,17 @@ fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
             net[w2 + i * hidden + j] = -r[(i, j)]; // w2[i][j]
         }
     }
-    let c = Checkpoint {
-        config: TrainConfig::default(),
-        state: TrainerState {
-            policy: GaussianPolicy {
-                sizes: vec![obs, hidden, act],
-                net,
-                log_std: vec![0.0; act],
-            },
-            baseline: LinearBaseline::default(),
-            iteration: 0,
-            env_steps: 0,
-            episodes_started: 0,
-            seed: 1,
-            adam: Default::default(),
-        },
-        history: Vec::new(),
-        best: None,
+    let policy = learner::rl::GaussianPolicy {
+        sizes: vec![obs, hidden, act],
+        net,
+        log_std: vec![0.0; act],
     };
-    let path = dir.join("centring.json");
-    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
-    path
+    policy_checkpoint(
+        dir,
+        "centring.json",
+        policy,
+        learner::rl::observe::ObservationKind::GroundTruth,
+    )
 }
 
 #[test]
@@ -745,26 +798,7 @@ fn a_trained_policy_drives_the_stack_live() {
     let _g = tests::exclusive();
     let dir = test_support::scratch_dir("stack-policy");
     let policy = centring_policy(dir.path(), 4);
-    let out = Command::new(tests::stack_bins().join("learner"))
-        .args(["stack", "--lockstep", "--episodes", "1", "--seed", "4"])
-        .args(["--episode-timeout-s", "3", "--namespace"])
-        .arg(tests::unique_namespace("policy"))
-        .arg("--policy")
-        .arg(&policy)
-        .arg("--log-dir")
-        .arg(dir.path())
-        .output()
-        .expect("running learner stack");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
-    let log = std::fs::read_dir(dir.path())
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .expect("the episode's log");
-    let reader = learner::log::LogReader::open(&log).unwrap();
+    let reader = policy_episode(dir.path(), &policy, 4, 3);
     let config = reader.read_config(None).unwrap();
     assert_eq!(
         config[0].1.policy,
@@ -802,9 +836,8 @@ fn a_trained_policy_drives_the_stack_live() {
 #[test]
 fn a_representation_policy_drives_the_stack_live() {
     use learner::models::{ModelConfig, Normaliser, ReprNet, init};
+    use learner::rl::GaussianPolicy;
     use learner::rl::observe::ObservationKind;
-    use learner::rl::run::{Checkpoint, TrainConfig};
-    use learner::rl::{GaussianPolicy, LinearBaseline, TrainerState};
     let _g = tests::exclusive();
     let dir = test_support::scratch_dir("stack-repr-policy");
     let model_dir = dir.join("model");
@@ -832,45 +865,13 @@ fn a_representation_policy_drives_the_stack_live() {
     for w in &mut policy.net {
         *w *= 10.0;
     }
-    let c = Checkpoint {
-        config: TrainConfig {
-            observation: ObservationKind::Representation(model_dir.clone()),
-            ..TrainConfig::default()
-        },
-        state: TrainerState {
-            policy,
-            baseline: LinearBaseline::default(),
-            iteration: 0,
-            env_steps: 0,
-            episodes_started: 0,
-            seed: 1,
-            adam: Default::default(),
-        },
-        history: Vec::new(),
-        best: None,
-    };
-    let ckpt = dir.join("policy.json");
-    std::fs::write(&ckpt, serde_json::to_vec(&c).unwrap()).unwrap();
-    let out = Command::new(tests::stack_bins().join("learner"))
-        .args(["stack", "--lockstep", "--episodes", "1", "--seed", "2"])
-        .args(["--episode-timeout-s", "2", "--namespace"])
-        .arg(tests::unique_namespace("repr-policy"))
-        .arg("--policy")
-        .arg(&ckpt)
-        .arg("--log-dir")
-        .arg(dir.path())
-        .output()
-        .expect("running learner stack");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
-    let log = std::fs::read_dir(dir.path())
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .expect("the episode's log");
-    let reader = learner::log::LogReader::open(&log).unwrap();
+    let ckpt = policy_checkpoint(
+        dir.path(),
+        "policy.json",
+        policy,
+        ObservationKind::Representation(model_dir.clone()),
+    );
+    let reader = policy_episode(dir.path(), &ckpt, 2, 2);
     let actions = reader
         .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
         .unwrap();
