@@ -475,6 +475,34 @@ pub fn run_episode(
     })
 }
 
+/// [`collect_fast`] until `stop` turns true (polled every 50 ms; for
+/// example the process's termination request): the workers then finish
+/// their episodes' files and stop. Returns the summary and whether `stop`
+/// ended the collection.
+pub fn collect_fast_until(
+    cfg: &CollectConfig,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<(CollectSummary, bool), CollectError> {
+    use std::sync::atomic::Ordering::Relaxed;
+    let halt = AtomicBool::new(false);
+    let done = AtomicBool::new(false);
+    let summary = std::thread::scope(|s| {
+        s.spawn(|| {
+            while !done.load(Relaxed) {
+                if stop() {
+                    halt.store(true, Relaxed);
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        });
+        let r = collect_fast(cfg, &halt);
+        done.store(true, Relaxed);
+        r
+    })?;
+    Ok((summary, halt.load(Relaxed)))
+}
+
 /// Fast-mode collection on `cfg.workers` threads. `stop` ends it early
 /// (each worker finishes its episode's file cleanly).
 pub fn collect_fast(

@@ -221,7 +221,7 @@ pub fn run(
         );
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut log = StageLog::open(out)?;
+    let mut log = StageLog::open(out);
     let data = ensure_dataset(&cfg.data, out, &mut log, stop)?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
@@ -265,11 +265,7 @@ pub fn run(
         let ckpt = policy_run::read_checkpoint(&trained)?;
         let trained_peg = ckpt.config.env.world.task.peg;
         // The paper evaluates the best checkpoint logged in training.
-        let (policy, which) = ckpt.chosen_policy(false);
-        let policy_iteration = ckpt
-            .best
-            .as_ref()
-            .map_or(ckpt.state.iteration, |b| b.iteration);
+        let chosen = ckpt.chosen_policy(false);
         let pegs = if cfg.eval.pegs.is_empty() {
             vec![trained_peg]
         } else {
@@ -278,7 +274,7 @@ pub fn run(
         for peg in pegs {
             let path = dir.join(format!("eval-{}.json", peg.name()));
             let wanted = |e: &StoredEval| {
-                e.policy_iteration == policy_iteration
+                e.policy_iteration == chosen.iteration
                     && e.run_env_steps == ckpt.state.env_steps
                     && e.seed == cfg.eval.seed
                     && e.report.episodes == cfg.eval.episodes
@@ -287,7 +283,7 @@ pub fn run(
                 Some(e) => e.report,
                 None => {
                     log.start(&format!(
-                        "{}: evaluation of {which} on the {} peg ({} episodes)",
+                        "{}: evaluation of {chosen} on the {} peg ({} episodes)",
                         v.name,
                         peg.name(),
                         cfg.eval.episodes
@@ -295,14 +291,14 @@ pub fn run(
                     let mut ecfg = ckpt.config.clone();
                     ecfg.env.world.task.peg = peg;
                     let report = policy_run::evaluate(
-                        policy,
+                        chosen.policy,
                         &ecfg,
                         cfg.eval.episodes,
                         cfg.eval.seed,
                         stop,
                     )?;
                     let e = StoredEval {
-                        policy_iteration,
+                        policy_iteration: chosen.iteration,
                         run_env_steps: ckpt.state.env_steps,
                         seed: cfg.eval.seed,
                         report,
@@ -377,25 +373,8 @@ fn ensure_dataset(
             ..Default::default()
         },
     };
-    // The workers finish their episodes' files and stop when `stop` turns.
-    let halt = std::sync::atomic::AtomicBool::new(false);
-    let done = std::sync::atomic::AtomicBool::new(false);
-    let collected = std::thread::scope(|s| {
-        s.spawn(|| {
-            while !done.load(std::sync::atomic::Ordering::Relaxed) {
-                if stop() {
-                    halt.store(true, std::sync::atomic::Ordering::Relaxed);
-                    break;
-                }
-                std::thread::sleep(std::time::Duration::from_millis(100));
-            }
-        });
-        let r = collect::collect_fast(&ccfg, &halt);
-        done.store(true, std::sync::atomic::Ordering::Relaxed);
-        r
-    });
-    collected?;
-    if halt.load(std::sync::atomic::Ordering::Relaxed) {
+    let (_, stopped) = collect::collect_fast_until(&ccfg, stop)?;
+    if stopped {
         bail!(
             "stopped during the collection into {}; run the same command again to collect anew",
             logs.display()
@@ -583,11 +562,11 @@ struct StageLog {
 }
 
 impl StageLog {
-    fn open(out: &Path) -> Result<Self> {
-        Ok(Self {
+    fn open(out: &Path) -> Self {
+        Self {
             path: out.join("stages.log"),
             current: None,
-        })
+        }
     }
 
     fn start(&mut self, what: &str) {

@@ -374,10 +374,10 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
                     *field = v;
                 }
             }
-            let (policy, which) = c.chosen_policy(last);
-            println!("evaluating {which}");
+            let chosen = c.chosen_policy(last);
+            println!("evaluating {chosen}");
             let r = run::evaluate(
-                policy,
+                chosen.policy,
                 &cfg,
                 episodes,
                 seed,
@@ -545,21 +545,9 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         mix,
         log,
     };
-    let stop = std::sync::atomic::AtomicBool::new(false);
     // Ctrl-C: the workers finish their episodes' files and stop.
-    let summary = std::thread::scope(|s| {
-        s.spawn(|| {
-            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                if shared_mem_schema::process::termination_requested() {
-                    stop.store(true, std::sync::atomic::Ordering::Relaxed);
-                }
-                std::thread::sleep(std::time::Duration::from_millis(50));
-            }
-        });
-        let r = collect::collect_fast(&cfg, &stop);
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        r
-    })?;
+    let (summary, _) =
+        collect::collect_fast_until(&cfg, &shared_mem_schema::process::termination_requested)?;
     let bytes: u64 = summary
         .shards
         .iter()

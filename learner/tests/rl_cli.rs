@@ -2,7 +2,8 @@
 //! written, a resumed run continues from the checkpoint, the evaluation
 //! reports the four categories.
 
-use std::process::Command;
+use std::path::Path;
+use std::process::{Command, Output};
 
 const CONFIG: &str = r#"
 seed = 3
@@ -23,20 +24,26 @@ fn learner() -> Command {
     Command::new(env!("CARGO_BIN_EXE_learner"))
 }
 
+/// `learner policy train [extra…] --config cfg --out out` to its end.
+fn train(extra: &[&str], cfg: &Path, out: &Path) -> Output {
+    learner()
+        .args(["policy", "train"])
+        .args(extra)
+        .arg("--config")
+        .arg(cfg)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn train_resume_and_evaluate() {
     let dir = test_support::scratch_dir("rl-cli");
     let cfg = dir.path().join("train.toml");
     std::fs::write(&cfg, CONFIG).unwrap();
     let out = dir.path().join("run");
-    let st = learner()
-        .args(["policy", "train", "--config"])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(st.success());
+    assert!(train(&[], &cfg, &out).status.success());
     for f in ["checkpoint.json", "curve.csv", "return.png", "outcomes.png"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -44,21 +51,8 @@ fn train_resume_and_evaluate() {
     assert_eq!(csv.lines().count(), 1 + 2, "{csv}");
     assert!(csv.starts_with("iteration,env_steps,episodes,mean_return"));
     // Resume for 40 more steps: one more update, history kept.
-    let st = learner()
-        .args([
-            "policy",
-            "train",
-            "--resume",
-            "--env-steps",
-            "120",
-            "--config",
-        ])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(st.success());
+    let resumed = train(&["--resume", "--env-steps", "120"], &cfg, &out);
+    assert!(resumed.status.success());
     let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
     assert_eq!(c.state.iteration, 3);
     assert_eq!(c.state.env_steps, 120);
@@ -99,13 +93,7 @@ fn a_bad_configuration_is_named() {
     let dir = test_support::scratch_dir("rl-cli-bad");
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, "[policy.trpo]\nmax_kl = -1.0\n").unwrap();
-    let o = learner()
-        .args(["policy", "train", "--config"])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(dir.path().join("run"))
-        .output()
-        .unwrap();
+    let o = train(&[], &cfg, &dir.path().join("run"));
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("policy.trpo.max_kl"), "{err}");
@@ -129,14 +117,7 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     )
     .unwrap();
     let out = dir.path().join("run");
-    let st = learner()
-        .args(["policy", "train", "--algorithm", "ppo", "--config"])
-        .arg(&cfg)
-        .arg("--out")
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(st.success());
+    assert!(train(&["--algorithm", "ppo"], &cfg, &out).status.success());
     let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
     assert_eq!(c.config.policy.algorithm, learner::rl::Algorithm::Ppo);
     // No episode of 400 steps ended in 60: no training result, no best

@@ -43,9 +43,10 @@ impl TrainedPolicy {
     pub fn load(checkpoint: &Path, last: bool) -> Result<(Self, String), RunError> {
         let c = read_checkpoint(checkpoint)?;
         let observer = c.config.observation.observer()?;
-        let (policy, which) = c.chosen_policy(last);
+        let chosen = c.chosen_policy(last);
+        let which = chosen.to_string();
         Self::new(
-            policy.clone(),
+            chosen.policy.clone(),
             observer,
             c.config.env.action,
             c.config.env.world.task.peg,

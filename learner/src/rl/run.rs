@@ -82,26 +82,53 @@ pub struct BestPolicy {
     pub policy: GaussianPolicy,
 }
 
+/// The policy a checkpoint offers for evaluation or deployment.
+#[derive(Debug, Clone, Copy)]
+pub struct Chosen<'a> {
+    /// The policy.
+    pub policy: &'a GaussianPolicy,
+    /// The update it was saved at.
+    pub iteration: u64,
+    /// Environment steps then.
+    pub env_steps: u64,
+    /// Its training result when it is the best logged one (None: the last).
+    pub best_reward: Option<f64>,
+}
+
+impl std::fmt::Display for Chosen<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.best_reward {
+            Some(r) => write!(
+                f,
+                "the best logged policy (update {}, {} steps, training reward {r:.3})",
+                self.iteration, self.env_steps
+            ),
+            None => write!(
+                f,
+                "the last policy (update {}, {} steps)",
+                self.iteration, self.env_steps
+            ),
+        }
+    }
+}
+
 impl Checkpoint {
     /// The policy to evaluate or deploy: the best logged one (the paper's
-    /// choice) unless `last`, or when there is none yet; with a line
-    /// saying which.
-    pub fn chosen_policy(&self, last: bool) -> (&GaussianPolicy, String) {
+    /// choice) unless `last`, or when there is none yet.
+    pub fn chosen_policy(&self, last: bool) -> Chosen<'_> {
         match (&self.best, last) {
-            (Some(b), false) => (
-                &b.policy,
-                format!(
-                    "the best logged policy (update {}, {} steps, training reward {:.3})",
-                    b.iteration, b.env_steps, b.mean_normalised
-                ),
-            ),
-            _ => (
-                &self.state.policy,
-                format!(
-                    "the last policy (update {}, {} steps)",
-                    self.state.iteration, self.state.env_steps
-                ),
-            ),
+            (Some(b), false) => Chosen {
+                policy: &b.policy,
+                iteration: b.iteration,
+                env_steps: b.env_steps,
+                best_reward: Some(b.mean_normalised),
+            },
+            _ => Chosen {
+                policy: &self.state.policy,
+                iteration: self.state.iteration,
+                env_steps: self.state.env_steps,
+                best_reward: None,
+            },
         }
     }
 }
