@@ -472,7 +472,10 @@ fn an_experiment_runs_every_stage_and_resumes() {
     assert_eq!(c.state.env_steps, 40);
     let gt = learner::rl::run::read_checkpoint(&out.join("ground-truth/policy/checkpoint.json"))
         .unwrap();
-    assert_eq!(gt.state.policy.sizes[0], 14);
+    assert_eq!(
+        gt.state.policy.sizes[0],
+        learner::rl::observe::GROUND_TRUTH_DIM
+    );
     for f in [
         "results.md",
         "results.csv",

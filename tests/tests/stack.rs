@@ -766,7 +766,7 @@ fn policy_episode(
 /// seed; ×5 mm), no descent and no roll. It acts only through the
 /// observation the live node rebuilds.
 fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
-    let (obs, hidden, act) = (14, 2, 4);
+    let (obs, hidden, act) = (learner::rl::observe::GROUND_TRUTH_DIM, 2, 4);
     let mut net = vec![0.0; hidden * obs + hidden + act * hidden + act];
     net[0] = 4.0; // w1[0][0]: s_x
     net[obs + 1] = 4.0; // w1[1][1]: s_y

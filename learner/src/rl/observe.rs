@@ -79,17 +79,34 @@ impl ObservationKind {
     }
 }
 
-/// Ground-truth state, 14 values, each scaled to about unit size:
+/// Ground-truth state, 18 values, each scaled to about unit size:
 /// the tip's position in the hole frame (/ 0.1 m, 3), its roll relative to
 /// the hole wrapped by the peg's symmetry (/ (π/k), 1), the tip's linear
-/// velocity in the hole frame (/ 0.1 m/s, 3), its roll rate (rad/s, 1), and
-/// the mean wrench of the newest 8 readings less the free-space reading
-/// (force / 10 N, 3; moment / 1 N·m, 3), sensor frame.
+/// velocity in the hole frame (/ 0.1 m/s, 3), its roll rate (rad/s, 1), the
+/// mean wrench of the newest 8 readings less the free-space reading
+/// (force / 10 N, 3; moment / 1 N·m, 3), sensor frame, and the position and
+/// roll again at the scale of the clearance (`tanh(s / 5 mm)`, 3;
+/// `tanh(s_ψ / 0.05 rad)`, 1).
+///
+/// Why the second, fine copy: at the coarse scale the 2 mm clearance is an
+/// input change of 0.02, which a freshly initialised MLP maps to an action
+/// change of about as little (0.1 mm), so the policy cannot resolve the
+/// opening; `rl_probe` showed a policy trained without it hovering 1 mm
+/// above the opening with 3 mm lateral steps (docs/experiments.md).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct GroundTruth;
 
 /// Readings averaged for [`GroundTruth`]'s wrench (8 ms).
 const WRENCH_MEAN_READINGS: usize = 8;
+
+/// Length of a [`GroundTruth`] observation.
+pub const GROUND_TRUTH_DIM: usize = 18;
+
+/// Position scale of [`GroundTruth`]'s fine channels, m.
+const FINE_POSITION_M: f64 = 0.005;
+
+/// Roll scale of [`GroundTruth`]'s fine channel, rad.
+const FINE_ROLL_RAD: f64 = 0.05;
 
 impl GroundTruth {
     fn one(v: &ObsView<'_>, out: &mut [f64]) {
@@ -120,6 +137,10 @@ impl GroundTruth {
             w[3] - v.free_wrench[3],
             w[4] - v.free_wrench[4],
             w[5] - v.free_wrench[5],
+            (s.x / FINE_POSITION_M).tanh(),
+            (s.y / FINE_POSITION_M).tanh(),
+            (s.z / FINE_POSITION_M).tanh(),
+            (v.task.s_psi_rad / FINE_ROLL_RAD).tanh(),
         ];
         out.copy_from_slice(&vals);
     }
@@ -127,11 +148,11 @@ impl GroundTruth {
 
 impl Observer for GroundTruth {
     fn dim(&self) -> usize {
-        14
+        GROUND_TRUTH_DIM
     }
 
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
-        for (v, o) in views.iter().zip(out.chunks_exact_mut(14)) {
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(GROUND_TRUTH_DIM)) {
             Self::one(v, o);
         }
     }

@@ -1,0 +1,143 @@
+//! Diagnosis of RL episodes on the ground truth: how episodes end (fault
+//! codes, the step of termination), how close the tip gets to the hole, and
+//! the outcome, for a trained checkpoint's policy (mean, or sampled with its
+//! own σ) or a scripted proportional policy. One line per episode and a
+//! summary.
+//!
+//! Usage: `rl_probe CHECKPOINT|scripted|heuristic|impactMM EPISODES [sample]`
+//! (`scripted`: centre over the hole, then descend; `heuristic`: the data
+//! collection's heuristic policy). Episodes use seeds from 1 000 000, as
+//! `learner policy eval` does. `impactMM`: come down onto the box's top
+//! face 12 mm beside the hole at a constant step of MM mm per policy step.
+
+use learner::rl::observe::{GroundTruth, Observer};
+use learner::rl::run::read_checkpoint;
+use learner::rl::{Outcome, RlEnv, RlEnvConfig};
+
+fn main() {
+    let usage = "usage: rl_probe CHECKPOINT|scripted|heuristic|impactMM EPISODES [sample]";
+    let args: Vec<String> = std::env::args().collect();
+    let what = args.get(1).expect(usage).clone();
+    let episodes: u64 = args.get(2).expect(usage).parse().expect(usage);
+    let sample = args.get(3).is_some_and(|a| a == "sample");
+    let impact_mm: Option<f64> = what.strip_prefix("impact").map(|v| v.parse().expect(usage));
+    let (cfg, policy) = if what == "scripted" || what == "heuristic" || impact_mm.is_some() {
+        (RlEnvConfig::default(), None)
+    } else {
+        let c = read_checkpoint(std::path::Path::new(&what)).expect("checkpoint");
+        let p = c.chosen_policy(false).policy.clone();
+        (c.config.env.clone(), Some(p))
+    };
+    let mut env = RlEnv::new(&cfg).expect("env");
+    let mut heuristic = learner::policy::HeuristicPolicy::new(Default::default());
+    let mut rng = hw_sim::rng::seeded(7, 0);
+    let mut counts = [0u32; 4];
+    let mut terminated = 0;
+    for ep in 0..episodes {
+        env.reset(1_000_000 + ep, false).expect("reset");
+        heuristic.reset();
+        let mut min_xy = f64::MAX;
+        let mut min_z = f64::MAX;
+        let mut fault = 0;
+        let mut max_force: f64 = 0.0;
+        let (end, o) = loop {
+            let mut obs = [0.0; learner::rl::observe::GROUND_TRUTH_DIM];
+            GroundTruth.observe(&[env.view().unwrap()], &mut obs);
+            let a: Vec<f64> = match &policy {
+                Some(p) if sample => p.sample(&obs, &mut rng),
+                Some(p) => p.means(&obs),
+                None if what == "heuristic" => {
+                    let d = heuristic.act(
+                        env.observation().unwrap(),
+                        &env.fast().wrench,
+                        &env.task_geometry(),
+                    );
+                    env.action_scale().from_delta(&d).to_vec()
+                }
+                None if impact_mm.is_some() => {
+                    // Centre 10 mm beside the hole's axis (on the top face),
+                    // then come down at a constant step onto the face.
+                    let task = env.task_geometry();
+                    let s = nalgebra::Vector3::new(obs[0], obs[1], obs[2]) * 0.1;
+                    let goal = nalgebra::Vector3::new(0.012, 0.0, 0.0);
+                    let mut d = goal - s;
+                    let step = impact_mm.unwrap() * 1e-3;
+                    d.z = if (d.x * d.x + d.y * d.y).sqrt() > 0.001 && s.z > 0.02 {
+                        0.0
+                    } else {
+                        -step
+                    };
+                    let d = task.hole_pose.rotation * d;
+                    env.action_scale()
+                        .from_delta(&[d.x, d.y, d.z, 0.0])
+                        .to_vec()
+                }
+                None => {
+                    // s in the hole frame, 0.1 m units; act in the hole frame
+                    // rotated to the base frame.
+                    let task = env.task_geometry();
+                    let s = nalgebra::Vector3::new(obs[0], obs[1], obs[2]) * 0.1;
+                    let xy = (s.x * s.x + s.y * s.y).sqrt();
+                    let dz = if xy < 0.0005 {
+                        -0.002
+                    } else if s.z > 0.01 {
+                        -0.003
+                    } else {
+                        0.0
+                    };
+                    let d = task.hole_pose.rotation * nalgebra::Vector3::new(-s.x, -s.y, dz);
+                    let sc = env.action_scale().clone();
+                    let roll = -obs[3] * std::f64::consts::PI / 4.0;
+                    sc.from_delta(&[d.x, d.y, d.z, roll]).to_vec()
+                }
+            };
+            let o = env.step(&a, false).expect("step");
+            let t = env.task();
+            min_xy = min_xy.min((t.s_m.x.powi(2) + t.s_m.y.powi(2)).sqrt());
+            min_z = min_z.min(t.s_m.z);
+            for w in env.fast().wrench.ordered() {
+                max_force = max_force.max((w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt());
+            }
+            if o.done() {
+                if o.terminated {
+                    terminated += 1;
+                    fault = env.fast().sensor_frame().fault_code;
+                }
+                break (o.steps, o);
+            }
+        };
+        let mut obs = [0.0; learner::rl::observe::GROUND_TRUTH_DIM];
+        GroundTruth.observe(&[env.view().unwrap()], &mut obs);
+        let mean = policy.as_ref().map(|p| p.means(&obs)).unwrap_or_default();
+        let hole_z = env.task_geometry().hole_pose.rotation * nalgebra::Vector3::z();
+        let peg_z = env.observation().unwrap().ee_rot * nalgebra::Vector3::z();
+        println!(
+            "   tilt {:.4} rad, mean action {:?}",
+            hole_z.angle(&peg_z).min(hole_z.angle(&-peg_z)),
+            mean.iter()
+                .map(|v| (v * 1000.0).round() / 1000.0)
+                .collect::<Vec<_>>()
+        );
+        counts[o.outcome.index()] += 1;
+        println!(
+            "ep {ep}: {:?} steps {end} fault {fault} min_xy {:.1} mm min_z {:.1} mm max|F| {:.0} N norm {:.3} final s ({:.1}, {:.1}, {:.1}) mm psi {:.3}",
+            o.outcome,
+            min_xy * 1e3,
+            min_z * 1e3,
+            max_force,
+            learner::rl::reward::normalised_return(o.episode_reward, cfg.max_steps),
+            env.task().s_m.x * 1e3,
+            env.task().s_m.y * 1e3,
+            env.task().s_m.z * 1e3,
+            env.task().s_psi_rad,
+        );
+    }
+    println!(
+        "outcomes {:?} over {episodes}; terminated {terminated}",
+        Outcome::ALL
+            .iter()
+            .zip(counts)
+            .map(|(o, c)| format!("{}: {c}", o.name()))
+            .collect::<Vec<_>>()
+    );
+}
