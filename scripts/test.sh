@@ -18,6 +18,13 @@ fi
 export ROBOT_MODEL_PINOCCHIO_PYTHON="$PWD/$PINOCCHIO_VENV/bin/python"
 export ROBOT_MODEL_REQUIRE_PINOCCHIO=1
 
+# franky-sim (PyPI), a simulated FR3 speaking the robot's own protocol: the
+# Franka backend's test runs the daemon against it (docs/franka.md), and
+# fails rather than skips when it is missing here.
+. scripts/franky-sim-venv.sh
+export FRANKY_SIM_PYTHON="$PWD/$FRANKY_SIM_VENV/bin/python"
+export FRANKY_SIM_REQUIRED=1
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy"

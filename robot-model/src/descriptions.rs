@@ -8,6 +8,9 @@ use std::path::{Component, Path, PathBuf};
 pub const IIWA14_URDF: &str = include_str!("../urdf/iiwa14.urdf");
 /// The Franka Emika Panda (the paper's real robot), `urdf/panda.urdf`.
 pub const PANDA_URDF: &str = include_str!("../urdf/panda.urdf");
+/// The Franka Research 3 with the Franka Hand (the Franka backend's robot),
+/// `urdf/fr3.urdf`; end-effector frame `fr3_hand_tcp`.
+pub const FR3_URDF: &str = include_str!("../urdf/fr3.urdf");
 
 /// The Panda's "ready" pose (Franka's documented start pose): the peg tip at
 /// (0.307, 0, 0.470) m pointing down.
@@ -21,6 +24,10 @@ pub const PANDA_READY_Q: [f64; 7] = [
     std::f64::consts::FRAC_PI_4,
 ];
 
+/// The FR3's "ready" pose: the same joint angles as the Panda's, inside the
+/// FR3's narrower joint limits.
+pub const FR3_READY_Q: [f64; 7] = PANDA_READY_Q;
+
 /// A start pose of the iiwa 14 (ours): the peg tip at (0.590, 0, 0.353) m
 /// pointing down.
 pub const IIWA14_HOME_Q: [f64; 7] = [0.0, 0.5, 0.0, -1.4, 0.0, 1.2, 0.0];
@@ -30,12 +37,13 @@ pub fn home_configuration(robot_name: &str) -> Option<[f64; 7]> {
     match robot_name {
         "panda" => Some(PANDA_READY_Q),
         "iiwa14" => Some(IIWA14_HOME_Q),
+        "fr3" => Some(FR3_READY_Q),
         _ => None,
     }
 }
 
 /// Names accepted by [`builtin`].
-pub const BUILTIN_NAMES: [&str; 2] = ["iiwa14", "panda"];
+pub const BUILTIN_NAMES: [&str; 3] = ["iiwa14", "panda", "fr3"];
 
 /// Loads a robot named in a configuration the operator wrote: a built-in
 /// name ([`BUILTIN_NAMES`]) or else the path of a URDF file (a regular file
@@ -49,11 +57,12 @@ pub fn load(name_or_path: &str) -> Result<Model, ModelError> {
     }
 }
 
-/// Loads a built-in description by name (`"iiwa14"` or `"panda"`).
+/// Loads a built-in description by name (`"iiwa14"`, `"panda"` or `"fr3"`).
 pub fn builtin(name: &str) -> Result<Model, ModelError> {
     let text = match name {
         "iiwa14" => IIWA14_URDF,
         "panda" => PANDA_URDF,
+        "fr3" => FR3_URDF,
         other => {
             return Err(ModelError::Parse {
                 path: None,

@@ -30,6 +30,7 @@ fn algorithms_do_not_allocate() {
         let mut jac = Matrix6xX::zeros(nv);
         let frame = model
             .frame_id("peg_tip")
+            .or_else(|_| model.frame_id("fr3_hand_tcp"))
             .or_else(|_| model.frame_id("hand"))
             .unwrap();
         let mut checksum = 0.0;

@@ -9,7 +9,8 @@
 //! (hardware state and action in, torque command and sensor frame out). The
 //! [`daemon`] module and the `rt-controller` binary wrap the cycle with
 //! shared-memory transport, a clock, real-time set-up and a hardware backend
-//! (the simulator; a Franka backend is planned).
+//! (the simulator, or a Franka robot through `franka-rs`: `daemon::franka`,
+//! docs/franka.md; run against a simulated FR3 only, never a physical one).
 //!
 //! It must not allocate, lock or block in the 1 kHz path, and it must not do
 //! any learning. Kinematics and dynamics come from `robot-model`.

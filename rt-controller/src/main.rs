@@ -6,7 +6,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller::daemon::config::{BackendKind, Clock, DaemonConfig};
 use rt_controller::daemon::rt::{self, Notifier};
 use rt_controller::daemon::rt_alloc::{self, RtAllocator};
-use rt_controller::daemon::{Daemon, FAULT_HARDWARE_SILENT, Shared, SimBackend};
+use rt_controller::daemon::{
+    Daemon, FAULT_HARDWARE_SILENT, FrankaBackend, Hardware, Shared, SimBackend, franka,
+};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::process::{
     install_termination_handler, termination_requested, termination_signal,
@@ -120,14 +122,43 @@ fn run(args: Args) -> Result<()> {
     let model = robot_model::descriptions::load(&cfg.robot)
         .with_context(|| format!("loading the robot `robot` = {:?}", cfg.robot))?;
     let node = transport::create_node("rt-controller")?;
-    let hw = match cfg.backend.kind {
-        BackendKind::Sim => SimBackend::open(&node, &cfg.backend.namespace)?,
-        BackendKind::Franka => bail!(
-            "`backend.kind` = \"franka\": the Franka backend is not part of this build yet \
-             (it arrives with the Franka adapter issue); use \"sim\""
-        ),
-    };
-    let mut daemon = Daemon::new(cfg.clone(), model, hw, &node)
+    match cfg.backend.kind {
+        BackendKind::Sim => {
+            let hw = SimBackend::open(&node, &cfg.backend.namespace)?;
+            drive(&cfg, model, hw, &node, |_| {})
+        }
+        BackendKind::Franka => {
+            let f = &cfg.backend.franka;
+            info!(
+                "rt-controller: connecting to the Franka at {} ({:?})",
+                f.address, f.generation
+            );
+            let robot = franka::connect(f, cfg.timing.startup_timeout_s)?;
+            info!(
+                "rt-controller: connected, robot server version {}",
+                robot.server_version()
+            );
+            let hw = FrankaBackend::new(&robot, f.clone(), &model)?;
+            drive(&cfg, model, hw, &node, |hw| {
+                info!(
+                    "rt-controller: the robot's lowest control command success rate: {:.3}",
+                    hw.min_success_rate
+                );
+            })
+        }
+    }
+}
+
+/// Builds the daemon on `hw` and runs it until a termination signal;
+/// `report_backend` logs the backend's own figures at the end.
+fn drive<H: Hardware>(
+    cfg: &DaemonConfig,
+    model: robot_model::Model,
+    hw: H,
+    node: &transport::StackNode,
+    report_backend: impl FnOnce(&H),
+) -> Result<()> {
+    let mut daemon = Daemon::new(cfg.clone(), model, hw, node)
         .map_err(|e| anyhow::anyhow!("{e}"))
         .context("building the controller")?;
 
@@ -175,13 +206,16 @@ fn run(args: Args) -> Result<()> {
     notifier.notify("STOPPING=1");
     monitor_stop.store(true, Ordering::Relaxed);
     let _ = monitor.join();
-    let summary = result?;
+    report_backend(daemon.hardware());
     let a = rt_alloc::stats();
-    info!(
-        "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap; \
-         {} frees to the heap",
-        a.pool_allocs, a.system_allocs_on_rt_thread, a.system_frees_on_rt_thread
-    );
+    let summary = match result {
+        Ok(s) => s,
+        Err(e) => {
+            log_allocations(&a);
+            return Err(e.into());
+        }
+    };
+    log_allocations(&a);
     let s = &daemon.stats;
     // Two lines: each stays short enough for a journal line (the tests
     // bound log lines at 300 characters).
@@ -218,6 +252,14 @@ fn run(args: Args) -> Result<()> {
         s.receive_errors
     );
     Ok(())
+}
+
+fn log_allocations(a: &rt_alloc::RtAllocStats) {
+    info!(
+        "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap; \
+         {} frees to the heap",
+        a.pool_allocs, a.system_allocs_on_rt_thread, a.system_frees_on_rt_thread
+    );
 }
 
 /// `rt-controller reset`: one reset command to the daemon of `namespace`,
@@ -296,6 +338,10 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
                 FAULT_HARDWARE_SILENT => error!(
                     "rt-controller: hardware silent: fault, no torques are sent; latched until \
                      `rt-controller reset` once the hardware streams again"
+                ),
+                code @ 101..=104 => error!(
+                    "rt-controller: mode {name} (fault code {code}): the robot stopped the \
+                     control session; the daemon stops"
                 ),
                 code => error!(
                     "rt-controller: mode {name} (fault code {code}); latched until \

@@ -10,11 +10,12 @@ pub fn crate_path(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
 }
 
-/// The robots every identity runs on: the two arms and the test tree.
+/// The robots every identity runs on: the three arms and the test tree.
 pub fn robots() -> Vec<(&'static str, Model)> {
     [
         "urdf/panda.urdf",
         "urdf/iiwa14.urdf",
+        "urdf/fr3.urdf",
         "tests/fixtures/tree.urdf",
     ]
     .into_iter()

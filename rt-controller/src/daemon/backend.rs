@@ -1,5 +1,6 @@
 //! What the daemon needs of a robot, and the simulator backend (hw-sim over
-//! shared memory). A Franka backend will implement the same trait.
+//! shared memory). The Franka backend ([`super::franka`]) implements the
+//! same trait.
 
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{HardwareState, TorqueCommand};
@@ -23,9 +24,22 @@ pub enum HardwareError {
         /// The service namespace.
         namespace: String,
     },
+    /// The robot stopped the control session (a reflex, a limit, a
+    /// communication constraint violation, a lost connection): the
+    /// daemon's Fault, with the robot's own words.
+    #[error("the robot reported an error (fault code {code}): {reason}")]
+    Robot {
+        /// The fault code published in the status
+        /// (`crate::daemon::FAULT_ROBOT_*`).
+        code: u32,
+        /// The robot's reason, as its client library words it.
+        reason: String,
+    },
 }
 
-/// What the daemon needs of a robot. Implementations never block.
+/// What the daemon needs of a robot. Implementations never block, except
+/// that a hardware which clocks the loop itself (the Franka) may wait in
+/// [`Hardware::poll`] for its next state, at most one period.
 pub trait Hardware {
     /// Short name for logs.
     fn name(&self) -> &'static str;
@@ -34,6 +48,13 @@ pub trait Hardware {
     fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError>;
     /// Sends a torque command.
     fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError>;
+    /// Ends the control session after the loop's last command (the
+    /// shutdown hold's end); called outside the real-time section. The
+    /// Franka backend finishes its motion there, so that the robot's own
+    /// controller takes the arm over without a jump.
+    fn finish(&mut self) -> Result<(), HardwareError> {
+        Ok(())
+    }
 }
 
 /// hw-sim over shared memory.

@@ -39,8 +39,126 @@ pub enum Clock {
 pub enum BackendKind {
     /// hw-sim over shared memory.
     Sim,
-    /// A Franka Panda through libfranka (its own issue; not built yet).
+    /// A Franka robot (FR3 or Panda/FER) over the Franka Control Interface
+    /// (docs/franka.md); settings in `[backend.franka]`.
     Franka,
+}
+
+/// Which Franka robot: it picks the FCI protocol version.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrankaGeneration {
+    /// Franka Research 3 (FCI protocol version 10).
+    Fr3,
+    /// Franka Emika Robot, "Panda" (FCI protocol version 5). Not run
+    /// against anything yet: franky-sim simulates an FR3 only.
+    Panda,
+}
+
+/// Where the sensor frame's wrench comes from on a Franka.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WrenchSource {
+    /// The robot's estimate from its joint torques (`K_F_ext_hat_K`),
+    /// turned into the flange frame.
+    RobotEstimate,
+    /// None: the wrench reads zero (the force supervision then sees none).
+    None,
+}
+
+/// The Franka backend (`backend.kind = "franka"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FrankaConfig {
+    /// The robot's FCI address: a host name or IP, optionally `:port`
+    /// (the FCI command port, 1337, by default).
+    pub address: String,
+    /// `fr3` or `panda`.
+    pub generation: FrankaGeneration,
+    /// Joint torques above which the robot reports a contact, N·m (the
+    /// robot's `lower_torque_thresholds`).
+    pub contact_torque_nm: [f64; 7],
+    /// Joint torques above which the robot stops in a collision reflex,
+    /// N·m (`upper_torque_thresholds`).
+    pub collision_torque_nm: [f64; 7],
+    /// Cartesian forces (N) and moments (N·m) above which the robot reports
+    /// a contact (`lower_force_thresholds`).
+    pub contact_force: [f64; 6],
+    /// Cartesian forces and moments above which the robot stops in a
+    /// collision reflex (`upper_force_thresholds`).
+    pub collision_force: [f64; 6],
+    /// Apply the client library's torque-rate limiter (1000 N·m/s on the
+    /// commanded torque without gravity, against the robot's last
+    /// commanded torque) before sending. On by default: it is the robot's
+    /// own constraint, and the control law limits the rate of the torque
+    /// *with* gravity, whose gravity part the robot adds itself.
+    pub rate_limit: bool,
+    /// Cut-off of the client library's first-order low-pass filter on the
+    /// commanded torques, Hz; 1000 (the default) turns it off: the control
+    /// law's torques are already rate-limited, and the filter's lag would
+    /// only take phase margin from the impedance's damping.
+    pub cutoff_hz: f64,
+    /// Run the robot's automatic error recovery at start-up (clears a
+    /// reflex left by an earlier run). Off by default: a reflex is for an
+    /// operator to look at.
+    pub error_recovery: bool,
+    /// `robot_estimate` or `none`.
+    pub wrench: WrenchSource,
+}
+
+impl Default for FrankaConfig {
+    fn default() -> Self {
+        // The thresholds of libfranka's examples (`setDefaultBehavior`).
+        Self {
+            address: "172.16.0.2".into(),
+            generation: FrankaGeneration::Fr3,
+            contact_torque_nm: [20.0, 20.0, 18.0, 18.0, 16.0, 14.0, 12.0],
+            collision_torque_nm: [20.0, 20.0, 18.0, 18.0, 16.0, 14.0, 12.0],
+            contact_force: [20.0, 20.0, 20.0, 25.0, 25.0, 25.0],
+            collision_force: [20.0, 20.0, 20.0, 25.0, 25.0, 25.0],
+            rate_limit: true,
+            cutoff_hz: 1000.0,
+            error_recovery: false,
+            wrench: WrenchSource::RobotEstimate,
+        }
+    }
+}
+
+impl FrankaConfig {
+    fn validate(&self) -> Result<(), FieldError> {
+        ensure(
+            !self.address.is_empty() && !self.address.contains(char::is_whitespace),
+            "backend.franka.address",
+            format_args!("{:?}", self.address),
+            "must be a host name or IP address, optionally with :port",
+        )?;
+        within("backend.franka.cutoff_hz", self.cutoff_hz, 0.0..=1000.0)?;
+        positive("backend.franka.cutoff_hz", self.cutoff_hz)?;
+        for (field, lower, upper) in [
+            (
+                "backend.franka.collision_torque_nm",
+                &self.contact_torque_nm[..],
+                &self.collision_torque_nm[..],
+            ),
+            (
+                "backend.franka.collision_force",
+                &self.contact_force[..],
+                &self.collision_force[..],
+            ),
+        ] {
+            for (i, (&lo, &hi)) in lower.iter().zip(upper).enumerate() {
+                positive(field, lo)?;
+                positive(field, hi)?;
+                ensure(
+                    lo <= hi,
+                    field,
+                    format_args!("{hi} (entry {i})"),
+                    "must be at least the contact threshold of the same entry",
+                )?;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The hardware backend.
@@ -51,6 +169,8 @@ pub struct BackendConfig {
     pub kind: BackendKind,
     /// Service namespace shared with the simulator and the learner.
     pub namespace: String,
+    /// The Franka backend's settings (used when `kind = "franka"`).
+    pub franka: FrankaConfig,
 }
 
 impl Default for BackendConfig {
@@ -58,6 +178,7 @@ impl Default for BackendConfig {
         Self {
             kind: BackendKind::Sim,
             namespace: shared_mem_schema::DEFAULT_NAMESPACE.into(),
+            franka: FrankaConfig::default(),
         }
     }
 }
@@ -252,6 +373,30 @@ impl DaemonConfig {
             format_args!("{ns:?}"),
             "must be non-empty, without spaces",
         )?;
+        if self.backend.kind == BackendKind::Franka {
+            // The robot clocks the loop (one cycle per state, 1 kHz) and
+            // never waits for the learner.
+            ensure(
+                t.clock == Clock::Hardware,
+                "timing.clock",
+                format_args!("{:?}", t.clock),
+                "must be \"hardware\" with backend.kind = \"franka\" (the robot clocks the loop)",
+            )?;
+            ensure(
+                !t.lockstep_actions,
+                "timing.lockstep_actions",
+                "true",
+                "must be false with backend.kind = \"franka\" (a robot cannot wait for the \
+                 learner)",
+            )?;
+            ensure(
+                (self.controller.period_s - 1e-3).abs() < 1e-12,
+                "controller.period_s",
+                self.controller.period_s,
+                "must be 0.001 with backend.kind = \"franka\" (the robot's cycle)",
+            )?;
+            self.backend.franka.validate()?;
+        }
         Ok(())
     }
 }
@@ -317,6 +462,36 @@ mod tests {
         assert!(e.to_string().contains("clok"), "{e}");
         let e = DaemonConfig::from_toml("[backend]\nkind = \"ur5\"\n", "x.toml").unwrap_err();
         assert!(e.to_string().contains("ur5"), "{e}");
+        for (toml, field) in [
+            ("[backend]\nkind = \"franka\"\n", "timing.clock"),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\nlockstep_actions = true\n",
+                "timing.lockstep_actions",
+            ),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+                 [backend.franka]\ncutoff_hz = 0.0\n",
+                "backend.franka.cutoff_hz",
+            ),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+                 [backend.franka]\ncollision_force = [20.0, 20.0, 20.0, 25.0, 25.0, 1.0]\n",
+                "backend.franka.collision_force",
+            ),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+                 [backend.franka]\naddress = \"\"\n",
+                "backend.franka.address",
+            ),
+        ] {
+            let e = DaemonConfig::from_toml(toml, "x.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{toml}: {e}");
+        }
+        let e = DaemonConfig::from_toml("[backend.franka]\ngeneration = \"fr2\"\n", "x.toml")
+            .unwrap_err();
+        assert!(e.to_string().contains("fr2"), "{e}");
         let e = DaemonConfig::from_file(std::path::Path::new("/nonexistent/rt.toml")).unwrap_err();
         assert!(e.to_string().contains("/nonexistent/rt.toml"), "{e}");
     }

@@ -58,6 +58,8 @@ pub struct Daemon<H: Hardware> {
     have_state: bool,
     last_state_ns: u64,
     hardware_lost: bool,
+    /// A robot error's fault code (0: none); it ends the run.
+    robot_fault: u32,
     last_command: TorqueCommand,
     sensor: SensorFrame,
     status_seq: u64,
@@ -100,6 +102,7 @@ impl<H: Hardware> Daemon<H> {
             have_state: false,
             last_state_ns: 0,
             hardware_lost: false,
+            robot_fault: 0,
             last_command: TorqueCommand::empty(0),
             sensor: *SensorFrame::boxed_zeroed(),
             status_seq: 0,
@@ -118,6 +121,11 @@ impl<H: Hardware> Daemon<H> {
         &self.cfg
     }
 
+    /// The hardware backend.
+    pub fn hardware(&self) -> &H {
+        &self.hw
+    }
+
     /// The robot model.
     pub fn model(&self) -> &Model {
         &self.model
@@ -130,15 +138,20 @@ impl<H: Hardware> Daemon<H> {
 
     /// The mode as published.
     pub fn mode(&self) -> ControllerMode {
-        if self.hardware_lost {
+        if self.robot_fault != 0 {
+            ControllerMode::Fault
+        } else if self.hardware_lost {
             ControllerMode::HardwareLost
         } else {
             self.control.mode()
         }
     }
 
-    fn fault_code(&self) -> u32 {
-        if self.hardware_lost {
+    /// The fault code as published.
+    pub fn fault_code(&self) -> u32 {
+        if self.robot_fault != 0 {
+            self.robot_fault
+        } else if self.hardware_lost {
             FAULT_HARDWARE_SILENT
         } else {
             self.control.fault_code()
@@ -500,6 +513,17 @@ impl<H: Hardware> Daemon<H> {
         if sent.is_err() {
             self.stats.publish_errors += 1;
         }
+    }
+
+    /// Latches a robot error's fault (`HardwareError::Robot`): published
+    /// at once in the status and the shared atomics.
+    pub fn latch_robot_fault(&mut self, code: u32, now_ns: u64) {
+        self.robot_fault = code;
+        self.shared
+            .mode
+            .store(ControllerMode::Fault as u32, Ordering::Relaxed);
+        self.shared.fault_code.store(code, Ordering::Relaxed);
+        self.publish_status(now_ns);
     }
 
     /// Asks the control law to hold the current target (shutdown).

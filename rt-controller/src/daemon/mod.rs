@@ -5,7 +5,7 @@
 //! waiting → [`crate::cycle::ControlCycle::cycle`] (the same code the fast
 //! path runs) → send torques → publish the sensor frame (and, every
 //! `status_period_ms`, the status). Files: [`backend`] (the hardware trait
-//! and the simulator backend), `queue` (actions), [`shared`] (atomics for
+//! and the simulator backend), [`franka`] (the Franka backend), `queue` (actions), [`shared`] (atomics for
 //! the monitor thread), [`stats`], [`control`] (one cycle), `run` (the loop). Nothing in a cycle locks or
 //! blocks, and our code allocates nothing; iceoryx2 0.10 itself takes one
 //! small block per publication, freed at send (tests/daemon_alloc.rs pins
@@ -22,6 +22,7 @@
 pub mod backend;
 pub mod config;
 pub mod control;
+pub mod franka;
 mod queue;
 pub mod rt;
 pub mod rt_alloc;
@@ -32,5 +33,9 @@ pub mod stats;
 pub use crate::cycle::fault_code;
 pub use backend::{Hardware, HardwareError, SimBackend};
 pub use control::{CycleOutcome, Daemon, DaemonError};
-pub use shared::{FAULT_HARDWARE_SILENT, Shared};
+pub use franka::FrankaBackend;
+pub use shared::{
+    FAULT_HARDWARE_SILENT, FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER,
+    FAULT_ROBOT_REFLEX, Shared,
+};
 pub use stats::{RunSummary, Stats};

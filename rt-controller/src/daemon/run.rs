@@ -11,9 +11,26 @@ use std::sync::atomic::Ordering;
 
 impl<H: Hardware> Daemon<H> {
     /// Runs the loop until `stop()` returns true; then holds for
-    /// `timing.shutdown_hold_s` and returns. `on_ready` runs once the first
-    /// hardware state is in (systemd's READY).
+    /// `timing.shutdown_hold_s`, ends the hardware's session
+    /// ([`Hardware::finish`]) and returns. `on_ready` runs once the first
+    /// hardware state is in (systemd's READY). A robot error
+    /// ([`HardwareError::Robot`]) is latched as the daemon's Fault and
+    /// published in a last status before it is returned.
     pub fn run(
+        &mut self,
+        stop: impl FnMut() -> bool,
+        on_ready: impl FnOnce(),
+    ) -> Result<RunSummary, HardwareError> {
+        let result = self.run_loop(stop, on_ready);
+        rt_alloc::leave_realtime();
+        let result = result.and_then(|summary| self.hw.finish().map(|()| summary));
+        if let Err(HardwareError::Robot { code, .. }) = &result {
+            self.latch_robot_fault(*code, mono_now_ns());
+        }
+        result
+    }
+
+    fn run_loop(
         &mut self,
         mut stop: impl FnMut() -> bool,
         on_ready: impl FnOnce(),
@@ -70,8 +87,12 @@ impl<H: Hardware> Daemon<H> {
                     let mut spins = 0u32;
                     let mut now = wait_start;
                     while !fresh {
-                        now = mono_now_ns();
-                        fresh = self.poll_hardware(now)?;
+                        let polled = mono_now_ns();
+                        fresh = self.poll_hardware(polled)?;
+                        // Compute time counts from the state's arrival: a
+                        // hardware that clocks the loop (the Franka) waits
+                        // for its next state inside the poll.
+                        now = if fresh { mono_now_ns() } else { polled };
                         // Stop waiting on a stop request, or when the
                         // shutdown hold is over; keep waiting during it.
                         let stopping = match stopping_until {

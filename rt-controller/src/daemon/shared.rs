@@ -5,6 +5,17 @@ use std::sync::atomic::{AtomicU32, AtomicU64};
 /// Fault code of a silent hardware (the control law's codes are
 /// [`crate::cycle::fault_code`]'s).
 pub const FAULT_HARDWARE_SILENT: u32 = 100;
+/// Fault code of a robot error: a communication constraint violation (the
+/// robot missed too many commands).
+pub const FAULT_ROBOT_COMMUNICATION: u32 = 101;
+/// Fault code of a robot error: one of the robot's limits (joint or
+/// Cartesian position, velocity, torque, power) was violated.
+pub const FAULT_ROBOT_LIMIT: u32 = 102;
+/// Fault code of a robot error: a collision or other reflex stopped it.
+pub const FAULT_ROBOT_REFLEX: u32 = 103;
+/// Fault code of any other robot error (emergency stop, a command the robot
+/// refused, a lost connection, a protocol error).
+pub const FAULT_ROBOT_OTHER: u32 = 104;
 
 /// State the loop shares with its low-priority monitor thread (logging,
 /// systemd watchdog) through atomics only.

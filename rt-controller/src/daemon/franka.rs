@@ -1,0 +1,536 @@
+//! The Franka backend: the daemon's control cycle as the robot's 1 kHz
+//! external torque controller, over the Franka Control Interface (FCI)
+//! through `franka-rs` (docs/franka.md: why that client, and what has and
+//! has not been run).
+//!
+//! The robot clocks the loop: [`Hardware::poll`] waits (at most one robot
+//! period) for the next state, the daemon's cycle answers it, and
+//! [`Hardware::send`] turns the control law's joint torques into the
+//! robot's command: minus gravity (the robot adds its own), clipped to the
+//! joint torque limits, optionally low-pass filtered and rate limited with
+//! the client library's functions, the rate limit against the robot's last
+//! commanded torque, which is zero when the motion starts. The motion
+//! starts at the first poll, not at connection, so that nothing between
+//! (building the controller, opening services) counts against the robot's
+//! communication constraints.
+//!
+//! A robot error ends the session with [`HardwareError::Robot`], carrying
+//! the robot's own message and a fault code ([`robot_fault_code`]); the
+//! daemon publishes it as its Fault and stops.
+
+use super::backend::{Hardware, HardwareError};
+use super::config::{FrankaConfig, FrankaGeneration, WrenchSource};
+use super::shared::{
+    FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX,
+};
+use franka::{
+    ActiveTorqueControl, FciVersion, FrankaError, MAX_CUTOFF_FREQUENCY, MAX_TORQUE_RATE,
+    RealtimeConfig, Robot, RobotOptions, RobotState, Torques, VersionPolicy,
+};
+use robot_model::{Data, Model};
+use shared_mem_schema::process::mono_now_ns;
+use shared_mem_schema::{HardwareState, TorqueCommand};
+
+/// The FR3's and the Panda's joint count.
+const JOINTS: usize = 7;
+
+/// Connects to the robot of `cfg`, retrying refused or unanswered
+/// connections for `timeout_s` (a robot or simulator still starting), then
+/// applies the collision thresholds and, when configured, the automatic
+/// error recovery. Not real-time: called before the loop starts.
+pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareError> {
+    let version = match cfg.generation {
+        FrankaGeneration::Fr3 => FciVersion::V10,
+        FrankaGeneration::Panda => FciVersion::V5,
+    };
+    // Our own real-time set-up (daemon::rt) runs on the control thread;
+    // the client must not change the scheduling of the caller. A control
+    // log of 0: the error path then copies no states.
+    let options = RobotOptions::new(RealtimeConfig::Ignore)
+        .with_version(VersionPolicy::Exact(version))
+        .with_log_size(0);
+    let start = std::time::Instant::now();
+    let robot = loop {
+        match Robot::with_options(&cfg.address, options.clone()) {
+            Ok(r) => break r,
+            Err(FrankaError::Network(_)) if start.elapsed().as_secs_f64() < timeout_s => {
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+            Err(e) => {
+                return Err(robot_error(
+                    &e,
+                    &format!(
+                        "connecting to the Franka at `backend.franka.address` = {:?} as \
+                         `generation` = {:?}",
+                        cfg.address, cfg.generation
+                    ),
+                ));
+            }
+        }
+    };
+    if cfg.error_recovery {
+        robot
+            .automatic_error_recovery()
+            .map_err(|e| robot_error(&e, "automatic error recovery"))?;
+    }
+    robot
+        .set_collision_behavior_simple(
+            cfg.contact_torque_nm,
+            cfg.collision_torque_nm,
+            cfg.contact_force,
+            cfg.collision_force,
+        )
+        .map_err(|e| robot_error(&e, "setting the collision thresholds"))?;
+    Ok(robot)
+}
+
+/// The fault code of a robot error: the robot's reflex reasons of the
+/// aborted motion decide (a communication constraint violation first, then
+/// a limit, then any reflex); every other error is
+/// [`FAULT_ROBOT_OTHER`].
+pub fn robot_fault_code(e: &FrankaError) -> u32 {
+    let FrankaError::Control(c) = e else {
+        return FAULT_ROBOT_OTHER;
+    };
+    let set = |pred: &dyn Fn(&str) -> bool| {
+        c.last_motion_errors
+            .0
+            .iter()
+            .zip(franka::ERROR_NAMES)
+            .any(|(&on, name)| on && pred(name))
+    };
+    if set(&|n| n == "communication_constraints_violation") {
+        FAULT_ROBOT_COMMUNICATION
+    } else if set(&|n| {
+        n.contains("limit") || n.ends_with("velocity_violation") || n == "tau_J_range_violation"
+    }) {
+        FAULT_ROBOT_LIMIT
+    } else if set(&|n| n.contains("reflex") || n.contains("collision"))
+        || c.move_status == Some(franka::MoveStatus::ReflexAborted)
+    {
+        FAULT_ROBOT_REFLEX
+    } else {
+        FAULT_ROBOT_OTHER
+    }
+}
+
+/// [`HardwareError::Robot`] of `e` (what the daemon was doing, then the
+/// robot's own message).
+pub fn robot_error(e: &FrankaError, doing: &str) -> HardwareError {
+    HardwareError::Robot {
+        code: robot_fault_code(e),
+        reason: format!("{doing}: {e}"),
+    }
+}
+
+/// The Franka as the daemon's hardware, on a connected [`Robot`] that
+/// outlives it (the daemon's thread owns both).
+pub struct FrankaBackend<'r> {
+    robot: &'r Robot,
+    control: Option<ActiveTorqueControl<'r>>,
+    cfg: FrankaConfig,
+    model: Model,
+    data: Data,
+    effort: [f64; JOINTS],
+    state: HardwareState,
+    /// The robot's state answered by the next send: its joint positions
+    /// (gravity) and the torque it last commanded (rate limit reference).
+    q: [f64; JOINTS],
+    tau_j_d: [f64; JOINTS],
+    /// The last torque sent (the low-pass filter's previous value).
+    sent: [f64; JOINTS],
+    pending: bool,
+    t0_ms: Option<u64>,
+    seq: u64,
+    last_command_seq: u64,
+    finished: bool,
+    /// Lowest `control_command_success_rate` the robot reported (1: no
+    /// command missed in its window).
+    pub min_success_rate: f64,
+}
+
+impl<'r> FrankaBackend<'r> {
+    /// The backend on `robot` for `model` (whose gravity is taken off the
+    /// commands: it must be the robot's with its end-effector load, e.g.
+    /// the built-in `fr3`).
+    pub fn new(robot: &'r Robot, cfg: FrankaConfig, model: &Model) -> Result<Self, HardwareError> {
+        if model.nv() != JOINTS {
+            return Err(HardwareError::Robot {
+                code: FAULT_ROBOT_OTHER,
+                reason: format!(
+                    "the robot model has {} joints; a Franka has {JOINTS} (`robot` must be a \
+                     Franka description such as \"fr3\")",
+                    model.nv()
+                ),
+            });
+        }
+        let mut effort = [0.0; JOINTS];
+        effort.copy_from_slice(model.effort_limits().as_slice());
+        Ok(Self {
+            robot,
+            control: None,
+            cfg,
+            model: model.clone(),
+            data: model.create_data(),
+            effort,
+            state: HardwareState::empty(JOINTS),
+            q: [0.0; JOINTS],
+            tau_j_d: [0.0; JOINTS],
+            sent: [0.0; JOINTS],
+            pending: false,
+            t0_ms: None,
+            seq: 0,
+            last_command_seq: 0,
+            finished: false,
+            min_success_rate: 1.0,
+        })
+    }
+
+    /// Fills the message from a robot state; never allocates.
+    fn take_state(&mut self, s: &RobotState) {
+        let t_ms = s.time.as_millis();
+        let t0 = *self.t0_ms.get_or_insert(t_ms);
+        self.seq += 1;
+        let st = &mut self.state;
+        // One episode per process: a robot error ends the run.
+        st.header = shared_mem_schema::Header::new(self.seq, mono_now_ns(), t_ms * 1_000_000, 1);
+        st.step = t_ms.saturating_sub(t0);
+        st.applied_command_seq = self.last_command_seq;
+        st.n_joints = JOINTS as u32;
+        st.q[..JOINTS].copy_from_slice(&s.q);
+        st.v[..JOINTS].copy_from_slice(&s.dq);
+        st.tau_measured[..JOINTS].copy_from_slice(&s.tau_J);
+        st.wrench = match self.cfg.wrench {
+            WrenchSource::RobotEstimate => flange_wrench(s),
+            WrenchSource::None => [0.0; 6],
+        };
+        self.q = s.q;
+        self.tau_j_d = s.tau_J_d;
+        self.min_success_rate = self.min_success_rate.min(s.control_command_success_rate);
+    }
+
+    /// The robot's command for the control law's joint torques `tau`
+    /// (gravity included) at the pending state.
+    fn command(&mut self, tau: &[f64]) -> Result<[f64; JOINTS], FrankaError> {
+        let g = robot_model::gravity(&self.model, &mut self.data, &self.q);
+        let mut out = [0.0; JOINTS];
+        for i in 0..JOINTS {
+            // The control law keeps its torques within the limits with
+            // gravity; without it they may not be.
+            out[i] = (tau[i] - g[i]).clamp(-self.effort[i], self.effort[i]);
+        }
+        if self.cfg.cutoff_hz < MAX_CUTOFF_FREQUENCY {
+            for (o, &last) in out.iter_mut().zip(&self.sent) {
+                *o = franka::low_pass_filter(1e-3, *o, last, self.cfg.cutoff_hz)?;
+            }
+        }
+        if self.cfg.rate_limit {
+            out = franka::limit_rate_torques(&MAX_TORQUE_RATE, &out, &self.tau_j_d)?;
+        }
+        Ok(out)
+    }
+}
+
+/// The robot's estimated external wrench (`K_F_ext_hat_K`, at and in the
+/// stiffness frame K) in the flange frame F, about F's origin: the frame
+/// the robot descriptions' wrench is read in. The robot reports the wrench
+/// the environment exerts on the end effector; through a rigid tool that
+/// is the wrench the tool exerts on the flange, the schema's convention.
+pub fn flange_wrench(s: &RobotState) -> [f64; 6] {
+    use nalgebra::{Matrix4, Vector3};
+    let f_t_k = Matrix4::from_column_slice(&s.F_T_EE) * Matrix4::from_column_slice(&s.EE_T_K);
+    let r = f_t_k.fixed_view::<3, 3>(0, 0);
+    let p = Vector3::new(f_t_k[(0, 3)], f_t_k[(1, 3)], f_t_k[(2, 3)]);
+    let w = &s.K_F_ext_hat_K;
+    let f = r * Vector3::new(w[0], w[1], w[2]);
+    let m = r * Vector3::new(w[3], w[4], w[5]) + p.cross(&f);
+    [f.x, f.y, f.z, m.x, m.y, m.z]
+}
+
+impl Hardware for FrankaBackend<'_> {
+    fn name(&self) -> &'static str {
+        "franka"
+    }
+
+    fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
+        if self.finished {
+            return Ok(None);
+        }
+        let control = match &mut self.control {
+            Some(c) => c,
+            None => self.control.insert(
+                self.robot
+                    .start_torque_control()
+                    .map_err(|e| robot_error(&e, "starting torque control"))?,
+            ),
+        };
+        let (s, _since_last) = match control.read_once() {
+            Ok(r) => r,
+            Err(e) => {
+                // The motion is over on the robot's side; dropping the
+                // handle cancels it on ours.
+                self.control = None;
+                return Err(robot_error(&e, "reading the robot state"));
+            }
+        };
+        self.take_state(&s);
+        self.pending = true;
+        Ok(Some(&self.state))
+    }
+
+    fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError> {
+        // One command per state: a repeated send has nothing to answer.
+        if !self.pending || self.control.is_none() {
+            return Ok(());
+        }
+        self.pending = false;
+        self.last_command_seq = cmd.header.seq;
+        let written = self.command_torques(cmd).and_then(|tau| {
+            self.sent = tau;
+            match self.control.as_mut() {
+                Some(c) => c.write_once(&Torques::new(tau)),
+                None => Ok(()),
+            }
+        });
+        written.map_err(|e| {
+            self.control = None;
+            robot_error(&e, "sending torques")
+        })
+    }
+
+    fn finish(&mut self) -> Result<(), HardwareError> {
+        let Some(mut control) = self.control.take() else {
+            return Ok(());
+        };
+        self.finished = true;
+        if !self.pending {
+            control
+                .read_once()
+                .map_err(|e| robot_error(&e, "reading the robot state to finish"))?;
+        }
+        self.pending = false;
+        // The last torque once more, as the motion's end: no jump when
+        // the robot's own controller takes over.
+        let last = Torques {
+            tau_J: self.sent,
+            motion_finished: true,
+        };
+        control
+            .write_once(&last)
+            .map_err(|e| robot_error(&e, "finishing the motion"))
+    }
+}
+
+impl FrankaBackend<'_> {
+    fn command_torques(&mut self, cmd: &TorqueCommand) -> Result<[f64; JOINTS], FrankaError> {
+        let mut tau = [0.0; JOINTS];
+        tau.copy_from_slice(&cmd.tau[..JOINTS]);
+        self.command(&tau)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! franky-sim never raises a robot error (docs/franka.md), so the path
+    //! from the robot's error to the daemon's Fault is checked here on
+    //! errors built as franka-rs builds them.
+    use super::*;
+    use crate::daemon::config::{Clock, DaemonConfig};
+    use crate::daemon::{Daemon, FAULT_ROBOT_LIMIT};
+    use franka::{ControlException, Errors, MoveStatus};
+    use robot_model::descriptions::{FR3_READY_Q, builtin};
+    use shared_mem_schema::transport;
+    use shared_mem_schema::{ControllerMode, ControllerStatus};
+
+    fn aborted(errors: &[&str], status: MoveStatus) -> FrankaError {
+        let mut e = ControlException::new(format!(
+            "libfranka: Move command aborted: motion aborted by reflex! [{}]",
+            errors.join(", ")
+        ));
+        e.move_status = Some(status);
+        let mut flags = Errors::default();
+        for name in errors {
+            flags.0[Errors::index_of(name).unwrap()] = true;
+        }
+        e.last_motion_errors = flags;
+        FrankaError::Control(e)
+    }
+
+    #[test]
+    fn robot_errors_map_to_fault_codes_with_the_robots_reason() {
+        let r = MoveStatus::ReflexAborted;
+        for (errors, code) in [
+            (
+                &["communication_constraints_violation"][..],
+                FAULT_ROBOT_COMMUNICATION,
+            ),
+            (&["joint_position_limits_violation"], FAULT_ROBOT_LIMIT),
+            (&["joint_velocity_violation"], FAULT_ROBOT_LIMIT),
+            (&["tau_J_range_violation"], FAULT_ROBOT_LIMIT),
+            (&["cartesian_reflex"], FAULT_ROBOT_REFLEX),
+            (
+                &["joint_reflex", "power_limit_violation"],
+                FAULT_ROBOT_LIMIT,
+            ),
+            (&[], FAULT_ROBOT_REFLEX),
+        ] {
+            let e = aborted(errors, r);
+            assert_eq!(robot_fault_code(&e), code, "{errors:?}");
+            let HardwareError::Robot { reason, .. } = robot_error(&e, "reading the robot state")
+            else {
+                unreachable!()
+            };
+            assert!(reason.starts_with("reading the robot state: libfranka: Move command aborted"));
+            for name in errors {
+                assert!(reason.contains(name), "{reason}");
+            }
+        }
+        let user_stop = aborted(&[], MoveStatus::EmergencyAborted);
+        assert_eq!(robot_fault_code(&user_stop), FAULT_ROBOT_OTHER);
+        let lost = FrankaError::Network("libfranka: UDP receive: Timeout".into());
+        assert_eq!(robot_fault_code(&lost), FAULT_ROBOT_OTHER);
+        assert!(
+            robot_error(&lost, "reading the robot state")
+                .to_string()
+                .contains("UDP receive: Timeout")
+        );
+    }
+
+    /// States of an FR3 at rest, then the robot's error.
+    struct FailingRobot {
+        state: HardwareState,
+        polls: u64,
+        fail_at: u64,
+        sent: u64,
+    }
+
+    impl Hardware for FailingRobot {
+        fn name(&self) -> &'static str {
+            "failing"
+        }
+        fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
+            self.polls += 1;
+            if self.polls >= self.fail_at {
+                let e = aborted(
+                    &["joint_position_limits_violation"],
+                    MoveStatus::ReflexAborted,
+                );
+                return Err(robot_error(&e, "reading the robot state"));
+            }
+            self.state.header.seq = self.polls;
+            self.state.step = self.polls;
+            self.state.header.t_hw_ns = self.polls * 1_000_000;
+            Ok(Some(&self.state))
+        }
+        fn send(&mut self, _: &TorqueCommand) -> Result<(), HardwareError> {
+            self.sent += 1;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_robot_error_becomes_the_daemons_published_fault() {
+        transport::quiet_logs();
+        let ns = format!("franka-fault-{}", std::process::id());
+        let mut cfg = DaemonConfig {
+            robot: "fr3".into(),
+            ..DaemonConfig::default()
+        };
+        cfg.controller.ee_frame = "fr3_hand_tcp".into();
+        cfg.backend.namespace = ns.clone();
+        cfg.timing.clock = Clock::Hardware;
+        cfg.realtime.enabled = false;
+        let model = builtin("fr3").unwrap();
+        let mut state = HardwareState::empty(7);
+        state.header.episode = 1;
+        state.q[..7].copy_from_slice(&FR3_READY_Q);
+        let hw = FailingRobot {
+            state,
+            polls: 0,
+            fail_at: 50,
+            sent: 0,
+        };
+        let node = transport::create_node("franka-fault").unwrap();
+        let statuses = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
+        let mut daemon = Daemon::new(cfg, model, hw, &node).unwrap();
+        let err = daemon.run(|| false, || {}).unwrap_err();
+        let HardwareError::Robot { code, reason } = &err else {
+            panic!("{err}")
+        };
+        assert_eq!(*code, FAULT_ROBOT_LIMIT);
+        assert!(
+            reason.contains("joint_position_limits_violation"),
+            "{reason}"
+        );
+        assert!(daemon.hardware().sent >= 40, "{}", daemon.hardware().sent);
+        assert_eq!(daemon.mode(), ControllerMode::Fault);
+        assert_eq!(daemon.fault_code(), FAULT_ROBOT_LIMIT);
+        let mut last = None;
+        transport::drain(&statuses, |s| last = Some(*s)).unwrap();
+        let last = last.expect("a status");
+        assert_eq!(last.mode, ControllerMode::Fault as u32);
+        assert_eq!(last.fault_code, FAULT_ROBOT_LIMIT);
+    }
+
+    #[test]
+    fn the_flange_wrench_is_the_robots_estimate_moved_to_the_flange() {
+        let mut s = RobotState::default();
+        // F_T_EE: the hand's TCP, 0.1034 m along z, yaw -π/4; EE_T_K = I.
+        let (c, si) = (
+            std::f64::consts::FRAC_1_SQRT_2,
+            -std::f64::consts::FRAC_1_SQRT_2,
+        );
+        s.F_T_EE = [
+            c, si, 0.0, 0.0, -si, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1034, 1.0,
+        ];
+        s.EE_T_K = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+        ];
+        // 10 N along K's x: along (c, si) in F, with a moment about F's
+        // origin from the 0.1034 m lever.
+        s.K_F_ext_hat_K = [10.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let w = flange_wrench(&s);
+        let want = [
+            10.0 * c,
+            10.0 * si,
+            0.0,
+            -0.1034 * 10.0 * si,
+            0.1034 * 10.0 * c,
+            0.0,
+        ];
+        for i in 0..6 {
+            assert!((w[i] - want[i]).abs() < 1e-12, "{w:?} vs {want:?}");
+        }
+    }
+
+    #[test]
+    fn our_fr3_gravity_is_the_robots_with_its_default_hand_load() {
+        // franka-rs' own FR3 model with the load the robot adds gravity for
+        // (Desk's default hand: 0.73 kg at (-0.01, 0, 0.03) m in the flange
+        // frame): what the backend takes off must be what the robot adds.
+        let theirs = franka::Model::from_urdf(franka::model::FR3_URDF).unwrap();
+        let ours = builtin("fr3").unwrap();
+        let mut data = ours.create_data();
+        for q in [
+            FR3_READY_Q,
+            [0.0, 0.0, 0.0, -1.57, 0.0, 1.57, 0.785],
+            [0.5, -0.3, 0.4, -2.0, 0.7, 2.5, -1.0],
+        ] {
+            let want = theirs.gravity_q(
+                &q,
+                0.73,
+                &[-0.01, 0.0, 0.03],
+                &franka::model::DEFAULT_GRAVITY_EARTH,
+            );
+            let got = robot_model::gravity(&ours, &mut data, &q);
+            for i in 0..7 {
+                assert!(
+                    (got[i] - want[i]).abs() < 1e-6,
+                    "joint {i} at {q:?}: ours {} franka-rs {}",
+                    got[i],
+                    want[i]
+                );
+            }
+        }
+    }
+}
