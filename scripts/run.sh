@@ -4,8 +4,34 @@
 # insertion episodes of the default peg, each episode's outcome and MCAP log
 # printed, everything stopped cleanly (Ctrl-C included).
 # Arguments go to `learner stack` (see `--help`), e.g. --peg hexagon --episodes 5.
+#
+# --robot franky-sim runs the same three-process path against franky-sim, a
+# simulated Franka FR3 (docs/franka.md, "The whole stack on franky-sim"):
+# installs it (scripts/franky-sim-venv.sh) and, without --hole-pos, gives the
+# example calibration below (franky-sim has no box).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+franky=0
+hole=0
+prev=
+for arg in "$@"; do
+    case "$prev/$arg" in
+        --robot/franky-sim | */--robot=franky-sim) franky=1 ;;
+        */--hole-pos | */--hole-pos=*) hole=1 ;;
+    esac
+    prev="$arg"
+done
+extra=()
+if [ "$franky" = 1 ]; then
+    . scripts/franky-sim-venv.sh
+    export FRANKY_SIM_PYTHON="$PWD/$FRANKY_SIM_VENV/bin/python"
+    if [ "$hole" = 0 ]; then
+        # 5 cm in front of and 10 cm below the FR3's start pose, on the
+        # arm's centre line (docs/franka.md says why there).
+        echo "run.sh: no --hole-pos given; using the example calibration 0.60,0.0,0.42" >&2
+        extra=(--hole-pos 0.60,0.0,0.42)
+    fi
+fi
 # Cargo's own progress is shown: a first build takes minutes, and a silent
 # terminal for that long looks hung.
 echo "run.sh: building hw-sim, rt-controller and learner (release; the first build takes several minutes)" >&2
@@ -13,4 +39,4 @@ cargo build --release -p hw-sim -p rt-controller -p learner --bins
 # Where cargo put them: CARGO_TARGET_DIR when set (relative to this root).
 target_dir="${CARGO_TARGET_DIR:-target}"
 echo "run.sh: starting the stack" >&2
-exec "$target_dir/release/learner" stack "$@"
+exec "$target_dir/release/learner" stack "$@" "${extra[@]}"

@@ -15,6 +15,7 @@
 //! It must never sit in the 1 kHz path: the controller takes its latest
 //! action without waiting for it.
 
+pub mod calibrated;
 pub mod collect;
 pub mod dataset;
 pub mod env;

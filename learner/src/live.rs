@@ -154,15 +154,16 @@ pub fn collect_live(c: &LiveCollect) -> Result<(), StackError> {
     if c.mix.end_after_completion.is_none() {
         run_args.push("--full-episodes".into());
     }
-    let status = crate::stack::run(&crate::stack::StackConfig {
+    let exit = crate::stack::run(&crate::stack::StackConfig {
+        hardware: crate::stack::Hardware::Sim,
         namespace: shared_mem_schema::DEFAULT_NAMESPACE.into(),
         lockstep: false,
         run_args,
         log_dir: c.out_dir.clone(),
         controller_config: c.controller_config.clone(),
     })?;
-    if !status.success() {
-        return Err(StackError::PolicyNodeFailed(status));
+    if !exit.policy.success() {
+        return Err(StackError::PolicyNodeFailed(exit.policy));
     }
     Ok(())
 }
@@ -216,21 +217,41 @@ pub struct PolicyNode {
 const EARLY_FRAMES: usize = 2000;
 
 /// What the node has seen of the current episode.
-struct Seen {
-    frame: Option<SensorFrame>,
+pub(crate) struct Seen {
+    pub(crate) frame: Option<SensorFrame>,
     /// The episode's roll reference: the roll of its first frame (the first
     /// one logged).
-    roll_ref_rad: Option<f64>,
-    report: Option<EpisodeReport>,
-    wrench: WrenchHistory,
-    frames: u64,
-    last_frame_wall_ns: u64,
-    gaps: SensorGapCounter,
+    pub(crate) roll_ref_rad: Option<f64>,
+    pub(crate) report: Option<EpisodeReport>,
+    pub(crate) wrench: WrenchHistory,
+    pub(crate) frames: u64,
+    pub(crate) last_frame_wall_ns: u64,
+    pub(crate) gaps: SensorGapCounter,
+    /// The latest controller status.
+    pub(crate) status: Option<ControllerStatus>,
     /// The episode's latest camera frame (kept only for a policy that
     /// reads the camera).
     camera: Option<Box<CameraFrame>>,
     /// Whether camera frames are kept.
     keep_camera: bool,
+}
+
+impl Seen {
+    /// Nothing seen yet (the first report, if any, given).
+    pub(crate) fn new(report: Option<EpisodeReport>, keep_camera: bool) -> Self {
+        Self {
+            frame: None,
+            roll_ref_rad: None,
+            report,
+            wrench: WrenchHistory::default(),
+            frames: 0,
+            last_frame_wall_ns: mono_now_ns(),
+            gaps: SensorGapCounter::default(),
+            status: None,
+            camera: None,
+            keep_camera,
+        }
+    }
 }
 
 impl PolicyNode {
@@ -253,7 +274,7 @@ impl PolicyNode {
     }
 
     /// Takes everything queued; logs what belongs to `episode`.
-    fn pump(
+    pub(crate) fn pump(
         &mut self,
         episode: u64,
         seen: &mut Seen,
@@ -292,6 +313,7 @@ impl PolicyNode {
             }
         })?;
         transport::drain(&self.status, |s| {
+            seen.status = Some(*s);
             if let Some(l) = log.as_deref_mut()
                 && let Err(e) = l.status(s)
             {
@@ -319,12 +341,23 @@ impl PolicyNode {
         Ok(())
     }
 
+    /// Queues a frame taken off the stream for the next pump to log.
+    pub(crate) fn push_early(&mut self, f: SensorFrame) {
+        self.early.push_back(f);
+    }
+
     /// Waits (up to 10 s) until the controller publishes sensor frames.
     /// hw-sim starts an episode at the reset whether the controller runs or
     /// not, and a step before the controller's first cycle has no frame: a
     /// stack started all at once would lose the first episode's first
     /// steps.
     pub fn wait_for_controller(&mut self) -> Result<(), StackError> {
+        self.wait_for_controller_within(10)
+    }
+
+    /// Waits up to `limit_s` seconds until the controller publishes sensor
+    /// frames (a robot's daemon may take its start-up time to connect).
+    pub fn wait_for_controller_within(&mut self, limit_s: u64) -> Result<(), StackError> {
         let start = mono_now_ns();
         loop {
             if transport::drain(&self.sensor, |_| {})? > 0 {
@@ -333,8 +366,8 @@ impl PolicyNode {
             if termination_requested() {
                 return Err(StackError::Interrupted);
             }
-            if mono_now_ns() - start > 10_000_000_000 {
-                return Err(StackError::NoSensorFrames);
+            if mono_now_ns() - start > limit_s * 1_000_000_000 {
+                return Err(StackError::ControllerNotStarted(limit_s));
             }
             std::thread::sleep(Duration::from_millis(1));
         }
@@ -660,17 +693,10 @@ impl LiveEpisode {
             task,
             mixed,
             heuristic: HeuristicPolicy::new(HeuristicConfig::default()),
-            seen: Seen {
-                frame: None,
-                roll_ref_rad: None,
-                report: Some(first),
-                wrench: WrenchHistory::default(),
-                frames: 0,
-                last_frame_wall_ns: mono_now_ns(),
-                gaps: SensorGapCounter::default(),
-                camera: None,
-                keep_camera: cfg.policy.as_ref().is_some_and(|p| p.needs_camera()),
-            },
+            seen: Seen::new(
+                Some(first),
+                cfg.policy.as_ref().is_some_and(|p| p.needs_camera()),
+            ),
             free_wrench: None,
             actions: 0,
             next_tick: mono_now_ns(),

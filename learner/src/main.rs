@@ -50,24 +50,100 @@ struct EpisodeArgs {
     policy: Option<PathBuf>,
 }
 
+/// A task the user calibrated instead of a simulator's report (a robot,
+/// franky-sim).
+#[derive(Debug, clap::Args)]
+struct CalibrationArgs {
+    /// The hole's top centre in the robot's base frame, m, as `X,Y,Z` (the
+    /// hole's axis is the base's z): the heuristic acts on this calibration
+    /// instead of a simulator's report. On a robot, where the box was
+    /// calibrated; on franky-sim (no box), any point the arm can reach.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_negative_numbers = true
+    )]
+    hole_pos: Option<Vec<f64>>,
+    /// The calibrated hole's depth, m: the heuristic descends to its bottom.
+    #[arg(long, default_value_t = 0.03)]
+    hole_depth_m: f64,
+}
+
+impl CalibrationArgs {
+    /// The task, when a hole position is given (`--peg` gives its symmetry).
+    fn task(&self, peg: PegShape) -> Result<Option<learner::policy::TaskGeometry>> {
+        let Some(p) = &self.hole_pos else {
+            return Ok(None);
+        };
+        anyhow::ensure!(
+            p.len() == 3 && p.iter().all(|v| v.is_finite()),
+            "--hole-pos {p:?}: must be three finite numbers X,Y,Z (m, the robot's base frame)"
+        );
+        anyhow::ensure!(
+            self.hole_depth_m.is_finite() && self.hole_depth_m > 0.0 && self.hole_depth_m <= 0.2,
+            "--hole-depth-m {}: must be within (0, 0.2] m",
+            self.hole_depth_m
+        );
+        Ok(Some(learner::policy::TaskGeometry {
+            hole_pose: nalgebra::Isometry3::translation(p[0], p[1], p[2]),
+            symmetry: peg.symmetry_order(),
+            depth_m: self.hole_depth_m,
+        }))
+    }
+}
+
+/// What `learner stack` runs the controller against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum RobotArg {
+    /// hw-sim: the simulated arm, peg, box and camera.
+    Sim,
+    /// franky-sim: a simulated Franka FR3 over the robot's own protocol,
+    /// without peg, box or camera (needs --hole-pos).
+    FrankySim,
+}
+
 #[derive(Debug, Subcommand)]
 enum Cmd {
     /// The live policy node: heuristic insertion episodes against a running
-    /// hw-sim and rt-controller, logged to MCAP.
+    /// hw-sim and rt-controller, logged to MCAP. With --hole-pos, against a
+    /// running rt-controller alone (a robot, franky-sim): the task from the
+    /// calibration, no resets.
     Run {
         #[command(flatten)]
         episodes: EpisodeArgs,
         #[command(flatten)]
         collect: RunCollectArgs,
+        #[command(flatten)]
+        calibration: CalibrationArgs,
+        /// With --hole-pos: the daemon's robot description, recorded in the
+        /// logs.
+        #[arg(long, default_value = "fr3")]
+        robot_description: String,
+        /// With --hole-pos: how long to wait for the controller's first
+        /// frame, s (a robot's daemon connects within its start-up timeout).
+        #[arg(long, default_value_t = 180)]
+        controller_wait_s: u64,
     },
-    /// The whole stack: starts hw-sim, rt-controller and `learner run` as
-    /// separate processes, runs the episodes, stops everything.
+    /// The whole stack: starts hw-sim (or franky-sim), rt-controller and
+    /// `learner run` as separate processes, runs the episodes, stops
+    /// everything.
     Stack {
         #[command(flatten)]
         episodes: EpisodeArgs,
-        /// rt-controller configuration (TOML).
+        /// rt-controller configuration (TOML); with --robot franky-sim, the
+        /// default is the repository's configs/rt-controller/franky-sim.toml.
         #[arg(long)]
         controller_config: Option<PathBuf>,
+        /// What the controller drives.
+        #[arg(long, value_enum, default_value_t = RobotArg::Sim)]
+        robot: RobotArg,
+        #[command(flatten)]
+        calibration: CalibrationArgs,
+        /// With --robot franky-sim: the loopback address franky-sim serves
+        /// on (default: one of this process's own in 127.20.0.0/16).
+        #[arg(long)]
+        franky_sim_address: Option<String>,
     },
     /// Collects episodes for the self-supervised dataset (random and
     /// heuristic policies), one MCAP shard per episode.
@@ -869,7 +945,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Run {
             episodes: a,
             collect: c,
+            calibration,
+            robot_description,
+            controller_wait_s,
         } => {
+            if let Some(task) = calibration.task(a.peg)? {
+                return run_calibrated(&a, &c, task, robot_description, controller_wait_s);
+            }
             let mut cfg = LiveConfig::new(&a.namespace, world_config(&a)?, a.log_dir.clone());
             cfg.episodes = a.episodes;
             cfg.seed = a.seed;
@@ -940,7 +1022,18 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Stack {
             episodes: a,
             controller_config,
+            robot,
+            calibration,
+            franky_sim_address,
         } => {
+            if robot == RobotArg::FrankySim {
+                return stack_franky_sim(&a, controller_config, &calibration, franky_sim_address);
+            }
+            anyhow::ensure!(
+                calibration.hole_pos.is_none() && franky_sim_address.is_none(),
+                "--hole-pos and --franky-sim-address are for --robot franky-sim (hw-sim reports \
+                 the hole itself)"
+            );
             world_config(&a)?; // fail early on a bad peg or file
             let mut run_args = vec![
                 "--episodes".to_string(),
@@ -963,7 +1056,8 @@ fn run(cli: Cli) -> Result<()> {
                 run_args.push("--policy".into());
                 run_args.push(p.display().to_string());
             }
-            let status = stack::run(&StackConfig {
+            let exit = stack::run(&StackConfig {
+                hardware: stack::Hardware::Sim,
                 namespace: a.namespace.clone(),
                 lockstep: a.lockstep,
                 run_args,
@@ -971,10 +1065,218 @@ fn run(cli: Cli) -> Result<()> {
                 controller_config,
             })?;
             println!("stack stopped; process logs in {}", a.log_dir.display());
-            if !status.success() {
-                anyhow::bail!("the policy node failed ({status})");
+            if !exit.policy.success() {
+                anyhow::bail!("the policy node failed ({})", exit.policy);
             }
             Ok(())
         }
     }
+}
+
+/// `learner run --hole-pos`: the heuristic on a calibrated task against a
+/// running controller alone (a robot, franky-sim).
+fn run_calibrated(
+    a: &EpisodeArgs,
+    c: &RunCollectArgs,
+    task: learner::policy::TaskGeometry,
+    robot: String,
+    controller_wait_s: u64,
+) -> Result<()> {
+    use learner::calibrated::{self, CalibratedConfig};
+    for (given, flag) in [
+        (
+            a.lockstep,
+            "--lockstep (a robot cannot wait for the learner)",
+        ),
+        (
+            a.policy.is_some(),
+            "--policy (a trained policy reads the simulator's task state)",
+        ),
+        (
+            a.world.is_some(),
+            "--world (there is no simulator to send it to)",
+        ),
+        (
+            c.mix_heuristic_fraction.is_some(),
+            "--mix-heuristic-fraction",
+        ),
+        (!c.pegs.is_empty(), "--pegs"),
+        (c.states.is_some(), "--states"),
+        (c.episode_actions.is_some(), "--episode-actions"),
+    ] {
+        anyhow::ensure!(!given, "--hole-pos excludes {flag}");
+    }
+    anyhow::ensure!(
+        a.episode_timeout_s.is_finite() && a.episode_timeout_s > 0.0,
+        "--episode-timeout-s {} must be positive",
+        a.episode_timeout_s
+    );
+    let cfg = CalibratedConfig {
+        namespace: a.namespace.clone(),
+        episodes: a.episodes,
+        task,
+        peg: a.peg,
+        robot,
+        episode_timeout_s: a.episode_timeout_s,
+        settle_s: 0.5,
+        controller_wait_s,
+        log_dir: a.log_dir.clone(),
+        log: learner::log::LogOptions {
+            foxglove: !c.no_foxglove,
+            view_rate_hz: c.view_rate_hz,
+            ..Default::default()
+        },
+    };
+    std::fs::create_dir_all(&cfg.log_dir)
+        .with_context(|| format!("creating {}", cfg.log_dir.display()))?;
+    let mm = |v: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", v[0] * 1e3, v[1] * 1e3, v[2] * 1e3);
+    let run = calibrated::run(&cfg, |o| {
+        let g = &o.sensor_gaps;
+        let loss = g.sensor.unwrap_or_default();
+        let e = o.end_error_m();
+        println!(
+            "episode {}: {} after {:.2} s, {} actions; tip from {} to {} mm, goal (the hole's \
+             bottom centre) {} mm: moved {:.1} mm towards it, ended {:.1} mm from it ({:.1} mm \
+             sideways, {:+.1} mm in z); sensor frames: {} logged, {} missing in {} gaps ({} \
+             hardware steps without a controller frame, {} published but not recorded); log {}",
+            o.episode,
+            if o.reached {
+                "reached the hole's bottom level"
+            } else if o.interrupted {
+                "interrupted"
+            } else {
+                "did not reach the hole's bottom level"
+            },
+            o.duration_s,
+            o.actions,
+            mm(o.start_m),
+            mm(o.end_m),
+            mm(o.goal_m),
+            o.approached_m() * 1e3,
+            e.norm() * 1e3,
+            e.xy().norm() * 1e3,
+            e.z * 1e3,
+            g.messages,
+            g.missing,
+            g.gaps,
+            loss.not_published,
+            loss.not_recorded,
+            o.log.display()
+        );
+    })?;
+    let reached = run.episodes.iter().filter(|o| o.reached).count();
+    println!(
+        "{reached} of {} episodes reached the calibrated hole's bottom level, in free space: \
+         there is no peg or box, so no contact and no insertion outcome",
+        run.episodes.len()
+    );
+    match &run.status {
+        Some(s) => println!(
+            "controller: {} cycles, {} hardware states skipped, compute p50 {} µs, p99 {} µs, \
+             max {:.0} µs (the robot's period: 1000 µs), fault code {}",
+            s.cycles,
+            s.hardware_states_skipped,
+            s.compute.quantile_us(0.5),
+            s.compute.quantile_us(0.99),
+            s.compute.max_ns as f64 / 1e3,
+            s.fault_code
+        ),
+        None => println!("controller: no status received"),
+    }
+    Ok(())
+}
+
+/// `learner stack --robot franky-sim`: franky-sim, rt-controller with the
+/// Franka backend, and the heuristic on the calibrated task.
+fn stack_franky_sim(
+    a: &EpisodeArgs,
+    controller_config: Option<PathBuf>,
+    calibration: &CalibrationArgs,
+    address: Option<String>,
+) -> Result<()> {
+    let Some(task) = calibration.task(a.peg)? else {
+        anyhow::bail!(
+            "--robot franky-sim needs --hole-pos X,Y,Z: where the hole is in the robot's base \
+             frame, m (franky-sim has no box; on a robot this is the box's calibration), e.g. \
+             --hole-pos 0.60,0.0,0.42, 5 cm in front of and 10 cm below the FR3's start pose"
+        );
+    };
+    for (given, flag) in [
+        (
+            a.lockstep,
+            "--lockstep (the robot clocks the loop and never waits)",
+        ),
+        (
+            a.policy.is_some(),
+            "--policy (a trained policy reads the simulator's task state)",
+        ),
+        (
+            a.world.is_some(),
+            "--world (franky-sim has no world to configure)",
+        ),
+    ] {
+        anyhow::ensure!(!given, "--robot franky-sim excludes {flag}");
+    }
+    let mut franky = stack::FrankySim::from_repository();
+    if let Some(addr) = address {
+        anyhow::ensure!(
+            addr.parse::<std::net::Ipv4Addr>()
+                .is_ok_and(|ip| ip.is_loopback()),
+            "--franky-sim-address {addr:?}: must be an IPv4 loopback address (127.x.y.z)"
+        );
+        franky.address = addr;
+    }
+    let template = controller_config
+        .unwrap_or_else(|| stack::repository_root().join("configs/rt-controller/franky-sim.toml"));
+    std::fs::create_dir_all(&a.log_dir)
+        .with_context(|| format!("creating {}", a.log_dir.display()))?;
+    let written = a.log_dir.join("rt-controller.toml");
+    stack::franky_sim_controller_config(&template, &franky.address, &a.namespace, &written)?;
+    let daemon = rt_controller::daemon::config::DaemonConfig::from_file(&written)?;
+    let p = task.hole_pose.translation.vector;
+    let run_args = vec![
+        "--episodes".to_string(),
+        a.episodes.to_string(),
+        "--peg".into(),
+        a.peg.name().into(),
+        "--episode-timeout-s".into(),
+        a.episode_timeout_s.to_string(),
+        "--hole-pos".into(),
+        format!("{},{},{}", p.x, p.y, p.z),
+        "--hole-depth-m".into(),
+        task.depth_m.to_string(),
+        "--robot-description".into(),
+        daemon.robot.clone(),
+        // The daemon retries connecting for its start-up timeout.
+        "--controller-wait-s".into(),
+        (daemon.timing.startup_timeout_s.ceil() as u64 + 60).to_string(),
+    ];
+    let exit = stack::run(&StackConfig {
+        hardware: stack::Hardware::FrankySim(franky),
+        namespace: a.namespace.clone(),
+        lockstep: false,
+        run_args,
+        log_dir: a.log_dir.clone(),
+        controller_config: Some(written),
+    })?;
+    let show = |s: Option<std::process::ExitStatus>| {
+        s.map_or("still running after SIGKILL".to_string(), |s| s.to_string())
+    };
+    println!(
+        "stack stopped: rt-controller {} after SIGTERM, franky-sim {}; process logs in {}",
+        show(exit.controller),
+        show(exit.hardware),
+        a.log_dir.display()
+    );
+    if !exit.policy.success() {
+        anyhow::bail!("the policy node failed ({})", exit.policy);
+    }
+    if !exit.controller.is_some_and(|s| s.success()) {
+        anyhow::bail!(
+            "rt-controller did not stop cleanly ({}); see {}",
+            show(exit.controller),
+            a.log_dir.join("rt-controller.log").display()
+        );
+    }
+    Ok(())
 }

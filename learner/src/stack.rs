@@ -1,6 +1,7 @@
-//! Starting and stopping the whole stack as separate processes: hw-sim,
-//! rt-controller and the live policy node (`learner run`), found next to
-//! the running executable (all three are built into one target directory).
+//! Starting and stopping the whole stack as separate processes: hw-sim (or
+//! franky-sim, a simulated Franka FR3), rt-controller and the live policy
+//! node (`learner run`), found next to the running executable (all three
+//! are built into one target directory).
 
 use crate::log::LogError;
 use shared_mem_schema::process::termination_requested;
@@ -85,9 +86,51 @@ pub enum StackError {
     /// No sensor frames arrived for 10 s at the start of an episode.
     #[error("no sensor frames from rt-controller for 10 s (is it running?)")]
     NoSensorFrames,
+    /// No sensor frames arrived while waiting for the controller to start.
+    #[error("no sensor frames from rt-controller within {0} s of waiting (is it running?)")]
+    ControllerNotStarted(u64),
     /// The sensor frames stopped for 2 s during an episode.
     #[error("sensor frames stopped for 2 s in episode {0}")]
     FramesStopped(u64),
+    /// The controller faulted during a run with a calibrated task (no
+    /// simulator resets the arm, so the run stops there).
+    #[error(
+        "the controller faulted in episode {episode} (fault code {code}); see rt-controller.log"
+    )]
+    ControllerFault {
+        /// The episode.
+        episode: u64,
+        /// The controller's fault code.
+        code: u32,
+    },
+    /// franky-sim cannot be run with the given interpreter.
+    #[error(
+        "franky-sim is not installed: `{} -c 'import franky_sim'` fails; run \
+         `. scripts/franky-sim-venv.sh` (./scripts/run.sh --robot franky-sim does) or set \
+         FRANKY_SIM_PYTHON"
+    , .0.display())]
+    FrankySimMissing(PathBuf),
+    /// The rt-controller configuration for franky-sim is unusable.
+    #[error("{}: {source}", path.display())]
+    ControllerConfig {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: rt_controller::daemon::config::DaemonConfigError,
+    },
+    /// The rt-controller configuration for franky-sim does not drive a
+    /// Franka.
+    #[error(
+        "{}: backend.kind must be \"franka\" to drive franky-sim (found {kind:?})",
+        path.display()
+    )]
+    NotFranka {
+        /// The file.
+        path: PathBuf,
+        /// Its backend kind, as the file spells it.
+        kind: String,
+    },
     /// A shared-memory service failed.
     #[error(transparent)]
     Transport(#[from] TransportError),
@@ -207,9 +250,99 @@ impl Drop for Managed {
     }
 }
 
+/// What the controller drives.
+#[derive(Debug, Clone)]
+pub enum Hardware {
+    /// hw-sim (the default): the peg, the box, the camera and the episode
+    /// resets.
+    Sim,
+    /// franky-sim, a simulated FR3 over the Franka Control Interface: no
+    /// peg, box, camera or resets (docs/franka.md, "The whole stack on
+    /// franky-sim").
+    FrankySim(FrankySim),
+}
+
+/// How to start franky-sim.
+#[derive(Debug, Clone)]
+pub struct FrankySim {
+    /// A Python interpreter that imports `franky_sim`.
+    pub python: PathBuf,
+    /// Our shim, scripts/franky_sim_server.py.
+    pub server: PathBuf,
+    /// The loopback address it serves port 1337 on (one client at a time,
+    /// so a run takes an address of its own).
+    pub address: String,
+}
+
+impl FrankySim {
+    /// The repository's defaults: `$FRANKY_SIM_PYTHON`, else
+    /// `.venv-franky-sim` (scripts/franky-sim-venv.sh), and an address of
+    /// this process's own in 127.20.0.0/16 (the Franka backend's test uses
+    /// 127.19.0.0/16).
+    pub fn from_repository() -> Self {
+        let repo = repository_root();
+        let pid = std::process::id();
+        Self {
+            python: std::env::var_os("FRANKY_SIM_PYTHON")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| repo.join(".venv-franky-sim/bin/python")),
+            server: repo.join("scripts/franky_sim_server.py"),
+            address: format!(
+                "127.20.{}.{}",
+                (pid >> 8) & 0xff,
+                (pid & 0xff).clamp(1, 254)
+            ),
+        }
+    }
+}
+
+/// The source tree this executable was built from (where scripts/ and
+/// configs/ are during development).
+pub fn repository_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The rt-controller configuration for franky-sim: `template` (a daemon
+/// configuration with `backend.kind = "franka"`) with franky-sim's
+/// address and the stack's namespace, written to `out` (the run's record of
+/// what the daemon ran with).
+pub fn franky_sim_controller_config(
+    template: &Path,
+    address: &str,
+    namespace: &str,
+    out: &Path,
+) -> Result<(), StackError> {
+    use rt_controller::daemon::config::{BackendKind, DaemonConfig};
+    let mut c =
+        DaemonConfig::from_file(template).map_err(|source| StackError::ControllerConfig {
+            path: template.to_path_buf(),
+            source,
+        })?;
+    if c.backend.kind != BackendKind::Franka {
+        return Err(StackError::NotFranka {
+            path: template.to_path_buf(),
+            kind: format!("{:?}", c.backend.kind).to_lowercase(),
+        });
+    }
+    c.backend.franka.address = address.to_string();
+    c.backend.namespace = namespace.to_string();
+    let text = format!(
+        "# {} with franky-sim's address and the stack's namespace (learner stack --robot \
+         franky-sim)\n{}",
+        template.display(),
+        c.to_toml()
+    );
+    std::fs::write(out, text).map_err(|source| StackError::Io {
+        path: out.to_path_buf(),
+        source,
+    })
+}
+
 /// Settings of a stack run.
 #[derive(Debug, Clone)]
 pub struct StackConfig {
+    /// What the controller drives.
+    pub hardware: Hardware,
     /// Service namespace.
     pub namespace: String,
     /// Lockstep instead of real time.
@@ -218,16 +351,29 @@ pub struct StackConfig {
     pub run_args: Vec<String>,
     /// Directory of logs (process logs and MCAP).
     pub log_dir: PathBuf,
-    /// Daemon configuration file, if any.
+    /// Daemon configuration file, if any (with franky-sim: the one the
+    /// stack wrote, see [`franky_sim_controller_config`]).
     pub controller_config: Option<PathBuf>,
 }
 
-/// Starts hw-sim and rt-controller, runs `learner run` to completion in the
-/// foreground (its output is ours), and stops everything. Returns the
-/// policy node's exit status.
-pub fn run(cfg: &StackConfig) -> Result<ExitStatus, StackError> {
+/// How the stack's processes ended.
+#[derive(Debug, Clone, Copy)]
+pub struct StackExit {
+    /// The policy node's exit status.
+    pub policy: ExitStatus,
+    /// rt-controller's, after its SIGTERM (`None`: it did not end even on
+    /// SIGKILL).
+    pub controller: Option<ExitStatus>,
+    /// The simulator's (hw-sim or franky-sim) after its SIGTERM.
+    pub hardware: Option<ExitStatus>,
+}
+
+/// Starts the simulator (hw-sim or franky-sim) and rt-controller, runs
+/// `learner run` to completion in the foreground (its output is ours), and
+/// stops everything: the controller first (SIGTERM: it holds the pose, then
+/// exits), then the simulator.
+pub fn run(cfg: &StackConfig) -> Result<StackExit, StackError> {
     let dir = bin_dir()?;
-    let sim_bin = executable(&dir, "hw-sim")?;
     let ctl_bin = executable(&dir, "rt-controller")?;
     let learner_bin = executable(&dir, "learner")?;
     std::fs::create_dir_all(&cfg.log_dir).map_err(|source| StackError::Io {
@@ -236,9 +382,33 @@ pub fn run(cfg: &StackConfig) -> Result<ExitStatus, StackError> {
     })?;
     shared_mem_schema::transport::cleanup_dead_nodes();
     let mode = if cfg.lockstep { "lockstep" } else { "realtime" };
-    let mut sim_cmd = Command::new(&sim_bin);
-    sim_cmd.args(["--mode", mode, "--namespace", &cfg.namespace]);
-    let mut sim = Managed::spawn("hw-sim", sim_cmd, Some(&cfg.log_dir.join("hw-sim.log")))?;
+    let mut sim = match &cfg.hardware {
+        Hardware::Sim => {
+            let mut sim_cmd = Command::new(executable(&dir, "hw-sim")?);
+            sim_cmd.args(["--mode", mode, "--namespace", &cfg.namespace]);
+            Managed::spawn("hw-sim", sim_cmd, Some(&cfg.log_dir.join("hw-sim.log")))?
+        }
+        Hardware::FrankySim(f) => {
+            let importable = Command::new(&f.python)
+                .args(["-c", "import franky_sim"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success());
+            if !importable {
+                return Err(StackError::FrankySimMissing(f.python.clone()));
+            }
+            if !f.server.is_file() {
+                return Err(StackError::NotBuilt(f.server.clone()));
+            }
+            let mut cmd = Command::new(&f.python);
+            cmd.arg(&f.server)
+                .args(["-s", "mujoco", "--hostname", &f.address])
+                .env("PYTHONUNBUFFERED", "1");
+            eprintln!("stack: franky-sim on {}:1337", f.address);
+            Managed::spawn("franky-sim", cmd, Some(&cfg.log_dir.join("franky-sim.log")))?
+        }
+    };
     let mut ctl_cmd = Command::new(&ctl_bin);
     ctl_cmd.args(["--namespace", &cfg.namespace]);
     if cfg.lockstep {
@@ -285,9 +455,14 @@ pub fn run(cfg: &StackConfig) -> Result<ExitStatus, StackError> {
         std::thread::sleep(Duration::from_millis(20));
     };
     // Controller first: it holds the pose, then stops sending; the
-    // simulator's brakes then hold the arm.
-    ctl.stop(Duration::from_secs(5));
-    sim.stop(Duration::from_secs(5));
+    // simulator's brakes (hw-sim) or the robot's own controller
+    // (franky-sim, as a Franka) then hold the arm.
+    let controller = ctl.stop(Duration::from_secs(5));
+    let hardware = sim.stop(Duration::from_secs(5));
     shared_mem_schema::transport::cleanup_dead_nodes();
-    Ok(status)
+    Ok(StackExit {
+        policy: status,
+        controller,
+        hardware,
+    })
 }
