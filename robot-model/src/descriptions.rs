@@ -28,9 +28,11 @@ pub const PANDA_READY_Q: [f64; 7] = [
 /// FR3's narrower joint limits.
 pub const FR3_READY_Q: [f64; 7] = PANDA_READY_Q;
 
-/// A start pose of the iiwa 14 (ours): the peg tip at (0.590, 0, 0.353) m
-/// pointing down.
-pub const IIWA14_HOME_Q: [f64; 7] = [0.0, 0.5, 0.0, -1.4, 0.0, 1.2, 0.0];
+/// A start pose of the iiwa 14 (ours): the peg tip at (0.580, 0, 0.353) m
+/// pointing straight down. The three pitch joints sum to π (q2 − q4 + q6);
+/// the pose before (q6 = 1.2) left the peg 0.0416 rad off the vertical, so
+/// it wedged in the hole part-way down (docs/experiments.md).
+pub const IIWA14_HOME_Q: [f64; 7] = [0.0, 0.5, 0.0, -1.4, 0.0, std::f64::consts::PI - 1.9, 0.0];
 
 /// The start pose of a built-in robot, by its URDF robot name.
 pub fn home_configuration(robot_name: &str) -> Option<[f64; 7]> {
