@@ -93,6 +93,45 @@ fn main() {
             };
             let o = env.step(&a, false).expect("step");
             let t = env.task();
+            if std::env::var_os("RL_PROBE_TRACE").is_some() && t.s_m.z < 0.003 {
+                let w = env.fast().sensor_frame().wrench;
+                println!(
+                    "  step {:3} s ({:5.2}, {:5.2}, {:5.2}) mm psi {:6.3} contact {} F ({:5.1}, {:5.1}, {:5.1}) a {:?}",
+                    o.steps,
+                    t.s_m.x * 1e3,
+                    t.s_m.y * 1e3,
+                    t.s_m.z * 1e3,
+                    t.s_psi_rad,
+                    t.in_contact,
+                    w[0],
+                    w[1],
+                    w[2],
+                    a.iter()
+                        .map(|v| (v * 100.0).round() / 100.0)
+                        .collect::<Vec<_>>()
+                );
+                // The peg's bottom corners in the hole frame: height and how
+                // far inside the hole's outline (negative: over the rim).
+                let w = env.fast().world();
+                if let (Some(peg), Some(b), Some(hole)) = (w.peg(), w.box_geometry(), w.hole_pose())
+                {
+                    let to_hole = hole.inverse() * w.link_pose(peg.link) * peg.sensor_in_link;
+                    let corners: Vec<String> = peg
+                        .prism
+                        .polygon
+                        .iter()
+                        .map(|c| {
+                            let p = to_hole * nalgebra::Point3::new(c[0], c[1], peg.prism.z1);
+                            format!(
+                                "({:.2} z, {:.2} in)",
+                                p.z * 1e3,
+                                b.hole_inset([p.x, p.y]) * 1e3
+                            )
+                        })
+                        .collect();
+                    println!("     corners mm {}", corners.join(" "));
+                }
+            }
             min_xy = min_xy.min((t.s_m.x.powi(2) + t.s_m.y.powi(2)).sqrt());
             min_z = min_z.min(t.s_m.z);
             for w in env.fast().wrench.ordered() {

@@ -27,6 +27,9 @@ pub struct RewardConfig {
     pub eps1_m: [f64; 3],
     /// The alignment region's roll bound, ε_ψ, rad.
     pub eps_psi_rad: f64,
+    /// The step up on entering the hole, c_e: insertion starts at 2 + c_e
+    /// where alignment ends at 2 (docs/rl.md, "Reward": why).
+    pub c_e: f64,
     /// Scale of the insertion term, c_i (its gain from the opening to the
     /// bottom).
     pub c_i: f64,
@@ -42,7 +45,8 @@ impl Default for RewardConfig {
             c_a: 1.0,
             eps1_m: [0.005, 0.005, 0.02],
             eps_psi_rad: 0.1,
-            c_i: 2.0,
+            c_e: 1.0,
+            c_i: 1.5,
             eps2_m: 0.003,
         }
     }
@@ -52,8 +56,9 @@ impl Default for RewardConfig {
 pub const MAX_STEP_REWARD: f64 = 5.0;
 
 impl RewardConfig {
-    /// Checks that every constant is usable: positive and finite, and the
-    /// stages ordered (reaching ≤ 1 ≤ alignment ≤ 2 ≤ insertion < 5).
+    /// Checks that every constant is usable: positive and finite (c_e may
+    /// be 0), and the stages ordered (reaching ≤ 1 ≤ alignment ≤ 2 ≤
+    /// insertion < 5).
     pub fn validate(&self) -> Result<(), FieldError> {
         let positive = [
             ("reward.c_r", self.c_r),
@@ -85,11 +90,21 @@ impl RewardConfig {
                 "at most 1: alignment must not pay more than insertion's base of 2",
             ));
         }
-        if self.c_i >= 3.0 {
+        if !(self.c_e.is_finite() && self.c_e >= 0.0) {
+            return Err(FieldError::new(
+                "reward.c_e",
+                self.c_e,
+                "must be finite and not negative",
+            ));
+        }
+        if self.c_e + self.c_i >= 3.0 {
             return Err(FieldError::new(
                 "reward.c_i",
                 self.c_i,
-                "below 3: insertion must pay less than completion's 5",
+                format!(
+                    "c_e + c_i below 3 (c_e is {}): insertion must pay less than completion's 5",
+                    self.c_e
+                ),
             ));
         }
         Ok(())
@@ -129,8 +144,8 @@ pub enum RewardStage {
 /// The reward of one state and its stage.
 ///
 /// - (c) in the hole and `h_d − |s_z| ≤ ε₂`: 5.
-/// - (i) in the hole: `2 + c_i·min(|s_z|, h_d)/h_d`, from 2 at the opening
-///   to 2 + c_i at the bottom.
+/// - (i) in the hole: `2 + c_e + c_i·min(|s_z|, h_d)/h_d`, from 2 + c_e at
+///   the opening to 2 + c_e + c_i at the bottom.
 /// - (a) `|s| ≤ ε₁` per axis and `|s_ψ| ≤ ε_ψ`:
 ///   `1 + c_a(1 − ‖s‖/‖ε₁‖)(1 − |s_ψ|/ε_ψ)`.
 /// - (r) otherwise: `c_r(1 − tanh(λ‖s‖))(1 − |s_ψ|/(π/k))`.
@@ -143,7 +158,10 @@ pub fn reward(cfg: &RewardConfig, geom: &RewardGeometry, task: &TaskState) -> (f
         if h_d - depth <= cfg.eps2_m {
             return (MAX_STEP_REWARD, RewardStage::Completion);
         }
-        return (2.0 + cfg.c_i * depth / h_d, RewardStage::Insertion);
+        return (
+            2.0 + cfg.c_e + cfg.c_i * depth / h_d,
+            RewardStage::Insertion,
+        );
     }
     let e = cfg.eps1_m;
     if s.x.abs() <= e[0] && s.y.abs() <= e[1] && s.z.abs() <= e[2] && psi <= cfg.eps_psi_rad {
@@ -257,7 +275,7 @@ mod tests {
         let (v, st) = r([0.003, 0.0, 0.004], 0.05, false);
         assert_eq!(st, RewardStage::Alignment);
         assert!((v - 1.382_148_869_802_612).abs() < 1e-12, "{v}");
-        // Aligned at the opening: 2, where insertion starts.
+        // Aligned at the opening: 2, alignment's best.
         assert_eq!(
             r([0.0, 0.0, 0.0], 0.0, false),
             (2.0, RewardStage::Alignment)
@@ -269,14 +287,18 @@ mod tests {
 
     #[test]
     fn insertion_and_completion_by_hand() {
-        // 1 cm into a 4 cm hole: 2 + 2·0.25 = 2.5.
+        // 1 cm into a 4 cm hole: 2 + 1 + 1.5·0.25 = 3.375.
         let (v, st) = r([0.0005, 0.0, -0.01], 0.0, true);
         assert_eq!(st, RewardStage::Insertion);
-        assert!((v - 2.5).abs() < 1e-12);
-        // 3.6 cm: 0.4 cm short of the bottom, above ε₂ = 3 mm: 3.8.
+        assert!((v - 3.375).abs() < 1e-12);
+        // 3.6 cm: 0.4 cm short of the bottom, above ε₂ = 3 mm: 4.35.
         let (v, st) = r([0.0, 0.0, -0.036], 0.0, true);
         assert_eq!(st, RewardStage::Insertion);
-        assert!((v - 3.8).abs() < 1e-12);
+        assert!((v - 4.35).abs() < 1e-12);
+        // Just in: a step up from alignment's best, 2, to 3.
+        let (v, st) = r([0.0, 0.0, -0.0001], 0.0, true);
+        assert_eq!(st, RewardStage::Insertion);
+        assert!((v - 3.00375).abs() < 1e-12, "{v}");
         // 3.8 cm: within ε₂.
         assert_eq!(
             r([0.0, 0.0, -0.038], 0.0, true),
@@ -308,10 +330,15 @@ mod tests {
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("reward.lambda_per_m"), "{e}");
         let bad = RewardConfig {
-            c_i: 3.5,
+            c_i: 2.5,
             ..Default::default()
         };
         assert!(bad.validate().unwrap_err().to_string().contains("c_i"));
+        let bad = RewardConfig {
+            c_e: -0.5,
+            ..Default::default()
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("c_e"));
     }
 
     #[test]
