@@ -22,7 +22,10 @@ fn main() {
     let sample = args.get(3).is_some_and(|a| a == "sample");
     let impact_mm: Option<f64> = what.strip_prefix("impact").map(|v| v.parse().expect(usage));
     let (cfg, policy) = if what == "scripted" || what == "heuristic" || impact_mm.is_some() {
-        (RlEnvConfig::default(), None)
+        // Scripted steps up to the controller's 1 cm clamp.
+        let mut cfg = RlEnvConfig::default();
+        cfg.action.max_step_m = 0.01;
+        (cfg, None)
     } else {
         let c = read_checkpoint(std::path::Path::new(&what)).expect("checkpoint");
         let p = c.chosen_policy(false).policy.clone();

@@ -704,11 +704,15 @@ fn policy_checkpoint(
 ) -> std::path::PathBuf {
     use learner::rl::run::{Checkpoint, TrainConfig};
     use learner::rl::{LinearBaseline, TrainerState};
+    let mut config = TrainConfig {
+        observation,
+        ..TrainConfig::default()
+    };
+    // Steps of up to 5 mm (the default is 1.5 mm): the hand-made centring
+    // policy then crosses its 4.6 cm within the short lockstep episode.
+    config.env.action.max_step_m = 0.005;
     let c = Checkpoint {
-        config: TrainConfig {
-            observation,
-            ..TrainConfig::default()
-        },
+        config,
         state: TrainerState {
             policy,
             baseline: LinearBaseline::default(),

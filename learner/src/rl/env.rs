@@ -70,7 +70,7 @@ pub struct ActionScale {
 impl Default for ActionScale {
     fn default() -> Self {
         Self {
-            max_step_m: 0.005,
+            max_step_m: 0.0015,
             max_roll_rad: 0.05,
         }
     }
