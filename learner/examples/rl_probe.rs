@@ -58,7 +58,7 @@ fn main() {
                     env.action_scale().from_delta(&d).to_vec()
                 }
                 None if impact_mm.is_some() => {
-                    // Centre 10 mm beside the hole's axis (on the top face),
+                    // Centre 12 mm beside the hole's axis (on the top face),
                     // then come down at a constant step onto the face.
                     let task = env.task_geometry();
                     let s = nalgebra::Vector3::new(obs[0], obs[1], obs[2]) * 0.1;
@@ -90,6 +90,7 @@ fn main() {
                     };
                     let d = task.hole_pose.rotation * nalgebra::Vector3::new(-s.x, -s.y, dz);
                     let sc = env.action_scale().clone();
+                    // obs[3] is s_ψ/(π/k); π/4 is the square's (k = 4) scale.
                     let roll = -obs[3] * std::f64::consts::PI / 4.0;
                     sc.from_delta(&[d.x, d.y, d.z, roll]).to_vec()
                 }

@@ -278,12 +278,15 @@ fn return_to(
     next: u64,
     status: &mut Option<ControllerStatus>,
 ) -> Result<(), StackError> {
+    // The home pose as a "hole" of symmetry 1, z up like a hole frame: the
+    // home position, turned about the base's z by the tool's roll there.
+    // (The tool's own frame, z down, would measure the roll with the
+    // opposite sign, and the correction below would add to the error.)
+    let home_x = crate::policy::unit_quaternion(home.ee_quat_xyzw) * Vector3::x();
     let home_pose = Isometry3::from_parts(
         Vector3::from(home.ee_pos_m).into(),
-        crate::policy::unit_quaternion(home.ee_quat_xyzw),
+        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), home_x.y.atan2(home_x.x)),
     );
-    // The home pose as a "hole" of symmetry 1: its relative position and
-    // roll are what the heuristic's actions are computed from.
     let task = TaskGeometry {
         hole_pose: home_pose,
         symmetry: 1,

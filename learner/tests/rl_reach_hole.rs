@@ -1,7 +1,7 @@
 //! A learning test on the fast path itself (hw-sim's world and the control
 //! cycle at 1 kHz, the policy at 20 Hz): TRPO on the ground-truth state,
 //! with the staged reward, learns to bring the peg to the hole of a box
-//! placed at random per episode (from 15–25 cm away). Seed fixed; the success rate of the
+//! placed at random per episode (the tip starts about 25 cm above it). Seed fixed; the success rate of the
 //! policy's mean over held-out box poses must rise from under 20% to at
 //! least 80% within a fixed number of updates.
 //!

@@ -99,12 +99,11 @@ impl RewardConfig {
         }
         if self.c_e + self.c_i >= 3.0 {
             return Err(FieldError::new(
-                "reward.c_i",
-                self.c_i,
-                format!(
-                    "c_e + c_i below 3 (c_e is {}): insertion must pay less than completion's 5",
-                    self.c_e
-                ),
+                "reward.c_e + reward.c_i",
+                format_args!("{} + {}", self.c_e, self.c_i),
+                "must be below 3: insertion must pay less than completion's 5 (a configuration \
+                 written before c_e existed was trained without the entry step: give it \
+                 c_e = 0)",
             ));
         }
         Ok(())
@@ -333,7 +332,11 @@ mod tests {
             c_i: 2.5,
             ..Default::default()
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("c_i"));
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("reward.c_e + reward.c_i") && e.contains("c_e = 0"),
+            "{e}"
+        );
         let bad = RewardConfig {
             c_e: -0.5,
             ..Default::default()

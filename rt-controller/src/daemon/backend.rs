@@ -38,8 +38,9 @@ pub enum HardwareError {
 }
 
 /// What the daemon needs of a robot. Implementations never block, except
-/// that a hardware which clocks the loop itself (the Franka) may wait in
-/// [`Hardware::poll`] for its next state, at most one period.
+/// that a hardware which clocks the loop itself (the Franka) waits in
+/// [`Hardware::poll`] for its next state: one period while it talks, up to
+/// its client's time-out when it falls silent (docs/franka.md).
 pub trait Hardware {
     /// Short name for logs.
     fn name(&self) -> &'static str;

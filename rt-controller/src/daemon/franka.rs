@@ -3,8 +3,9 @@
 //! through `franka-rs` (docs/franka.md: why that client, and what has and
 //! has not been run).
 //!
-//! The robot clocks the loop: [`Hardware::poll`] waits (at most one robot
-//! period) for the next state, the daemon's cycle answers it, and
+//! The robot clocks the loop: [`Hardware::poll`] waits for the next state
+//! (one robot period; up to franka-rs's 1 s time-out when the robot falls
+//! silent), the daemon's cycle answers it, and
 //! [`Hardware::send`] turns the control law's joint torques into the
 //! robot's command: minus gravity (the robot adds its own), clipped to the
 //! joint torque limits, optionally low-pass filtered and rate limited with
@@ -233,17 +234,20 @@ impl<'r> FrankaBackend<'r> {
 
 /// The robot's estimated external wrench (`K_F_ext_hat_K`, at and in the
 /// stiffness frame K) in the flange frame F, about F's origin: the frame
-/// the robot descriptions' wrench is read in. The robot reports the wrench
-/// the environment exerts on the end effector; through a rigid tool that
-/// is the wrench the tool exerts on the flange, the schema's convention.
+/// the robot descriptions' wrench is read in, with its sign turned. libfranka
+/// documents the estimate as the wrench the robot applies to the
+/// environment ("forces applied by the robot to the environment are
+/// positive"); the schema's is the wrench the tool exerts on the flange,
+/// which through a rigid tool is the environment's on the tool: the
+/// opposite.
 pub fn flange_wrench(s: &RobotState) -> [f64; 6] {
     use nalgebra::{Matrix4, Vector3};
     let f_t_k = Matrix4::from_column_slice(&s.F_T_EE) * Matrix4::from_column_slice(&s.EE_T_K);
     let r = f_t_k.fixed_view::<3, 3>(0, 0);
     let p = Vector3::new(f_t_k[(0, 3)], f_t_k[(1, 3)], f_t_k[(2, 3)]);
     let w = &s.K_F_ext_hat_K;
-    let f = r * Vector3::new(w[0], w[1], w[2]);
-    let m = r * Vector3::new(w[3], w[4], w[5]) + p.cross(&f);
+    let f = -(r * Vector3::new(w[0], w[1], w[2]));
+    let m = -(r * Vector3::new(w[3], w[4], w[5])) + p.cross(&f);
     [f.x, f.y, f.z, m.x, m.y, m.z]
 }
 
@@ -486,16 +490,17 @@ mod tests {
         s.EE_T_K = [
             1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
         ];
-        // 10 N along K's x: along (c, si) in F, with a moment about F's
-        // origin from the 0.1034 m lever.
+        // The robot pushing with 10 N along K's x: the environment pushes
+        // back, so the tool exerts 10 N along −(c, si) in F on the flange,
+        // with a moment about F's origin from the 0.1034 m lever.
         s.K_F_ext_hat_K = [10.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let w = flange_wrench(&s);
         let want = [
-            10.0 * c,
-            10.0 * si,
+            -10.0 * c,
+            -10.0 * si,
             0.0,
-            -0.1034 * 10.0 * si,
-            0.1034 * 10.0 * c,
+            0.1034 * 10.0 * si,
+            -0.1034 * 10.0 * c,
             0.0,
         ];
         for i in 0..6 {

@@ -7,7 +7,9 @@
 //! `status_period_ms`, the status). Files: [`backend`] (the hardware trait
 //! and the simulator backend), [`franka`] (the Franka backend), `queue` (actions), [`shared`] (atomics for
 //! the monitor thread), [`stats`], [`control`] (one cycle), `run` (the loop). Nothing in a cycle locks or
-//! blocks, and our code allocates nothing; iceoryx2 0.10 itself takes one
+//! blocks (except the Franka backend's wait for the robot's state, which
+//! clocks the loop, and franka-rs's internal mutex; docs/franka.md), and our
+//! code allocates nothing; iceoryx2 0.10 itself takes one
 //! small block per publication, freed at send (tests/daemon_alloc.rs pins
 //! that down exactly), and clarabel a fixed set per solve. The daemon serves
 //! those from lock-free static pools ([`rt_alloc`]), so the loop never
