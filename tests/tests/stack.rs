@@ -219,8 +219,11 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         ran_s <= 0.1 + 1e-6,
         "still running {ran_s:.4} s after the last action (timeout 0.1 s)"
     );
+    // The supervisor compares times in f64 seconds: at some absolute times
+    // 100 ms after the action already counts as past 0.1 s, so the hold may
+    // come exactly 100 ms after it (seen once on a loaded machine).
     assert!(
-        gap_s > 0.1 && gap_s < 0.2,
+        gap_s > 0.1 - 1e-6 && gap_s < 0.2,
         "held {gap_s:.4} s after the last action (timeout 0.1 s)"
     );
     // The policy comes back: actions resume the run.

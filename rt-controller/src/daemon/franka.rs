@@ -103,7 +103,10 @@ pub fn robot_fault_code(e: &FrankaError) -> u32 {
     if set(&|n| n == "communication_constraints_violation") {
         FAULT_ROBOT_COMMUNICATION
     } else if set(&|n| {
-        n.contains("limit") || n.ends_with("velocity_violation") || n == "tau_J_range_violation"
+        n.contains("limit")
+            || n.ends_with("velocity_violation")
+            || n == "tau_J_range_violation"
+            || n.contains("discontinuity")
     }) {
         FAULT_ROBOT_LIMIT
     } else if set(&|n| n.contains("reflex") || n.contains("collision"))
@@ -221,12 +224,24 @@ impl<'r> FrankaBackend<'r> {
             out[i] = (tau[i] - g[i]).clamp(-self.effort[i], self.effort[i]);
         }
         if self.cfg.cutoff_hz < MAX_CUTOFF_FREQUENCY {
-            for (o, &last) in out.iter_mut().zip(&self.sent) {
+            // Filtered against the robot's last commanded torque, as
+            // libfranka's control loop does.
+            for (o, &last) in out.iter_mut().zip(&self.tau_j_d) {
                 *o = franka::low_pass_filter(1e-3, *o, last, self.cfg.cutoff_hz)?;
             }
         }
         if self.cfg.rate_limit {
-            out = franka::limit_rate_torques(&MAX_TORQUE_RATE, &out, &self.tau_j_d)?;
+            let mut max = MAX_TORQUE_RATE;
+            if self.cfg.generation == FrankaGeneration::Fr3 {
+                // The FR3 publishes tau_J_d as an f32 but judges our rate
+                // against the f64 it received: half an f32 ulp of |tau_J_d|
+                // per 1 ms is up to 3.8e-3 N·m/s at 64 N·m, more than the
+                // 1e-3 N·m/s MAX_TORQUE_RATE keeps below 1000. Give it up.
+                for (m, t) in max.iter_mut().zip(&self.tau_j_d) {
+                    *m -= f64::from(f32::EPSILON) * t.abs() / 2.0 / 1e-3;
+                }
+            }
+            out = franka::limit_rate_torques(&max, &out, &self.tau_j_d)?;
         }
         Ok(out)
     }
@@ -371,6 +386,7 @@ mod tests {
             (&["joint_position_limits_violation"], FAULT_ROBOT_LIMIT),
             (&["joint_velocity_violation"], FAULT_ROBOT_LIMIT),
             (&["tau_J_range_violation"], FAULT_ROBOT_LIMIT),
+            (&["controller_torque_discontinuity"], FAULT_ROBOT_LIMIT),
             (&["cartesian_reflex"], FAULT_ROBOT_REFLEX),
             (
                 &["joint_reflex", "power_limit_violation"],
