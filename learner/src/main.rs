@@ -1073,6 +1073,28 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Refuses the episode options that need hw-sim, for `mode` (a run without
+/// the simulator: a robot, franky-sim).
+fn without_simulator(a: &EpisodeArgs, mode: &str) -> Result<()> {
+    for (given, flag) in [
+        (
+            a.lockstep,
+            "--lockstep (the robot clocks the loop and never waits for the learner)",
+        ),
+        (
+            a.policy.is_some(),
+            "--policy (a trained policy reads the simulator's task state)",
+        ),
+        (
+            a.world.is_some(),
+            "--world (there is no simulator to configure)",
+        ),
+    ] {
+        anyhow::ensure!(!given, "{mode} excludes {flag}");
+    }
+    Ok(())
+}
+
 /// `learner run --hole-pos`: the heuristic on a calibrated task against a
 /// running controller alone (a robot, franky-sim).
 fn run_calibrated(
@@ -1083,19 +1105,8 @@ fn run_calibrated(
     controller_wait_s: u64,
 ) -> Result<()> {
     use learner::calibrated::{self, CalibratedConfig};
+    without_simulator(a, "--hole-pos")?;
     for (given, flag) in [
-        (
-            a.lockstep,
-            "--lockstep (a robot cannot wait for the learner)",
-        ),
-        (
-            a.policy.is_some(),
-            "--policy (a trained policy reads the simulator's task state)",
-        ),
-        (
-            a.world.is_some(),
-            "--world (there is no simulator to send it to)",
-        ),
         (
             c.mix_heuristic_fraction.is_some(),
             "--mix-heuristic-fraction",
@@ -1201,22 +1212,7 @@ fn stack_franky_sim(
              --hole-pos 0.60,0.0,0.42, 5 cm in front of and 10 cm below the FR3's start pose"
         );
     };
-    for (given, flag) in [
-        (
-            a.lockstep,
-            "--lockstep (the robot clocks the loop and never waits)",
-        ),
-        (
-            a.policy.is_some(),
-            "--policy (a trained policy reads the simulator's task state)",
-        ),
-        (
-            a.world.is_some(),
-            "--world (franky-sim has no world to configure)",
-        ),
-    ] {
-        anyhow::ensure!(!given, "--robot franky-sim excludes {flag}");
-    }
+    without_simulator(a, "--robot franky-sim")?;
     let mut franky = stack::FrankySim::from_repository();
     if let Some(addr) = address {
         anyhow::ensure!(
