@@ -989,24 +989,15 @@ fn run(cli: Cli) -> Result<()> {
                 cfg.policy = Some(std::sync::Arc::new(p));
             }
             let outcomes = live::run(&cfg, |o| {
-                let g = &o.sensor_gaps;
-                let loss = g.sensor.unwrap_or_default();
                 println!(
-                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; sensor frames: {} \
-                     logged, {} missing in {} gaps ({} hardware steps without a controller frame, \
-                     {} published but not recorded); log {}",
+                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; {}",
                     o.episode,
                     o.seed,
                     o.stage,
                     if o.interrupted { " (interrupted)" } else { "" },
                     o.duration_s,
                     o.actions,
-                    g.messages,
-                    g.missing,
-                    g.gaps,
-                    loss.not_published,
-                    loss.not_recorded,
-                    o.log.display()
+                    frames_and_log(&o.sensor_gaps, &o.log)
                 );
             })?;
             let done = outcomes
@@ -1071,6 +1062,21 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// An episode line's tail: its sensor frames logged and missing, and its log.
+fn frames_and_log(g: &learner::log::ChannelGaps, log: &std::path::Path) -> String {
+    let loss = g.sensor.unwrap_or_default();
+    format!(
+        "sensor frames: {} logged, {} missing in {} gaps ({} hardware steps without a controller \
+         frame, {} published but not recorded); log {}",
+        g.messages,
+        g.missing,
+        g.gaps,
+        loss.not_published,
+        loss.not_recorded,
+        log.display()
+    )
 }
 
 /// Refuses the episode options that need hw-sim, for `mode` (a run without
@@ -1142,14 +1148,11 @@ fn run_calibrated(
         .with_context(|| format!("creating {}", cfg.log_dir.display()))?;
     let mm = |v: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", v[0] * 1e3, v[1] * 1e3, v[2] * 1e3);
     let run = calibrated::run(&cfg, |o| {
-        let g = &o.sensor_gaps;
-        let loss = g.sensor.unwrap_or_default();
         let e = o.end_error_m();
         println!(
             "episode {}: {} after {:.2} s, {} actions; tip from {} to {} mm, goal (the hole's \
              bottom centre) {} mm: moved {:.1} mm towards it, ended {:.1} mm from it ({:.1} mm \
-             sideways, {:+.1} mm in z); sensor frames: {} logged, {} missing in {} gaps ({} \
-             hardware steps without a controller frame, {} published but not recorded); log {}",
+             sideways, {:+.1} mm in z); {}",
             o.episode,
             if o.reached {
                 "reached the hole's bottom level"
@@ -1167,12 +1170,7 @@ fn run_calibrated(
             e.norm() * 1e3,
             e.xy().norm() * 1e3,
             e.z * 1e3,
-            g.messages,
-            g.missing,
-            g.gaps,
-            loss.not_published,
-            loss.not_recorded,
-            o.log.display()
+            frames_and_log(&o.sensor_gaps, &o.log)
         );
     })?;
     let reached = run.episodes.iter().filter(|o| o.reached).count();
