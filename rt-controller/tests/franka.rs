@@ -18,29 +18,12 @@
 use shared_mem_schema::transport::{self, Sub};
 use shared_mem_schema::{ControllerMode, ControllerStatus, PolicyAction, SensorFrame};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
+use test_support::franky_sim;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn python() -> PathBuf {
-    std::env::var_os("FRANKY_SIM_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join(".venv-franky-sim/bin/python"))
-}
-
-fn required() -> bool {
-    std::env::var("FRANKY_SIM_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok()
-}
-
-fn franky_sim_available() -> bool {
-    Command::new(python())
-        .args(["-c", "import franky_sim"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
 }
 
 /// A child process killed (SIGKILL) and reaped when dropped.
@@ -51,17 +34,6 @@ impl Drop for Guard {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
-}
-
-/// A loopback address of this process's own (franky-sim always serves
-/// port 1337, but binds any 127.x.y.z): concurrent runs do not meet.
-fn address() -> String {
-    let pid = std::process::id();
-    format!(
-        "127.19.{}.{}",
-        (pid >> 8) & 0xff,
-        (pid & 0xff).clamp(1, 254)
-    )
 }
 
 /// Waits for the next sensor frame, at most `limit` of wall time (a hang
@@ -88,29 +60,18 @@ fn dist(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
 
 #[test]
 fn the_daemon_drives_franky_sim() {
-    if !franky_sim_available() {
-        assert!(
-            !required(),
-            "franky-sim is required here but `{} -c 'import franky_sim'` fails; run \
-             scripts/franky-sim-venv.sh",
-            python().display()
-        );
-        use std::io::Write;
-        let _ = writeln!(
-            std::io::stderr().lock(),
-            "\n*** the_daemon_drives_franky_sim SKIPPED: franky-sim is not importable by {}; \
-             run ./scripts/test.sh or set FRANKY_SIM_PYTHON. ***\n",
-            python().display()
-        );
+    if !franky_sim::available_for("the_daemon_drives_franky_sim") {
         return;
     }
     transport::quiet_logs();
     let dir = test_support::scratch_dir("franka");
-    let addr = address();
+    // The stack's own franky-sim test uses 127.21.0.0/16, `learner stack`
+    // 127.20.0.0/16.
+    let addr = franky_sim::loopback_address(19);
     let ns = format!("franka-{}", std::process::id());
     let sim_log = dir.join("franky-sim.log");
     let _sim = Guard(
-        Command::new(python())
+        Command::new(franky_sim::python())
             .arg(repo().join("scripts/franky_sim_server.py"))
             .args(["-s", "mujoco", "--hostname", &addr])
             .env("PYTHONUNBUFFERED", "1")

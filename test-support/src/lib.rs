@@ -2,13 +2,14 @@
 //!
 //! What the workspace's tests share, so that no crate keeps its own copy:
 //! the counting global allocator behind every allocation test ([`alloc`]),
-//! the seeded generator of test inputs ([`rng`]) and scratch directories
-//! ([`scratch_dir`]).
+//! the seeded generator of test inputs ([`rng`]), scratch directories
+//! ([`scratch_dir`]) and what the franky-sim tests need ([`franky_sim`]).
 //!
 //! A dev-dependency only: nothing a deployed process runs may depend on it,
 //! and it depends on no crate of the workspace (every crate can use it).
 
 pub mod alloc;
+pub mod franky_sim;
 
 pub use rand::RngExt;
 use rand::SeedableRng;

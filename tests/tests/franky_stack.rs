@@ -9,18 +9,8 @@
 //! `$FRANKY_SIM_REQUIRED=1` or `$CI` is set: then it fails (scripts/test.sh
 //! sets it), as rt-controller/tests/franka.rs does.
 
-use std::path::PathBuf;
-use std::process::{Command, Stdio};
-
-fn python() -> PathBuf {
-    std::env::var_os("FRANKY_SIM_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| tests::workspace_root().join(".venv-franky-sim/bin/python"))
-}
-
-fn required() -> bool {
-    std::env::var("FRANKY_SIM_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok()
-}
+use std::process::Command;
+use test_support::franky_sim;
 
 /// The numbers of an episode line: (moved towards the goal, ended from it),
 /// mm.
@@ -36,35 +26,14 @@ fn approach(line: &str) -> (f64, f64) {
 
 #[test]
 fn the_heuristic_drives_franky_sim_through_the_stack() {
-    let importable = Command::new(python())
-        .args(["-c", "import franky_sim"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !importable {
-        assert!(
-            !required(),
-            "franky-sim is required here but `{} -c 'import franky_sim'` fails; run \
-             scripts/franky-sim-venv.sh",
-            python().display()
-        );
-        eprintln!(
-            "\n*** the_heuristic_drives_franky_sim_through_the_stack SKIPPED: franky-sim is not \
-             importable by {}; run ./scripts/test.sh or set FRANKY_SIM_PYTHON. ***\n",
-            python().display()
-        );
+    if !franky_sim::available_for("the_heuristic_drives_franky_sim_through_the_stack") {
         return;
     }
     let _g = tests::exclusive();
     let dir = test_support::scratch_dir("franky-stack");
     // An address of this test's own (franky-sim serves one client at a
     // time); the Franka backend's test uses 127.19.0.0/16.
-    let pid = std::process::id();
-    let addr = format!(
-        "127.21.{}.{}",
-        (pid >> 8) & 0xff,
-        (pid & 0xff).clamp(1, 254)
-    );
+    let addr = franky_sim::loopback_address(21);
     let out = Command::new(tests::stack_bins().join("learner"))
         .args(["stack", "--robot", "franky-sim", "--episodes", "2"])
         // 5 cm in front of and 10 cm below the FR3's start pose.
@@ -75,7 +44,7 @@ fn the_heuristic_drives_franky_sim_through_the_stack() {
         .arg(tests::unique_namespace("franky"))
         .arg("--log-dir")
         .arg(dir.path())
-        .env("FRANKY_SIM_PYTHON", python())
+        .env("FRANKY_SIM_PYTHON", franky_sim::python())
         .output()
         .expect("running learner stack");
     let stdout = String::from_utf8_lossy(&out.stdout);
