@@ -28,7 +28,10 @@ fn main() {
         (cfg, None)
     } else {
         let c = read_checkpoint(std::path::Path::new(&what)).expect("checkpoint");
-        let p = c.chosen_policy(false).policy.clone();
+        let p = c
+            .chosen_policy(std::env::var_os("RL_PROBE_LAST").is_some())
+            .policy
+            .clone();
         (c.config.env.clone(), Some(p))
     };
     let mut env = RlEnv::new(&cfg).expect("env");

@@ -162,9 +162,14 @@ pub struct ImpedanceConfig {
 }
 
 impl Default for ImpedanceConfig {
+    /// 300/s² on the translations and the roll (about base z); ten times
+    /// that on the two tilts (about base x and y), which the policy never
+    /// commands. OSC's rotational inertia at the wrist is small, so 300/s²
+    /// there let a 15 N side load at the peg's tip tilt the tool by 0.1 rad
+    /// and wedge it in the hole (docs/experiments.md, "The wrist tilted").
     fn default() -> Self {
         Self {
-            kp: [300.0; 6],
+            kp: [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0],
             kv: None,
         }
     }
