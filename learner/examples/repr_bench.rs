@@ -5,16 +5,18 @@
 //! (bench-anchors/torch-repr/bench.py) times the same architecture; the
 //! script bench-anchors/repr.sh runs both alternately.
 //!
-//! Usage: `repr_bench train|infer BATCH STEPS [DEPTH_CONVS_PER_STAGE]`
+//! Usage: `repr_bench train|infer|infer-fast BATCH STEPS [DEPTH_CONVS_PER_STAGE]`
 //! (threads: RAYON_NUM_THREADS; the last argument, default 3, measures the
-//! depth encoder's share).
+//! depth encoder's share). `infer` times burn's `encode`, `infer-fast` the
+//! CPU path the inference API takes (`learner::models::fast`).
 
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
+use learner::models::fast::FastEncoder;
 use learner::models::losses::{LabelTensors, losses};
 use learner::models::net::tensor;
 use learner::models::{
-    InputTensors, LabelArrays, LossWeights, Modalities, ModelConfig, ReprNet, init,
+    InputArrays, InputTensors, LabelArrays, LossWeights, Modalities, ModelConfig, ReprNet, init,
 };
 use std::time::Instant;
 
@@ -25,7 +27,7 @@ fn median(mut xs: Vec<f64>) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: repr_bench train|infer BATCH STEPS [DEPTH_CONVS_PER_STAGE]";
+    let usage = "usage: repr_bench train|infer|infer-fast BATCH STEPS [DEPTH_CONVS_PER_STAGE]";
     let what = args.get(1).expect(usage).clone();
     let b: usize = args.get(2).expect(usage).parse().expect(usage);
     let steps: usize = args.get(3).expect(usage).parse().expect(usage);
@@ -44,12 +46,15 @@ fn main() {
     } else {
         Device::flex()
     };
-    let x = InputTensors {
-        rgb: tensor(randn(b * 3 * s * s), [b, 3, s, s], &dev),
-        depth: tensor(randn(b * s * s), [b, 1, s, s], &dev),
-        wrench: tensor(randn(b * 6 * 32), [b, 6, 32], &dev),
-        proprio: tensor(randn(b * 8), [b, 8], &dev),
+    let arrays = InputArrays {
+        batch: b,
+        side: s,
+        rgb: randn(b * 3 * s * s),
+        depth: randn(b * s * s),
+        wrench: randn(b * 6 * 32),
+        proprio: randn(b * 8),
     };
+    let x = InputTensors::new(&arrays, &dev);
     let mut net = init::seeded(ReprNet::new(&cfg, &dev), 0);
     let mut times = Vec::new();
     if train {
@@ -93,17 +98,26 @@ fn main() {
             cfg.depth_convs_per_stage
         );
     } else {
+        let fast =
+            (what == "infer-fast").then(|| FastEncoder::new(&net, &cfg).with_threads(threads));
         for i in 0..steps + 3 {
             let t = Instant::now();
-            let z = net.encode(&cfg, &x, Modalities::ALL).mean;
-            let _ = z.into_data();
+            match &fast {
+                Some(f) => drop(f.encode(&arrays, Modalities::ALL)),
+                None => drop(net.encode(&cfg, &x, Modalities::ALL).mean.into_data()),
+            }
             if i >= 3 {
                 times.push(t.elapsed().as_secs_f64());
             }
         }
         let per = median(times);
         println!(
-            "{{\"side\": \"burn-flex\", \"what\": \"infer\", \"batch\": {b}, \"threads\": {threads}, \"batch_s\": {per:.6}, \"per_obs_ms\": {:.4}, \"steps\": {steps}}}",
+            "{{\"side\": \"{}\", \"what\": \"infer\", \"batch\": {b}, \"threads\": {threads}, \"batch_s\": {per:.6}, \"per_obs_ms\": {:.4}, \"steps\": {steps}}}",
+            if fast.is_some() {
+                "ours-fast"
+            } else {
+                "burn-flex"
+            },
             1e3 * per / b as f64
         );
     }

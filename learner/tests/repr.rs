@@ -319,3 +319,69 @@ fn configurations_are_checked_and_the_shipped_files_load() {
         .to_string();
     assert!(e.contains("latent"), "{e}");
 }
+
+#[test]
+fn the_fast_cpu_path_computes_what_encode_computes() {
+    // Every model kind, a model built without a modality, and every sensor
+    // lost at run time: the inference API's CPU path against burn's encode.
+    let dev = device();
+    let no_rgb = Modalities {
+        rgb: false,
+        ..Modalities::ALL
+    };
+    let mut models = vec![
+        config(ModelKind::Full, 16, 64),
+        config(ModelKind::Deterministic, 16, 64),
+        config(ModelKind::Reconstruction, 8, 64),
+    ];
+    let mut lacking = config(ModelKind::Full, 16, 64);
+    lacking.modalities = no_rgb;
+    models.push(lacking);
+    let (b, s) = (3, 64);
+    let mut r = test_support::rng(11);
+    let mut v = |n: usize| -> Vec<f32> {
+        (0..n)
+            .map(|_| rand::RngExt::random_range(&mut r, -1.0f32..1.0))
+            .collect()
+    };
+    let a = learner::models::InputArrays {
+        batch: b,
+        side: s,
+        rgb: v(b * 3 * s * s),
+        depth: v(b * s * s),
+        wrench: v(b * 6 * 32),
+        proprio: v(b * 8),
+    };
+    let x = InputTensors::new(&a, &dev);
+    for cfg in &models {
+        let net = new_net(cfg, &dev);
+        // Split over three threads, and on one.
+        let fast = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(3);
+        let single = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(1);
+        let masks = [
+            Modalities::ALL,
+            no_rgb,
+            Modalities {
+                depth: false,
+                ..Modalities::ALL
+            },
+            Modalities {
+                haptics: false,
+                ..Modalities::ALL
+            },
+            Modalities {
+                proprio: false,
+                ..Modalities::ALL
+            },
+        ];
+        for m in masks {
+            let on = cfg.modalities.and(m);
+            let want = vals(net.encode(cfg, &x, on).mean);
+            let got = fast.encode(&a, on);
+            close(&got, &want, 1e-4);
+            close(&single.encode(&a, on), &want, 1e-4);
+            // The result is not trivially zero.
+            assert!(got.iter().any(|z| z.abs() > 1e-3), "{:?} {m:?}", cfg.kind);
+        }
+    }
+}

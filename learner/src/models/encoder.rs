@@ -4,6 +4,7 @@
 //! "Multimodal Input Experiments": the mean is the policy's input).
 
 use super::config::{Modalities, ModelConfig};
+use super::fast::FastEncoder;
 use super::inputs::{InputError, Normaliser, ObservationRef};
 use super::net::{InputTensors, ReprNet};
 use burn::prelude::*;
@@ -16,6 +17,8 @@ pub struct Encoder {
     normaliser: Normaliser,
     device: Device,
     active: Modalities,
+    /// The CPU path (on the `flex` device only).
+    fast: Option<FastEncoder>,
 }
 
 impl Encoder {
@@ -29,6 +32,7 @@ impl Encoder {
     /// From parts in memory.
     pub fn new(net: ReprNet, config: ModelConfig, normaliser: Normaliser, device: &Device) -> Self {
         Self {
+            fast: (*device == Device::flex()).then(|| FastEncoder::new(&net, &config)),
             active: config.modalities,
             net,
             config,
@@ -41,6 +45,17 @@ impl Encoder {
     /// product).
     pub fn with_modalities(mut self, m: Modalities) -> Self {
         self.active = self.config.modalities.and(m);
+        self
+    }
+
+    /// Whether encoding on the CPU takes the fast path (the default) or
+    /// burn's `flex` backend (the reference the fast path is tested against).
+    pub fn with_fast_path(mut self, on: bool) -> Self {
+        if !on {
+            self.fast = None;
+        } else if self.fast.is_none() && self.device == Device::flex() {
+            self.fast = Some(FastEncoder::new(&self.net, &self.config));
+        }
         self
     }
 
@@ -60,6 +75,9 @@ impl Encoder {
             return Ok(Vec::new());
         }
         let a = self.normaliser.inputs(obs, self.config.image_size)?;
+        if let Some(f) = &self.fast {
+            return Ok(f.encode(&a, self.active));
+        }
         let x = InputTensors::new(&a, &self.device);
         let latent = self.net.encode(&self.config, &x, self.active);
         Ok(latent.mean.try_into_vec_as::<f32>().expect("an f32 tensor"))

@@ -22,7 +22,7 @@ pub fn act<const D: usize>(x: Tensor<D>) -> Tensor<D> {
 /// A multilayer perceptron: leaky ReLU between layers, none after the last.
 #[derive(Module, Debug)]
 pub struct Mlp {
-    layers: Vec<Linear>,
+    pub(crate) layers: Vec<Linear>,
 }
 
 impl Mlp {
@@ -67,8 +67,8 @@ const RGB_KERNELS: [usize; 6] = [7, 5, 5, 3, 3, 3];
 /// connections.
 #[derive(Module, Debug)]
 pub struct RgbEncoder {
-    convs: Vec<Conv2d>,
-    fc: Linear,
+    pub(crate) convs: Vec<Conv2d>,
+    pub(crate) fc: Linear,
 }
 
 impl RgbEncoder {
@@ -107,8 +107,8 @@ const DEPTH_CHANNELS: [usize; 5] = [16, 32, 64, 64, 128];
 /// each (3: the paper's eighteen layers), and one fully connected layer.
 #[derive(Module, Debug)]
 pub struct DepthEncoder {
-    convs: Vec<Conv2d>,
-    fc: Linear,
+    pub(crate) convs: Vec<Conv2d>,
+    pub(crate) fc: Linear,
 }
 
 impl DepthEncoder {
@@ -150,7 +150,7 @@ const WRENCH_CHANNELS: [usize; 4] = [16, 32, 64, 128];
 /// reading from the first layer).
 #[derive(Module, Debug)]
 pub struct WrenchEncoder {
-    convs: Vec<Conv1d>,
+    pub(crate) convs: Vec<Conv1d>,
 }
 
 impl WrenchEncoder {
@@ -182,7 +182,7 @@ impl WrenchEncoder {
 /// The proprioception encoder: a four-layer MLP 8 → 32 → 64 → 128 → 2·d.
 #[derive(Module, Debug)]
 pub struct ProprioEncoder {
-    mlp: Mlp,
+    pub(crate) mlp: Mlp,
 }
 
 impl ProprioEncoder {

@@ -10,7 +10,8 @@
 //! - [`init`]: initial weights from our own seeded generator.
 //! - [`losses`]: the losses.
 //! - [`encoder`]: the inference API the live node and the RL environment
-//!   use (a trained model's z means for a batch of observations).
+//!   use (a trained model's z means for a batch of observations); on the
+//!   CPU it runs [`fast`], a copy of the encoders' arithmetic outside burn.
 //!
 //! Training loops, checkpoints and evaluation live in [`crate::train`];
 //! nothing here reads files except the exported model's loader.
@@ -19,6 +20,7 @@ pub mod config;
 pub mod decoders;
 pub mod encoder;
 pub mod encoders;
+pub mod fast;
 pub mod fusion;
 pub mod init;
 pub mod inputs;

@@ -86,12 +86,12 @@ pub struct Outputs {
 /// The network of a representation model.
 #[derive(Module, Debug)]
 pub struct ReprNet {
-    rgb: Option<RgbEncoder>,
-    depth: Option<DepthEncoder>,
-    haptics: Option<WrenchEncoder>,
-    proprio: Option<ProprioEncoder>,
+    pub(crate) rgb: Option<RgbEncoder>,
+    pub(crate) depth: Option<DepthEncoder>,
+    pub(crate) haptics: Option<WrenchEncoder>,
+    pub(crate) proprio: Option<ProprioEncoder>,
     /// Deterministic model: the concatenated features (4 × 2d) → d.
-    concat_fusion: Option<Mlp>,
+    pub(crate) concat_fusion: Option<Mlp>,
     action: Option<ActionFusion>,
     flow: Option<FlowDecoder>,
     contact: Option<Linear>,
