@@ -264,7 +264,8 @@ pub fn run(
         }
         let ckpt = policy_run::read_checkpoint(&trained)?;
         let trained_peg = ckpt.config.env.world.task.peg;
-        // The paper evaluates the best checkpoint logged in training.
+        // The best validated policy when the policy configuration validates,
+        // otherwise the best logged in training (the paper's protocol).
         let chosen = ckpt.chosen_policy(false);
         let pegs = if cfg.eval.pegs.is_empty() {
             vec![trained_peg]

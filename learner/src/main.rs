@@ -239,8 +239,9 @@ enum PolicyCmd {
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
-        /// Evaluate the last policy instead of the best one logged in
-        /// training (the paper's choice, the default).
+        /// Evaluate the last policy instead of the best validated one (a
+        /// run with `[validation]`) or the best one logged in training (the
+        /// paper's choice).
         #[arg(long)]
         last: bool,
     },

@@ -161,3 +161,36 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("force_std_n"), "{err}");
 }
+
+#[test]
+fn validation_episodes_choose_the_policy_to_evaluate() {
+    use learner::rl::run::{ChosenBy, TrainConfig, read_checkpoint, train};
+    let dir = test_support::scratch_dir("rl-cli-validation");
+    let text = format!("{CONFIG}\n[validation]\nevery = 1\nepisodes = 2\n");
+    let cfg: TrainConfig = toml::from_str(&text).unwrap();
+    let out = dir.path().join("run");
+    let c = train(cfg, &out, false, &|| false).unwrap();
+    // One validation per update, on file and in the checkpoint.
+    assert_eq!(c.validations.len(), c.history.len());
+    let csv = std::fs::read_to_string(out.join("validation.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + c.validations.len(), "{csv}");
+    // The best is the one with most completions, then the highest reward.
+    let key = |p: &learner::rl::run::ValidationPoint| (p.outcomes[3], p.mean_normalised);
+    let top = c
+        .validations
+        .iter()
+        .max_by(|a, b| key(a).partial_cmp(&key(b)).unwrap())
+        .unwrap();
+    let best = c.best_validated.as_ref().expect("validated");
+    assert_eq!(key(&best.validation), key(top));
+    let read = read_checkpoint(&out.join("checkpoint.json")).unwrap();
+    let chosen = read.chosen_policy(false);
+    assert!(matches!(chosen.why, ChosenBy::Validation { .. }), "{chosen}");
+    assert_eq!(chosen.iteration, best.validation.iteration);
+    assert!(matches!(read.chosen_policy(true).why, ChosenBy::Last));
+    // Validation needs episodes.
+    let bad: TrainConfig =
+        toml::from_str(&format!("{CONFIG}\n[validation]\nevery = 1\nepisodes = 0\n")).unwrap();
+    let e = train(bad, &dir.path().join("bad"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("validation.episodes"), "{e}");
+}

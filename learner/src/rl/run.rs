@@ -35,6 +35,66 @@ pub struct TrainConfig {
     pub env: RlEnvConfig,
     /// The policy and its learning algorithm.
     pub policy: PolicyConfig,
+    /// Validation episodes during training, which choose the policy to
+    /// evaluate.
+    pub validation: ValidationConfig,
+}
+
+/// Validation: every `every` updates the current policy's mean runs
+/// `episodes` episodes on seeds of their own, and the best validated policy
+/// is the one evaluated and deployed. Off by default (the paper evaluates
+/// the best policy logged in training, by its training episodes' reward).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ValidationConfig {
+    /// Validate every this many updates (0: never).
+    pub every: u64,
+    /// Episodes per validation.
+    pub episodes: usize,
+    /// Seed of the first validation episode: apart from the training
+    /// episodes' seeds and from evaluation's (1 000 000 on).
+    pub seed: u64,
+}
+
+impl Default for ValidationConfig {
+    fn default() -> Self {
+        Self {
+            every: 0,
+            episodes: 10,
+            seed: 2_000_000,
+        }
+    }
+}
+
+/// One validation's result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValidationPoint {
+    /// The update validated.
+    pub iteration: u64,
+    /// Environment steps then.
+    pub env_steps: u64,
+    /// Share in each outcome category ([`Outcome::ALL`] order).
+    pub outcomes: [f64; 4],
+    /// Mean normalised episode reward.
+    pub mean_normalised: f64,
+}
+
+impl ValidationPoint {
+    /// Whether it beats `other`: more completed insertions, then a higher
+    /// reward.
+    fn beats(&self, other: &ValidationPoint) -> bool {
+        let c = Outcome::CompletedInsertion.index();
+        (self.outcomes[c], self.mean_normalised) > (other.outcomes[c], other.mean_normalised)
+    }
+}
+
+/// The best validated policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValidatedPolicy {
+    /// Its validation.
+    pub validation: ValidationPoint,
+    /// The policy.
+    pub policy: GaussianPolicy,
 }
 
 impl Default for TrainConfig {
@@ -48,6 +108,7 @@ impl Default for TrainConfig {
             observation: ObservationKind::GroundTruth,
             env: RlEnvConfig::default(),
             policy: PolicyConfig::default(),
+            validation: ValidationConfig::default(),
         }
     }
 }
@@ -66,6 +127,12 @@ pub struct Checkpoint {
     /// training results" (absent in checkpoints older than this field).
     #[serde(default)]
     pub best: Option<BestPolicy>,
+    /// Every validation so far (none when validation is off).
+    #[serde(default)]
+    pub validations: Vec<ValidationPoint>,
+    /// The best validated policy, which is evaluated when there is one.
+    #[serde(default)]
+    pub best_validated: Option<ValidatedPolicy>,
 }
 
 /// The policy of the checkpoint with the highest training reward.
@@ -91,19 +158,43 @@ pub struct Chosen<'a> {
     pub iteration: u64,
     /// Environment steps then.
     pub env_steps: u64,
-    /// Its training result when it is the best logged one (None: the last).
-    pub best_reward: Option<f64>,
+    /// Why it was chosen.
+    pub why: ChosenBy,
+}
+
+/// How a checkpoint's policy was chosen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChosenBy {
+    /// The last policy.
+    Last,
+    /// The highest training reward over a checkpoint interval (the paper).
+    TrainingReward(f64),
+    /// The best validation: its completed share and normalised reward.
+    Validation {
+        /// Completed insertions in its validation episodes.
+        completed: f64,
+        /// Their mean normalised reward.
+        reward: f64,
+    },
 }
 
 impl std::fmt::Display for Chosen<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.best_reward {
-            Some(r) => write!(
+        match self.why {
+            ChosenBy::TrainingReward(r) => write!(
                 f,
                 "the best logged policy (update {}, {} steps, training reward {r:.3})",
                 self.iteration, self.env_steps
             ),
-            None => write!(
+            ChosenBy::Validation { completed, reward } => write!(
+                f,
+                "the best validated policy (update {}, {} steps, validation: {:.0} % completed, \
+                 reward {reward:.3})",
+                self.iteration,
+                self.env_steps,
+                100.0 * completed
+            ),
+            ChosenBy::Last => write!(
                 f,
                 "the last policy (update {}, {} steps)",
                 self.iteration, self.env_steps
@@ -113,21 +204,31 @@ impl std::fmt::Display for Chosen<'_> {
 }
 
 impl Checkpoint {
-    /// The policy to evaluate or deploy: the best logged one (the paper's
-    /// choice) unless `last`, or when there is none yet.
+    /// The policy to evaluate or deploy unless `last` (or when nothing
+    /// else exists yet): the best validated one when the run validated,
+    /// otherwise the best logged one (the paper's choice).
     pub fn chosen_policy(&self, last: bool) -> Chosen<'_> {
-        match (&self.best, last) {
-            (Some(b), false) => Chosen {
+        match (&self.best_validated, &self.best, last) {
+            (Some(v), _, false) => Chosen {
+                policy: &v.policy,
+                iteration: v.validation.iteration,
+                env_steps: v.validation.env_steps,
+                why: ChosenBy::Validation {
+                    completed: v.validation.outcomes[Outcome::CompletedInsertion.index()],
+                    reward: v.validation.mean_normalised,
+                },
+            },
+            (None, Some(b), false) => Chosen {
                 policy: &b.policy,
                 iteration: b.iteration,
                 env_steps: b.env_steps,
-                best_reward: Some(b.mean_normalised),
+                why: ChosenBy::TrainingReward(b.mean_normalised),
             },
             _ => Chosen {
                 policy: &self.state.policy,
                 iteration: self.state.iteration,
                 env_steps: self.state.env_steps,
-                best_reward: None,
+                why: ChosenBy::Last,
             },
         }
     }
@@ -258,27 +359,43 @@ pub fn train(
     cfg: TrainConfig,
     out: &Path,
     resume: bool,
-    stop: &dyn Fn() -> bool,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<Checkpoint, RunError> {
     std::fs::create_dir_all(out).map_err(io(out))?;
     let ckpt_path = checkpoint_path(out);
-    let (cfg, state, mut history, mut best) = if resume && ckpt_path.exists() {
-        let c = read_checkpoint(&ckpt_path)?;
-        // The file's configuration rules, except the length of the run: a
-        // run is one experiment, and its curves one configuration's.
-        let mut kept = c.config;
-        kept.env_steps = cfg.env_steps;
-        if kept != cfg {
-            eprintln!(
-                "learner: resuming {} with the configuration it started with; the one given \
+    let (cfg, state, mut history, mut best, mut validations, mut best_validated) =
+        if resume && ckpt_path.exists() {
+            let c = read_checkpoint(&ckpt_path)?;
+            // The file's configuration rules, except the length of the run: a
+            // run is one experiment, and its curves one configuration's.
+            let mut kept = c.config;
+            kept.env_steps = cfg.env_steps;
+            if kept != cfg {
+                eprintln!(
+                    "learner: resuming {} with the configuration it started with; the one given \
                  differs in more than env_steps and is not used",
-                ckpt_path.display()
-            );
-        }
-        (kept, Some(c.state), c.history, c.best)
-    } else {
-        (cfg, None, Vec::new(), None)
-    };
+                    ckpt_path.display()
+                );
+            }
+            (
+                kept,
+                Some(c.state),
+                c.history,
+                c.best,
+                c.validations,
+                c.best_validated,
+            )
+        } else {
+            (cfg, None, Vec::new(), None, Vec::new(), None)
+        };
+    if cfg.validation.every > 0 && cfg.validation.episodes == 0 {
+        return Err(RlEnvError::Config(hw_sim::FieldError::new(
+            "validation.episodes",
+            0,
+            "must be at least 1 when validation.every is set",
+        ))
+        .into());
+    }
     let env = VecEnv::new(
         &cfg.env,
         cfg.num_envs,
@@ -295,33 +412,38 @@ pub fn train(
     let mut episodes = 0usize;
     // Updates already covered by the best-policy bookkeeping.
     let mut judged = history.len();
-    let mut save =
-        |trainer: &Trainer<VecEnv>, history: &[CurvePoint]| -> Result<Checkpoint, RunError> {
-            if let Some(m) = window_mean(&history[judged.min(history.len())..])
-                && best.as_ref().is_none_or(|b| m > b.mean_normalised)
-            {
-                best = Some(BestPolicy {
-                    iteration: trainer.state.iteration,
-                    env_steps: trainer.state.env_steps,
-                    mean_normalised: m,
-                    policy: trainer.state.policy.clone(),
-                });
-            }
-            judged = history.len();
-            let c = Checkpoint {
-                config: cfg.clone(),
-                state: trainer.state.clone(),
-                history: history.to_vec(),
-                best: best.clone(),
-            };
-            let json = serde_json::to_vec(&c).map_err(|e| RunError::Parse {
-                path: ckpt_path.clone(),
-                detail: e.to_string(),
-            })?;
-            write_atomic(&ckpt_path, &json)?;
-            write_curves(out, history, cfg.policy.algorithm)?;
-            Ok(c)
+    let mut save = |trainer: &Trainer<VecEnv>,
+                    history: &[CurvePoint],
+                    validations: &[ValidationPoint],
+                    best_validated: &Option<ValidatedPolicy>|
+     -> Result<Checkpoint, RunError> {
+        if let Some(m) = window_mean(&history[judged.min(history.len())..])
+            && best.as_ref().is_none_or(|b| m > b.mean_normalised)
+        {
+            best = Some(BestPolicy {
+                iteration: trainer.state.iteration,
+                env_steps: trainer.state.env_steps,
+                mean_normalised: m,
+                policy: trainer.state.policy.clone(),
+            });
+        }
+        judged = history.len();
+        let c = Checkpoint {
+            config: cfg.clone(),
+            state: trainer.state.clone(),
+            history: history.to_vec(),
+            best: best.clone(),
+            validations: validations.to_vec(),
+            best_validated: best_validated.clone(),
         };
+        let json = serde_json::to_vec(&c).map_err(|e| RunError::Parse {
+            path: ckpt_path.clone(),
+            detail: e.to_string(),
+        })?;
+        write_atomic(&ckpt_path, &json)?;
+        write_curves(out, history, cfg.policy.algorithm)?;
+        Ok(c)
+    };
     while trainer.state.env_steps < cfg.env_steps {
         if stop() {
             progress.finish();
@@ -347,12 +469,61 @@ pub fn train(
             ),
         );
         history.push(p);
+        let v = &cfg.validation;
+        if v.every > 0 && s.iteration.is_multiple_of(v.every) {
+            let policy = trainer.state.policy.clone();
+            let r = match evaluate(&policy, &cfg, v.episodes, v.seed, stop) {
+                Ok(r) => r,
+                // Ctrl-C during a validation: the loop's check saves.
+                Err(RunError::Stopped) => continue,
+                Err(e) => return Err(e),
+            };
+            let point = ValidationPoint {
+                iteration: s.iteration,
+                env_steps: s.env_steps,
+                outcomes: r.outcomes,
+                mean_normalised: r.mean_normalised,
+            };
+            if best_validated
+                .as_ref()
+                .is_none_or(|b| point.beats(&b.validation))
+            {
+                best_validated = Some(ValidatedPolicy {
+                    validation: point.clone(),
+                    policy,
+                });
+            }
+            validations.push(point);
+            write_validation_csv(out, &validations)?;
+        }
         if s.iteration.is_multiple_of(cfg.checkpoint_every.max(1)) {
-            save(&trainer, &history)?;
+            save(&trainer, &history, &validations, &best_validated)?;
         }
     }
     progress.finish();
-    save(&trainer, &history)
+    save(&trainer, &history, &validations, &best_validated)
+}
+
+/// Writes `validation.csv`: one row per validation.
+fn write_validation_csv(out: &Path, points: &[ValidationPoint]) -> Result<(), RunError> {
+    let mut text = String::from(
+        "iteration,env_steps,mean_normalised,completed_insertion,inserted_into_hole,\
+         touched_the_box,failed\n",
+    );
+    for p in points {
+        let o = |x: Outcome| p.outcomes[x.index()];
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{}\n",
+            p.iteration,
+            p.env_steps,
+            p.mean_normalised,
+            o(Outcome::CompletedInsertion),
+            o(Outcome::InsertedIntoHole),
+            o(Outcome::TouchedBox),
+            o(Outcome::Failed)
+        ));
+    }
+    write_atomic(&out.join("validation.csv"), text.as_bytes())
 }
 
 /// Writes `curve.csv` and the two charts of a run.
