@@ -185,12 +185,33 @@ fn validation_episodes_choose_the_policy_to_evaluate() {
     assert_eq!(key(&best.validation), key(top));
     let read = read_checkpoint(&out.join("checkpoint.json")).unwrap();
     let chosen = read.chosen_policy(false);
-    assert!(matches!(chosen.why, ChosenBy::Validation { .. }), "{chosen}");
+    assert!(
+        matches!(chosen.why, ChosenBy::Validation { .. }),
+        "{chosen}"
+    );
     assert_eq!(chosen.iteration, best.validation.iteration);
     assert!(matches!(read.chosen_policy(true).why, ChosenBy::Last));
     // Validation needs episodes.
-    let bad: TrainConfig =
-        toml::from_str(&format!("{CONFIG}\n[validation]\nevery = 1\nepisodes = 0\n")).unwrap();
+    let bad: TrainConfig = toml::from_str(&format!(
+        "{CONFIG}\n[validation]\nevery = 1\nepisodes = 0\n"
+    ))
+    .unwrap();
     let e = train(bad, &dir.path().join("bad"), false, &|| false).unwrap_err();
     assert!(e.to_string().contains("validation.episodes"), "{e}");
+}
+
+#[test]
+fn the_shipped_policy_configurations_load() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/policy");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        let cfg = learner::rl::run::read_config(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        cfg.env.validate().unwrap();
+        cfg.policy.validate().unwrap();
+        assert!(cfg.validation.every > 0, "{}", path.display());
+        n += 1;
+    }
+    assert!(n >= 3);
 }
