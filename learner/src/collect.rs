@@ -169,10 +169,14 @@ pub struct CollectConfig {
     pub mix: Mix,
     /// Log options.
     pub log: LogOptions,
+    /// Continue the collection in `out_dir`: the episodes its manifest
+    /// lists (with their files present) are kept and not run again. Without
+    /// it, a directory that already holds a collection is refused.
+    pub resume: bool,
 }
 
 /// What one episode wrote.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeShard {
     /// Episode number.
     pub episode: u64,
@@ -195,7 +199,9 @@ pub struct EpisodeShard {
 
 /// Where the peg was when the controller faulted, from the simulator's
 /// task state at that cycle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum FaultSite {
     /// Touching the box outside the hole (its top face or rim, mostly: the
@@ -234,7 +240,7 @@ impl FaultSite {
 }
 
 /// A controller fault during an episode.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeFault {
     /// Episode time of the fault, s.
     pub t_s: f64,
@@ -520,16 +526,46 @@ pub fn collect_fast(
         source,
     })?;
     let start = Instant::now();
-    let next_episode = AtomicU64::new(0);
-    let done = AtomicU64::new(0);
-    let episodes_done = AtomicU64::new(0);
-    let progress = Progress::new(cfg.states, "states");
-    let shards = Mutex::new(Vec::new());
     let manifest_path = cfg.out_dir.join("manifest.jsonl");
     let manifest_err = |source: std::io::Error| CollectError::Io {
         path: manifest_path.clone(),
         source,
     };
+    let kept = read_manifest(&manifest_path)?;
+    if !kept.is_empty() && !cfg.resume {
+        return Err(CollectError::NotEmpty {
+            dir: cfg.out_dir.clone(),
+            episodes: kept.len(),
+        });
+    }
+    // Episodes on file are not run again; one whose file is gone is. An
+    // episode listed twice (run again after its file went) counts once.
+    let mut by_episode = std::collections::BTreeMap::new();
+    for s in kept.into_iter().filter(|s| s.file.exists()) {
+        by_episode.insert(s.episode, s);
+    }
+    let kept: Vec<EpisodeShard> = by_episode.into_values().collect();
+    if cfg.resume && manifest_path.exists() {
+        // Rewritten with the records kept, so that a line cut short by a
+        // crash does not run into the next one appended.
+        let mut text = String::new();
+        for s in &kept {
+            let line =
+                serde_json::to_string(s).map_err(|e| manifest_err(std::io::Error::other(e)))?;
+            text.push_str(&line);
+            text.push('\n');
+        }
+        let tmp = manifest_path.with_extension("jsonl.tmp");
+        std::fs::write(&tmp, text).map_err(manifest_err)?;
+        std::fs::rename(&tmp, &manifest_path).map_err(manifest_err)?;
+    }
+    let skip: std::collections::HashSet<u64> = kept.iter().map(|s| s.episode).collect();
+    let next_episode = AtomicU64::new(0);
+    let done = AtomicU64::new(kept.iter().map(|s| s.states).sum());
+    let episodes_done = AtomicU64::new(kept.len() as u64);
+    let progress = Progress::new(cfg.states, "states");
+    progress.resume_at(done.load(Ordering::Relaxed));
+    let shards = Mutex::new(kept);
     let manifest = Mutex::new(
         std::fs::OpenOptions::new()
             .create(true)
@@ -549,6 +585,9 @@ pub fn collect_fast(
                     let i = next_episode.fetch_add(1, Ordering::Relaxed);
                     if cfg.episodes.is_some_and(|n| i >= n) {
                         return Ok(());
+                    }
+                    if skip.contains(&i) {
+                        continue;
                     }
                     let mut world = cfg.world.clone();
                     world.task.enabled = true;
@@ -612,6 +651,38 @@ pub fn collect_fast(
     })
 }
 
+/// The episodes `manifest.jsonl` lists (none when there is no manifest). A
+/// last line cut short by a crash is ignored (its episode runs again); any
+/// other line that does not parse is an error naming it.
+pub fn read_manifest(path: &Path) -> Result<Vec<EpisodeShard>, CollectError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => {
+            return Err(CollectError::Io {
+                path: path.to_path_buf(),
+                source,
+            });
+        }
+    };
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    let mut out = Vec::with_capacity(lines.len());
+    for (k, line) in lines.iter().enumerate() {
+        match serde_json::from_str::<EpisodeShard>(line) {
+            Ok(s) => out.push(s),
+            Err(_) if k + 1 == lines.len() && !text.ends_with('\n') => {}
+            Err(e) => {
+                return Err(CollectError::Manifest {
+                    path: path.to_path_buf(),
+                    line: k + 1,
+                    detail: e.to_string(),
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Why a collection (or one of its episodes) failed; names the file or
 /// episode at fault.
 #[derive(Debug, thiserror::Error)]
@@ -625,6 +696,29 @@ pub enum CollectError {
     /// The world has no task (its hole pose is unknown).
     #[error("the world has no task")]
     NoTask,
+    /// The output directory already holds a collection and resuming was
+    /// not asked for.
+    #[error(
+        "{}: already holds a collection of {episodes} episodes (manifest.jsonl); resume it or \
+         collect into another directory",
+        dir.display()
+    )]
+    NotEmpty {
+        /// The directory.
+        dir: PathBuf,
+        /// Episodes its manifest lists.
+        episodes: usize,
+    },
+    /// A line of the manifest is not an episode record.
+    #[error("{}: line {line}: {detail}", path.display())]
+    Manifest {
+        /// The manifest.
+        path: PathBuf,
+        /// Its line, from 1.
+        line: usize,
+        /// Why.
+        detail: String,
+    },
     /// The world has no box.
     #[error("the world has no box")]
     NoBox,

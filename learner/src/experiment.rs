@@ -373,11 +373,13 @@ fn ensure_dataset(
             foxglove: false,
             ..Default::default()
         },
+        // An interrupted collection continues where it stopped.
+        resume: true,
     };
     let (_, stopped) = collect::collect_fast_until(&ccfg, stop)?;
     if stopped {
         bail!(
-            "stopped during the collection into {}; run the same command again to collect anew",
+            "stopped during the collection into {}; run the same command again to continue it",
             logs.display()
         );
     }

@@ -536,6 +536,11 @@ struct CollectArgs {
     /// at the bottom does not dominate the data).
     #[arg(long)]
     full_episodes: bool,
+    /// Continue an interrupted collection in `--out` (fast mode): the
+    /// episodes its manifest lists are kept and not run again. Without it a
+    /// directory that already holds a collection is refused.
+    #[arg(long)]
+    resume: bool,
     /// Worker threads (fast mode); default: all cores.
     #[arg(long)]
     workers: Option<usize>,
@@ -590,6 +595,10 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         mix.end_after_completion = None;
     }
     if a.live {
+        anyhow::ensure!(
+            !a.resume,
+            "--resume continues a fast-mode collection; a live collection cannot be resumed"
+        );
         return Ok(live::collect_live(&live::LiveCollect {
             out_dir: a.out.clone(),
             states: a.states,
@@ -621,6 +630,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         controller,
         mix,
         log,
+        resume: a.resume,
     };
     // Ctrl-C: the workers finish their episodes' files and stop.
     let (summary, _) =

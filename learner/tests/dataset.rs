@@ -105,6 +105,7 @@ fn collect_with(
             view_rate_hz: 50.0,
             ..LogOptions::default()
         },
+        resume: false,
     };
     collect_fast(&cfg, &AtomicBool::new(false)).unwrap()
 }
@@ -443,4 +444,77 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
         rest <= 2 * (n as u64 + 1),
         "{rest} samples after completion"
     );
+}
+
+#[test]
+fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
+    use learner::collect::{CollectError, read_manifest};
+    let dir = test_support::scratch_dir("collect-resume");
+    let cfg = |episodes: u64, resume: bool| CollectConfig {
+        out_dir: dir.path().to_path_buf(),
+        states: u64::MAX,
+        episodes: Some(episodes),
+        episode_actions: 6,
+        pegs: vec![hw_sim::PegShape::Square],
+        seed: 21,
+        workers: 2,
+        world: world(),
+        controller: rt_controller::ControllerConfig::default(),
+        mix: Mix::default(),
+        log: LogOptions {
+            foxglove: false,
+            ..LogOptions::default()
+        },
+        resume,
+    };
+    let first = collect_fast(&cfg(3, false), &AtomicBool::new(false)).unwrap();
+    assert_eq!(first.shards.len(), 3);
+    let stamp = |ep: usize| {
+        std::fs::metadata(&first.shards[ep].file)
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before: Vec<_> = (0..3).map(stamp).collect();
+    // Without resuming, the directory is refused and nothing is touched.
+    let e = collect_fast(&cfg(5, false), &AtomicBool::new(false)).unwrap_err();
+    assert!(
+        matches!(e, CollectError::NotEmpty { episodes: 3, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("resume"), "{e}");
+    // Episode 1's file lost, and a manifest line cut short by a crash.
+    std::fs::remove_file(&first.shards[1].file).unwrap();
+    let manifest = dir.path().join("manifest.jsonl");
+    let mut text = std::fs::read_to_string(&manifest).unwrap();
+    text.push_str("{\"episode\": 4, \"se");
+    std::fs::write(&manifest, &text).unwrap();
+    let resumed = collect_fast(&cfg(5, true), &AtomicBool::new(false)).unwrap();
+    let eps: Vec<u64> = resumed.shards.iter().map(|s| s.episode).collect();
+    assert_eq!(eps, [0, 1, 2, 3, 4]);
+    assert!(resumed.shards.iter().all(|s| s.file.exists()));
+    // Episodes 0 and 2 were not run again; 1 was.
+    assert_eq!(stamp(0), before[0]);
+    assert_eq!(stamp(2), before[2]);
+    assert_eq!(
+        resumed.states,
+        resumed.shards.iter().map(|s| s.states).sum::<u64>()
+    );
+    // The manifest reads back with one record per episode.
+    let listed: Vec<u64> = read_manifest(&manifest)
+        .unwrap()
+        .iter()
+        .map(|s| s.episode)
+        .collect();
+    assert_eq!(listed.len(), 5, "{listed:?}");
+    // A damaged line that is not the last is named.
+    let mut lines: Vec<String> = std::fs::read_to_string(&manifest)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect();
+    lines[0] = "not json".into();
+    std::fs::write(&manifest, lines.join("\n") + "\n").unwrap();
+    let e = read_manifest(&manifest).unwrap_err();
+    assert!(e.to_string().contains("line 1"), "{e}");
 }

@@ -31,6 +31,7 @@ fn collect_one(dir: &Path) -> PathBuf {
             foxglove: false,
             ..LogOptions::default()
         },
+        resume: false,
     };
     let summary = collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
     summary.shards[0].file.clone()

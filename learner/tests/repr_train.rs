@@ -48,6 +48,7 @@ fn dataset() -> &'static Path {
                 view_rate_hz: 10.0,
                 ..LogOptions::default()
             },
+            resume: false,
         };
         collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
         let out = root.join("ds");
