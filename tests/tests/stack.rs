@@ -727,6 +727,8 @@ fn policy_checkpoint(
         },
         history: Vec::new(),
         best: None,
+        validations: Vec::new(),
+        best_validated: None,
     };
     let path = dir.join(name);
     std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
