@@ -5,9 +5,12 @@
 //! does not depend on the weights), with Gaussian actions of σ 0.5. One
 //! JSON line per run; episodes are reset as they end, as in training.
 //!
-//! Usage: `env_bench ground-truth|representation NUM_ENVS THREADS STEPS`
-//! (THREADS 0: all cores; STEPS are batch steps, each NUM_ENVS policy
-//! steps; the encoder's own threads: RAYON_NUM_THREADS).
+//! Usage: `env_bench ground-truth|representation|representation-burn
+//! NUM_ENVS THREADS STEPS` (THREADS 0: all cores, for the environments and
+//! the encoder's CPU path alike; STEPS are batch steps, each NUM_ENVS policy
+//! steps). `representation` encodes through the inference API's CPU path,
+//! `representation-burn` through burn's `encode` (its threads:
+//! RAYON_NUM_THREADS).
 
 use learner::models::{Encoder, ModelConfig, Normaliser, ReprNet, init};
 use learner::rl::observe::{GroundTruth, Observer};
@@ -16,7 +19,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 fn main() {
-    let usage = "usage: env_bench ground-truth|representation NUM_ENVS THREADS STEPS";
+    let usage =
+        "usage: env_bench ground-truth|representation|representation-burn NUM_ENVS THREADS STEPS";
     let args: Vec<String> = std::env::args().collect();
     let what = args.get(1).expect(usage).as_str();
     let n: usize = args.get(2).expect(usage).parse().expect(usage);
@@ -24,16 +28,15 @@ fn main() {
     let steps: usize = args.get(4).expect(usage).parse().expect(usage);
     let observer: Arc<dyn Observer> = match what {
         "ground-truth" => Arc::new(GroundTruth),
-        "representation" => {
+        "representation" | "representation-burn" => {
             let cfg = ModelConfig::default();
             let dev = burn::prelude::Device::flex();
             let net = init::seeded(ReprNet::new(&cfg, &dev), 0);
-            Arc::new(Representation::new(Encoder::new(
-                net,
-                cfg,
-                Normaliser::identity(),
-                &dev,
-            )))
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let encoder = Encoder::new(net, cfg, Normaliser::identity(), &dev)
+                .with_fast_path(what == "representation")
+                .with_threads(if threads == 0 { cores } else { threads });
+            Arc::new(Representation::new(encoder))
         }
         _ => panic!("{usage}"),
     };

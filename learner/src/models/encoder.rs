@@ -59,6 +59,13 @@ impl Encoder {
         self
     }
 
+    /// Splits the CPU path's batches over at most `n` threads (the default:
+    /// every core). burn's own path takes rayon's pool (RAYON_NUM_THREADS).
+    pub fn with_threads(mut self, n: usize) -> Self {
+        self.fast = self.fast.map(|f| f.with_threads(n));
+        self
+    }
+
     /// Latent size d.
     pub fn dim(&self) -> usize {
         self.config.latent_dim
