@@ -195,6 +195,9 @@ pub struct EpisodeShard {
     pub fault: Option<EpisodeFault>,
     /// The file.
     pub file: PathBuf,
+    /// Cut short by a stop (Ctrl-C): a resumed collection runs it again.
+    #[serde(default)]
+    pub interrupted: bool,
 }
 
 /// Where the peg was when the controller faulted, from the simulator's
@@ -478,6 +481,7 @@ pub fn run_episode(
         stage: best,
         fault,
         file,
+        interrupted: stop,
     })
 }
 
@@ -531,18 +535,45 @@ pub fn collect_fast(
         path: manifest_path.clone(),
         source,
     };
-    let kept = read_manifest(&manifest_path)?;
-    if !kept.is_empty() && !cfg.resume {
+    let listed = read_manifest(&manifest_path)?;
+    let started = !listed.is_empty()
+        || std::fs::metadata(&manifest_path).is_ok_and(|m| m.len() > 0)
+        || has_episode_files(&cfg.out_dir)?;
+    if started && !cfg.resume {
         return Err(CollectError::NotEmpty {
             dir: cfg.out_dir.clone(),
-            episodes: kept.len(),
+            episodes: listed.len(),
         });
     }
-    // Episodes on file are not run again; one whose file is gone is. An
-    // episode listed twice (run again after its file went) counts once.
+    // Episodes on file are not run again; one whose file is gone, or that a
+    // stop cut short, is. An episode listed twice (run again) counts once.
+    // Files are looked up in `out_dir`, wherever the collection ran from.
     let mut by_episode = std::collections::BTreeMap::new();
-    for s in kept.into_iter().filter(|s| s.file.exists()) {
-        by_episode.insert(s.episode, s);
+    for mut s in listed {
+        let Some(name) = s.file.file_name() else {
+            continue;
+        };
+        s.file = cfg.out_dir.join(name);
+        let peg = cfg.pegs[s.episode as usize % cfg.pegs.len()];
+        if s.seed != cfg.seed + s.episode || s.peg != peg {
+            return Err(CollectError::Mismatch {
+                dir: cfg.out_dir.clone(),
+                episode: s.episode,
+                detail: format!(
+                    "it was collected with seed {} and the {} peg, this collection gives it \
+                     seed {} and the {} peg",
+                    s.seed,
+                    s.peg.name(),
+                    cfg.seed + s.episode,
+                    peg.name()
+                ),
+            });
+        }
+        if s.file.exists() && !s.interrupted {
+            by_episode.insert(s.episode, s);
+        } else {
+            by_episode.remove(&s.episode);
+        }
     }
     let kept: Vec<EpisodeShard> = by_episode.into_values().collect();
     if cfg.resume && manifest_path.exists() {
@@ -651,6 +682,19 @@ pub fn collect_fast(
     })
 }
 
+/// Whether `dir` holds episode files (`episode-*.mcap`).
+fn has_episode_files(dir: &Path) -> Result<bool, CollectError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| CollectError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    Ok(entries.flatten().any(|e| {
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        name.starts_with("episode-") && name.ends_with(".mcap")
+    }))
+}
+
 /// The episodes `manifest.jsonl` lists (none when there is no manifest). A
 /// last line cut short by a crash is ignored (its episode runs again); any
 /// other line that does not parse is an error naming it.
@@ -699,7 +743,7 @@ pub enum CollectError {
     /// The output directory already holds a collection and resuming was
     /// not asked for.
     #[error(
-        "{}: already holds a collection of {episodes} episodes (manifest.jsonl); resume it or \
+        "{}: already holds a collection ({episodes} episodes in manifest.jsonl); resume it or \
          collect into another directory",
         dir.display()
     )]
@@ -708,6 +752,17 @@ pub enum CollectError {
         dir: PathBuf,
         /// Episodes its manifest lists.
         episodes: usize,
+    },
+    /// An episode on file was collected with another seed or peg than this
+    /// collection would give it.
+    #[error("{}: episode {episode}: {detail}; resume with the same settings or collect into another directory", dir.display())]
+    Mismatch {
+        /// The directory.
+        dir: PathBuf,
+        /// The episode.
+        episode: u64,
+        /// What differs.
+        detail: String,
     },
     /// A line of the manifest is not an episode record.
     #[error("{}: line {line}: {detail}", path.display())]

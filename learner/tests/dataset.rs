@@ -483,19 +483,39 @@ fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
         "{e}"
     );
     assert!(e.to_string().contains("resume"), "{e}");
-    // Episode 1's file lost, and a manifest line cut short by a crash.
+    // Resuming with another seed would mix two collections: refused.
+    let mut other = cfg(5, true);
+    other.seed = 99;
+    let e = collect_fast(&other, &AtomicBool::new(false)).unwrap_err();
+    assert!(matches!(e, CollectError::Mismatch { .. }), "{e}");
+    assert!(e.to_string().contains("seed"), "{e}");
+    // Episode 1's file lost, episode 2 cut short by a stop, and a manifest
+    // line cut short by a crash.
     std::fs::remove_file(&first.shards[1].file).unwrap();
     let manifest = dir.path().join("manifest.jsonl");
-    let mut text = std::fs::read_to_string(&manifest).unwrap();
-    text.push_str("{\"episode\": 4, \"se");
+    let mut text = std::fs::read_to_string(&manifest)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            if l.contains("\"episode\":2,") {
+                l.replace("\"interrupted\":false", "\"interrupted\":true")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(text.contains("\"interrupted\":true"), "{text}");
+    text.push_str("\n{\"episode\": 4, \"se");
     std::fs::write(&manifest, &text).unwrap();
     let resumed = collect_fast(&cfg(5, true), &AtomicBool::new(false)).unwrap();
     let eps: Vec<u64> = resumed.shards.iter().map(|s| s.episode).collect();
     assert_eq!(eps, [0, 1, 2, 3, 4]);
     assert!(resumed.shards.iter().all(|s| s.file.exists()));
-    // Episodes 0 and 2 were not run again; 1 was.
+    // Episode 0 was not run again; 1 and 2 were.
     assert_eq!(stamp(0), before[0]);
-    assert_eq!(stamp(2), before[2]);
+    assert_ne!(stamp(2), before[2]);
+    assert!(resumed.shards.iter().all(|s| !s.interrupted));
     assert_eq!(
         resumed.states,
         resumed.shards.iter().map(|s| s.states).sum::<u64>()
@@ -507,6 +527,17 @@ fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
         .map(|s| s.episode)
         .collect();
     assert_eq!(listed.len(), 5, "{listed:?}");
+    // Episode files without a manifest are not overwritten either.
+    let bare = test_support::scratch_dir("collect-bare");
+    std::fs::write(bare.path().join("episode-000000.mcap"), b"kept").unwrap();
+    let mut c = cfg(1, false);
+    c.out_dir = bare.path().to_path_buf();
+    let e = collect_fast(&c, &AtomicBool::new(false)).unwrap_err();
+    assert!(matches!(e, CollectError::NotEmpty { .. }), "{e}");
+    assert_eq!(
+        std::fs::read(bare.path().join("episode-000000.mcap")).unwrap(),
+        b"kept"
+    );
     // A damaged line that is not the last is named.
     let mut lines: Vec<String> = std::fs::read_to_string(&manifest)
         .unwrap()

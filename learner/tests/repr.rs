@@ -320,10 +320,38 @@ fn configurations_are_checked_and_the_shipped_files_load() {
     assert!(e.contains("latent"), "{e}");
 }
 
+/// Every bias of `m` set to random values (seeded initialisation makes
+/// them zero, which would hide a bias left out).
+fn random_biases<M: burn::module::Module>(m: M, seed: u64) -> M {
+    struct Biases(test_support::Rng);
+    impl burn::module::ModuleMapper for Biases {
+        fn map_float<const D: usize>(
+            &mut self,
+            p: burn::module::Param<Tensor<D>>,
+        ) -> burn::module::Param<Tensor<D>> {
+            if D != 1 {
+                return p;
+            }
+            let r = &mut self.0;
+            p.map(|t| {
+                let dims = t.dims();
+                let n: usize = dims.iter().product();
+                let v: Vec<f32> = (0..n)
+                    .map(|_| rand::RngExt::random_range(r, -0.3f32..0.3))
+                    .collect();
+                Tensor::from_data(TensorData::new(v, dims), &t.device())
+            })
+        }
+    }
+    m.map(&mut Biases(test_support::rng(seed)))
+}
+
 #[test]
 fn the_fast_cpu_path_computes_what_encode_computes() {
     // Every model kind, a model built without a modality, and every sensor
-    // lost at run time: the inference API's CPU path against burn's encode.
+    // lost at run time: the inference API's CPU path against burn's encode,
+    // with random biases. 64 px leaves 1×1 maps before the fully connected
+    // layers; the Full Model at 128 px (2×2) checks their reordering.
     let dev = device();
     let no_rgb = Modalities {
         rgb: false,
@@ -333,29 +361,31 @@ fn the_fast_cpu_path_computes_what_encode_computes() {
         config(ModelKind::Full, 16, 64),
         config(ModelKind::Deterministic, 16, 64),
         config(ModelKind::Reconstruction, 8, 64),
+        config(ModelKind::Full, 8, 128),
     ];
     let mut lacking = config(ModelKind::Full, 16, 64);
     lacking.modalities = no_rgb;
     models.push(lacking);
-    let (b, s) = (3, 64);
+    let b = 5;
     let mut r = test_support::rng(11);
     let mut v = |n: usize| -> Vec<f32> {
         (0..n)
             .map(|_| rand::RngExt::random_range(&mut r, -1.0f32..1.0))
             .collect()
     };
-    let a = learner::models::InputArrays {
-        batch: b,
-        side: s,
-        rgb: v(b * 3 * s * s),
-        depth: v(b * s * s),
-        wrench: v(b * 6 * 32),
-        proprio: v(b * 8),
-    };
-    let x = InputTensors::new(&a, &dev);
     for cfg in &models {
-        let net = new_net(cfg, &dev);
-        // Split over three threads, and on one.
+        let s = cfg.image_size;
+        let a = learner::models::InputArrays {
+            batch: b,
+            side: s,
+            rgb: v(b * 3 * s * s),
+            depth: v(b * s * s),
+            wrench: v(b * 6 * 32),
+            proprio: v(b * 8),
+        };
+        let x = InputTensors::new(&a, &dev);
+        let net = random_biases(new_net(cfg, &dev), 3);
+        // Split unevenly over three threads (2, 2, 1), and on one.
         let fast = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(3);
         let single = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(1);
         let masks = [

@@ -238,6 +238,11 @@ fn a_run_can_start_from_another_runs_policy() {
     let c = train(cfg.clone(), &dir.path().join("c"), false, &|| false).unwrap();
     assert_eq!(c.state.iteration, 1);
     assert_ne!(c.state.policy, a.state.policy);
+    // Other hidden layers than the source policy's are refused.
+    let mut wide = cfg.clone();
+    wide.policy.hidden = vec![32, 32];
+    let e = train(wide, &dir.path().join("w"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("policy.hidden"), "{e}");
     // A policy of another observation is refused, naming the file.
     let mut other =
         learner::rl::run::read_checkpoint(&dir.path().join("a/checkpoint.json")).unwrap();

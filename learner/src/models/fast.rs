@@ -293,6 +293,7 @@ struct Scratch {
 /// inference of z means.
 pub struct FastEncoder {
     d: usize,
+    side: usize,
     rgb: Option<ImageEncoder>,
     depth: Option<ImageEncoder>,
     haptics: Option<WrenchStack>,
@@ -309,6 +310,7 @@ impl FastEncoder {
         let side = cfg.image_size;
         Self {
             d: cfg.latent_dim,
+            side,
             rgb: net
                 .rgb
                 .as_ref()
@@ -335,8 +337,25 @@ impl FastEncoder {
     /// modalities already applied), `batch × d` values row after row, as
     /// [`ReprNet::encode`] computes them. A batch is split over the threads
     /// by samples.
+    ///
+    /// # Panics
+    /// If `a` is not of the model's image side or its arrays are not of
+    /// its batch's sizes ([`super::Encoder::encode`] checks both first).
     pub fn encode(&self, a: &InputArrays, on: Modalities) -> Vec<f32> {
         let d = self.d;
+        let (b, px) = (a.batch, a.side * a.side);
+        assert_eq!(
+            a.side, self.side,
+            "image side: the model takes {} px",
+            self.side
+        );
+        assert!(
+            a.rgb.len() == b * 3 * px
+                && a.depth.len() == b * px
+                && a.wrench.len() == b * 6 * WRENCH_WINDOW
+                && a.proprio.len() == b * PROPRIO,
+            "input arrays of another size than a batch of {b}"
+        );
         let mut z = vec![0.0f32; a.batch * d];
         let threads = self.threads.min(a.batch);
         if threads <= 1 {

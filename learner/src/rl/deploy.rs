@@ -36,8 +36,9 @@ impl std::fmt::Debug for TrainedPolicy {
 }
 
 impl TrainedPolicy {
-    /// Loads `checkpoint` (a run's checkpoint.json): its best logged policy
-    /// unless `last` ([`super::run::Checkpoint::chosen_policy`]), and its
+    /// Loads `checkpoint` (a run's checkpoint.json): its best validated or
+    /// best logged policy unless `last`
+    /// ([`super::run::Checkpoint::chosen_policy`]), and its
     /// observer (a representation's model is loaded from the directory the
     /// run was configured with). Returns the line saying which policy.
     pub fn load(checkpoint: &Path, last: bool) -> Result<(Self, String), RunError> {

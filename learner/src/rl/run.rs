@@ -421,6 +421,19 @@ pub fn train(
                     ),
                 });
             }
+            // The policy keeps its own layers: this run's `policy.hidden`
+            // must describe them (the initial σ is the source's learned one).
+            let hidden = &c.state.policy.sizes[1..c.state.policy.sizes.len().saturating_sub(1)];
+            if hidden != cfg.policy.hidden.as_slice() {
+                return Err(RunError::Parse {
+                    path: from.clone(),
+                    detail: format!(
+                        "init_from: its policy's hidden layers are {hidden:?}, this run's \
+                         policy.hidden {:?}",
+                        cfg.policy.hidden
+                    ),
+                });
+            }
             Some(TrainerState {
                 policy: c.state.policy,
                 baseline: c.state.baseline,
