@@ -2,8 +2,8 @@
 //! arithmetic as [`ReprNet::encode`], without burn's per-operation dispatch
 //! and layout conversions. Images stay channels-last through every layer;
 //! each convolution is one im2col and one faer matrix product, with bias and
-//! leaky ReLU applied in the same pass over its output. Buffers are reused
-//! between calls.
+//! leaky ReLU applied in the same pass over its output. The convolutions'
+//! buffers are reused between the calls of one thread.
 //!
 //! It exists because burn's `flex` backend took 10 ms per observation on one
 //! core (docs/performance.md), most of it in layout changes and im2col
