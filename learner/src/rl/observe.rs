@@ -67,12 +67,22 @@ pub enum ObservationKind {
 }
 
 impl ObservationKind {
-    /// The observer (loading a representation's model from its file).
+    /// The observer (loading a representation's model from its file),
+    /// encoding on every core.
     pub fn observer(&self) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
+        self.observer_on(0)
+    }
+
+    /// The same, a representation encoding on at most `threads` cores (0:
+    /// all), as a run's `threads` setting asks.
+    pub fn observer_on(
+        &self,
+        threads: usize,
+    ) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
         Ok(match self {
             ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
             ObservationKind::Representation(dir) => std::sync::Arc::new(
-                super::represent::Representation::load(dir)
+                super::represent::Representation::load_on(dir, threads)
                     .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
             ),
         })

@@ -21,7 +21,15 @@ pub struct Representation {
 impl Representation {
     /// Loads the model `learner repr train` exported into `dir`, for the CPU.
     pub fn load(dir: &Path) -> crate::train::Result<Self> {
-        let encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
+        Self::load_on(dir, 0)
+    }
+
+    /// The same, encoding batches on at most `threads` cores (0: all).
+    pub fn load_on(dir: &Path, threads: usize) -> crate::train::Result<Self> {
+        let mut encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
+        if threads > 0 {
+            encoder = encoder.with_threads(threads);
+        }
         Ok(Self::new(encoder))
     }
 

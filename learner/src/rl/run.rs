@@ -405,7 +405,7 @@ pub fn train(
     let env = VecEnv::new(
         &cfg.env,
         cfg.num_envs,
-        cfg.observation.observer()?,
+        cfg.observation.observer_on(cfg.threads)?,
         cfg.threads,
     )?;
     let state = match (state, &cfg.init_from) {
@@ -667,7 +667,7 @@ pub fn evaluate(
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<EvalReport, RunError> {
     let n = cfg.num_envs.clamp(1, episodes.max(1));
-    let observer = cfg.observation.observer()?;
+    let observer = cfg.observation.observer_on(cfg.threads)?;
     let mut envs = (0..n)
         .map(|_| RlEnv::new(&cfg.env))
         .collect::<Result<Vec<_>, _>>()?;
