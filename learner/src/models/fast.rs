@@ -29,6 +29,26 @@ fn values<const D: usize>(p: &Param<Tensor<D>>) -> Vec<f32> {
     p.val().try_into_vec_as::<f32>().expect("an f32 tensor")
 }
 
+/// A bias as values (zeros when the layer has none).
+fn bias(b: &Option<Param<Tensor<1>>>, n: usize) -> Vec<f32> {
+    b.as_ref().map_or(vec![0.0; n], values)
+}
+
+/// Convolution weights `[cout, cin, taps]` (burn's layout, the kernel
+/// flattened) as the product's `[(tap, ci), cout]`, rows in tap-then-channel
+/// order as the channels-last im2col lays them out.
+fn taps_first(src: &[f32], cout: usize, cin: usize, taps: usize) -> Vec<f32> {
+    let mut w = vec![0.0; taps * cin * cout];
+    for co in 0..cout {
+        for ci in 0..cin {
+            for t in 0..taps {
+                w[(t * cin + ci) * cout + co] = src[(co * cin + ci) * taps + t];
+            }
+        }
+    }
+    w
+}
+
 fn leaky(x: f32) -> f32 {
     if x >= 0.0 { x } else { x * LEAKY_SLOPE as f32 }
 }
@@ -65,7 +85,7 @@ impl Dense {
         let [n_in, n_out] = l.weight.val().dims();
         Self {
             w: values(&l.weight),
-            b: l.bias.as_ref().map_or(vec![0.0; n_out], values),
+            b: bias(&l.bias, n_out),
             n_in,
             n_out,
         }
@@ -121,27 +141,14 @@ impl Conv {
             PaddingConfig2d::Valid => 0,
             ref p => panic!("unsupported padding {p:?}"),
         };
-        let src = values(&c.weight);
-        let k = kh;
-        let mut w = vec![0.0; k * k * cin * cout];
-        for co in 0..cout {
-            for ci in 0..cin {
-                for ky in 0..k {
-                    for kx in 0..k {
-                        w[((ky * k + kx) * cin + ci) * cout + co] =
-                            src[((co * cin + ci) * k + ky) * k + kx];
-                    }
-                }
-            }
-        }
         Self {
-            k,
+            k: kh,
             stride: c.stride[0],
             pad,
             cin,
             cout,
-            w,
-            b: c.bias.as_ref().map_or(vec![0.0; cout], values),
+            w: taps_first(&values(&c.weight), cout, cin, kh * kw),
+            b: bias(&c.bias, cout),
         }
     }
 
@@ -210,10 +217,8 @@ impl ImageEncoder {
         Self { convs, fc }
     }
 
-    /// One channels-last image → `out[2d]`.
-    fn forward(&self, x: &[f32], side: usize, s: &mut Scratch, out: &mut [f32]) {
-        s.a.clear();
-        s.a.extend_from_slice(x);
+    /// The channels-last image in `s.a` → `out[2d]`.
+    fn forward(&self, side: usize, s: &mut Scratch, out: &mut [f32]) {
         let mut side = side;
         for c in &self.convs {
             side = c.forward(&s.a, side, &mut s.col, &mut s.b);
@@ -237,18 +242,9 @@ impl WrenchStack {
                     let [cout, cin, k] = c.weight.val().dims();
                     assert!(k == 2 && c.stride == 2 && c.groups == 1 && c.dilation == 1);
                     assert!(matches!(c.padding, PaddingConfig1d::Valid));
-                    let src = values(&c.weight);
-                    let mut w = vec![0.0; k * cin * cout];
-                    for co in 0..cout {
-                        for ci in 0..cin {
-                            for j in 0..k {
-                                w[(j * cin + ci) * cout + co] = src[(co * cin + ci) * k + j];
-                            }
-                        }
-                    }
                     Dense {
-                        w,
-                        b: c.bias.as_ref().map_or(vec![0.0; cout], values),
+                        w: taps_first(&values(&c.weight), cout, cin, k),
+                        b: bias(&c.bias, cout),
                         n_in: k * cin,
                         n_out: cout,
                     }
@@ -285,7 +281,6 @@ struct Scratch {
     a: Vec<f32>,
     b: Vec<f32>,
     col: Vec<f32>,
-    img: Vec<f32>,
     feats: Vec<f32>,
 }
 
@@ -395,21 +390,21 @@ impl FastEncoder {
         feats.resize(8 * d, 0.0);
         let mut present = [false; 4];
         if let (Some(e), true) = (&self.rgb, on.rgb) {
-            // Channels-first to channels-last.
+            // Channels-first to channels-last, into the encoder's input.
             let src = &a.rgb[i * 3 * px..][..3 * px];
-            let mut img = std::mem::take(&mut s.img);
-            img.resize(3 * px, 0.0);
+            s.a.resize(3 * px, 0.0);
             for p in 0..px {
                 for c in 0..3 {
-                    img[p * 3 + c] = src[c * px + p];
+                    s.a[p * 3 + c] = src[c * px + p];
                 }
             }
-            e.forward(&img, side, s, &mut feats[..2 * d]);
-            s.img = img;
+            e.forward(side, s, &mut feats[..2 * d]);
             present[0] = true;
         }
         if let (Some(e), true) = (&self.depth, on.depth) {
-            e.forward(&a.depth[i * px..][..px], side, s, &mut feats[2 * d..4 * d]);
+            s.a.clear();
+            s.a.extend_from_slice(&a.depth[i * px..][..px]);
+            e.forward(side, s, &mut feats[2 * d..4 * d]);
             present[1] = true;
         }
         if let (Some(e), true) = (&self.haptics, on.haptics) {
@@ -436,7 +431,7 @@ impl FastEncoder {
 }
 
 /// The mean of the product of the present experts and the standard-normal
-/// prior (docs in [`super::fusion`]).
+/// prior (docs in [`super::fusion`]); with none present, the prior's 0.
 fn product_of_experts(feats: &[f32], present: &[bool; 4], d: usize, z: &mut [f32]) {
     for (j, zj) in z.iter_mut().enumerate() {
         let (mut precision, mut weighted) = (0.0f32, 0.0f32);
@@ -446,11 +441,7 @@ fn product_of_experts(feats: &[f32], present: &[bool; 4], d: usize, z: &mut [f32
             precision += 1.0 / var;
             weighted += p[j] / var;
         }
-        *zj = if present.iter().any(|p| *p) {
-            weighted / (precision + 1.0)
-        } else {
-            0.0
-        };
+        *zj = weighted / (precision + 1.0);
     }
 }
 
