@@ -536,8 +536,8 @@ pub fn collect_fast(
         source,
     };
     let listed = read_manifest(&manifest_path)?;
-    let started = !listed.is_empty()
-        || std::fs::metadata(&manifest_path).is_ok_and(|m| m.len() > 0)
+    // A manifest with any bytes (even a line cut short) or episode files.
+    let started = std::fs::metadata(&manifest_path).is_ok_and(|m| m.len() > 0)
         || has_episode_files(&cfg.out_dir)?;
     if started && !cfg.resume {
         return Err(CollectError::NotEmpty {
@@ -586,9 +586,7 @@ pub fn collect_fast(
             text.push_str(&line);
             text.push('\n');
         }
-        let tmp = manifest_path.with_extension("jsonl.tmp");
-        std::fs::write(&tmp, text).map_err(manifest_err)?;
-        std::fs::rename(&tmp, &manifest_path).map_err(manifest_err)?;
+        crate::write_atomic(&manifest_path, text.as_bytes()).map_err(manifest_err)?;
     }
     let skip: std::collections::HashSet<u64> = kept.iter().map(|s| s.episode).collect();
     let next_episode = AtomicU64::new(0);

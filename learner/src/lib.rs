@@ -31,3 +31,12 @@ pub mod proprio;
 pub mod rl;
 pub mod stack;
 pub mod train;
+
+/// Writes `bytes` to `path` through a sibling `<name>.tmp` and a rename, so
+/// that a crash leaves the old file or the new one, never half of one.
+pub(crate) fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    std::fs::write(&tmp, bytes)?;
+    std::fs::rename(&tmp, path)
+}

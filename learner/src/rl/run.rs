@@ -345,9 +345,7 @@ pub fn read_checkpoint(path: &Path) -> Result<Checkpoint, RunError> {
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunError> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io(path))
+    crate::write_atomic(path, bytes).map_err(io(path))
 }
 
 /// The checkpoint file of a run directory.
