@@ -18,6 +18,9 @@ struct Reach {
     sum: Vec<f64>,
     obs: Vec<f64>,
     out: Vec<StepOutcome>,
+    /// What the observation is multiplied by (the learned representation's
+    /// z means vary by a few hundredths).
+    scale: f64,
 }
 
 const STEPS: u32 = 20;
@@ -31,13 +34,21 @@ impl Reach {
             sum: vec![0.0; n],
             obs: vec![0.0; 2 * n],
             out: Vec::new(),
+            scale: 1.0,
+        }
+    }
+
+    fn scaled(n: usize, scale: f64) -> Self {
+        Self {
+            scale,
+            ..Self::new(n)
         }
     }
 
     fn observe(&mut self) {
         for i in 0..self.x.len() {
-            self.obs[2 * i] = self.x[i];
-            self.obs[2 * i + 1] = self.goal[i];
+            self.obs[2 * i] = self.scale * self.x[i];
+            self.obs[2 * i + 1] = self.scale * self.goal[i];
         }
     }
 
@@ -102,7 +113,7 @@ impl BatchEnv for Reach {
 
 /// Success rate of the policy's mean over 100 fresh goals.
 fn evaluate(trainer: &Trainer<Reach>) -> f64 {
-    let mut env = Reach::new(100);
+    let mut env = Reach::scaled(100, trainer.env().scale);
     let which: Vec<_> = (0..100).map(|i| (i, 1_000_000 + i as u64)).collect();
     env.reset(&which).unwrap();
     for _ in 0..STEPS {
@@ -110,6 +121,33 @@ fn evaluate(trainer: &Trainer<Reach>) -> f64 {
         env.step(&a).unwrap();
     }
     (0..100).filter(|&i| env.success(i)).count() as f64 / 100.0
+}
+
+/// Success rate of `algorithm`'s policy after 30 updates of 400 steps on
+/// the reach with its observations multiplied by `scale`.
+fn reach_after_training(algorithm: Algorithm, scale: f64, normalise: bool) -> f64 {
+    let cfg = PolicyConfig {
+        algorithm,
+        batch_steps: 400,
+        normalise_observations: normalise,
+        ..Default::default()
+    };
+    let mut trainer = Trainer::new(Reach::scaled(10, scale), cfg, 7).unwrap();
+    for _ in 0..30 {
+        trainer.iterate().unwrap();
+    }
+    evaluate(&trainer)
+}
+
+#[test]
+fn observation_normalisation_lets_a_policy_tell_nearby_observations_apart() {
+    // Observations that vary by hundredths, as the z means do: the raw
+    // network maps them to nearly one action; normalised, it learns.
+    let raw = reach_after_training(Algorithm::Trpo, 0.02, false);
+    let normalised = reach_after_training(Algorithm::Trpo, 0.02, true);
+    println!("success after 30 updates: raw {raw:.2}, normalised {normalised:.2}");
+    assert!(normalised >= 0.8, "{normalised}");
+    assert!(raw < 0.5, "{raw}");
 }
 
 /// Trains 30 updates of 400 steps and checks the success rate before and
@@ -188,4 +226,26 @@ fn resumes_exactly(algorithm: Algorithm) {
     let (sa, sb) = (a.iterate().unwrap(), b.iterate().unwrap());
     assert_eq!(sa, sb);
     assert_eq!(a.state, b.state);
+}
+
+#[test]
+fn a_policy_cannot_gain_or_lose_its_normalisation_by_a_setting() {
+    let on = PolicyConfig {
+        batch_steps: 200,
+        ..Default::default()
+    };
+    let off = PolicyConfig {
+        normalise_observations: false,
+        ..on.clone()
+    };
+    let trained_on = Trainer::new(Reach::new(2), on.clone(), 3).unwrap().state;
+    let trained_off = Trainer::new(Reach::new(2), off.clone(), 3).unwrap().state;
+    assert!(trained_on.policy.obs_norm.is_some() && trained_off.policy.obs_norm.is_none());
+    for (cfg, state) in [(off, trained_on), (on, trained_off)] {
+        let e = Trainer::resume(Reach::new(2), cfg, state).err().unwrap();
+        assert!(
+            e.to_string().contains("policy.normalise_observations"),
+            "{e}"
+        );
+    }
 }

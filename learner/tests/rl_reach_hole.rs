@@ -9,8 +9,8 @@
 //! to the controller's 1 cm clamp so that the reach fits in an episode and
 //! the test in seconds; everything else is what `learner policy train` runs.
 
-use learner::rl::observe::GroundTruth;
-use learner::rl::{ActionScale, BatchEnv, PolicyConfig, RlEnvConfig, Trainer, VecEnv};
+use learner::rl::observe::{GroundTruth, Observer};
+use learner::rl::{ActionScale, PolicyConfig, RlEnv, RlEnvConfig, Trainer, VecEnv};
 use std::sync::Arc;
 
 const STEPS: u32 = 40;
@@ -34,17 +34,25 @@ fn at_the_hole(s: &nalgebra::Vector3<f64>) -> bool {
 }
 
 /// Share of `n` held-out episodes (seeds far from the training seeds) whose
-/// last state is at the hole, acting with the policy's mean.
+/// last state is at the hole, acting with the policy's mean. An episode the
+/// controller faults is a failure.
 fn success_rate(policy: &learner::rl::GaussianPolicy, n: usize) -> f64 {
-    let mut env = VecEnv::new(&env_config(), n, Arc::new(GroundTruth), 0).unwrap();
-    let which: Vec<_> = (0..n).map(|i| (i, 1_000_000 + i as u64)).collect();
-    env.reset(&which).unwrap();
-    for _ in 0..STEPS {
-        let a = policy.means(env.observations());
-        env.step(&a).unwrap();
-    }
+    let mut env = RlEnv::new(&env_config()).unwrap();
+    let mut obs = vec![0.0; GroundTruth.dim()];
     let ok = (0..n)
-        .filter(|&i| at_the_hole(&env.env(i).task().s_m))
+        .filter(|&i| {
+            env.reset(1_000_000 + i as u64, false).unwrap();
+            loop {
+                GroundTruth.observe(&[env.view().unwrap()], &mut obs);
+                let o = env.step(&policy.means(&obs), false).unwrap();
+                if o.terminated {
+                    return false;
+                }
+                if o.done() {
+                    return at_the_hole(&env.task().s_m);
+                }
+            }
+        })
         .count();
     ok as f64 / n as f64
 }
@@ -64,6 +72,10 @@ fn learns(algorithm: learner::rl::Algorithm) {
     let cfg = PolicyConfig {
         algorithm,
         batch_steps: 400,
+        // The ground truth's channels are scaled by hand; normalised, its
+        // free-space wrench noise becomes as loud as the position, and this
+        // test's policy did not learn (0 % at the hole after 30 updates).
+        normalise_observations: false,
         ..Default::default()
     };
     let mut trainer = Trainer::new(env, cfg, 3).unwrap();

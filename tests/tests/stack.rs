@@ -792,6 +792,7 @@ fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
         sizes: vec![obs, hidden, act],
         net,
         log_std: vec![0.0; act],
+        obs_norm: None,
     };
     policy_checkpoint(
         dir,

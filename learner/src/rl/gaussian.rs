@@ -4,13 +4,16 @@
 //! ([`super::trpo`]) and PPO ([`super::ppo`]) take their steps on these.
 
 use super::mlp::{Cache, Mlp};
+use super::obs_norm::ObsNorm;
 use faer::Mat;
 use faer::prelude::*;
 use hw_sim::rng::{self, SimRng};
 use serde::{Deserialize, Serialize};
 
 /// A diagonal Gaussian policy: an MLP's output is the mean, log σ is a
-/// free parameter per action component.
+/// free parameter per action component. With `obs_norm` the observations
+/// are normalised before the network ([`ObsNorm`]); the network's inputs
+/// are then those, not the observations ([`GaussianPolicy::inputs`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GaussianPolicy {
     /// Layer sizes of the mean's MLP (observation, hidden…, action).
@@ -19,6 +22,11 @@ pub struct GaussianPolicy {
     pub net: Vec<f64>,
     /// log σ per action component.
     pub log_std: Vec<f64>,
+    /// The observation normalisation the network was trained under (None:
+    /// the network sees the observations as they are, as every policy
+    /// trained before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_norm: Option<ObsNorm>,
 }
 
 impl GaussianPolicy {
@@ -38,6 +46,16 @@ impl GaussianPolicy {
             net: mlp.init(rng, 0.1),
             sizes,
             log_std: vec![init_log_std; act_dim],
+            obs_norm: None,
+        }
+    }
+
+    /// The network's inputs for a batch of observations: normalised when
+    /// the policy has an [`ObsNorm`], the observations otherwise.
+    pub fn inputs(&self, obs: &[f64]) -> Vec<f64> {
+        match &self.obs_norm {
+            Some(n) => n.apply(obs),
+            None => obs.to_vec(),
         }
     }
 
@@ -72,8 +90,14 @@ impl GaussianPolicy {
 
     /// Means for a batch of observations (batch × action).
     pub fn means(&self, obs: &[f64]) -> Vec<f64> {
+        self.net_means(&self.inputs(obs))
+    }
+
+    /// Means for a batch of the network's inputs (what
+    /// [`GaussianPolicy::inputs`] gives; what an update's [`Batch`] holds).
+    pub fn net_means(&self, inputs: &[f64]) -> Vec<f64> {
         let mut c = Cache::default();
-        self.mlp().forward(&self.net, obs, &mut c);
+        self.mlp().forward(&self.net, inputs, &mut c);
         c.output().to_vec()
     }
 
@@ -139,7 +163,9 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// One batch of on-policy samples for an update.
 #[derive(Debug, Clone, Default)]
 pub struct Batch {
-    /// Observations, batch × observation size.
+    /// The network's inputs (the observations, normalised where the policy
+    /// normalises them: [`GaussianPolicy::inputs`]), batch × observation
+    /// size.
     pub obs: Vec<f64>,
     /// The actions drawn (before the environment's clipping), batch ×
     /// action size.

@@ -2,7 +2,8 @@
 //! ([`env`], [`vec`]), what the policy observes ([`observe`], the frozen
 //! representation in [`represent`]), the paper's
 //! staged reward and outcome categories ([`reward`]), the Gaussian policy
-//! and value baseline ([`gaussian`], on the small differentiable network of
+//! with its observation normalisation ([`obs_norm`]) and value baseline
+//! ([`gaussian`], on the small differentiable network of
 //! [`mlp`]), TRPO ([`trpo`]) and PPO ([`ppo`]), and the training loop
 //! ([`train`]). docs/rl.md gives every
 //! constant and setting with its source or reason.
@@ -11,6 +12,7 @@ pub mod deploy;
 pub mod env;
 pub mod gaussian;
 pub mod mlp;
+pub mod obs_norm;
 pub mod observe;
 pub mod ppo;
 pub mod represent;
@@ -23,6 +25,7 @@ pub mod vec;
 pub use deploy::TrainedPolicy;
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
 pub use gaussian::{GaussianPolicy, LinearBaseline};
+pub use obs_norm::ObsNorm;
 pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};
 pub use ppo::PpoConfig;
 pub use represent::Representation;

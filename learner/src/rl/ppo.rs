@@ -208,7 +208,7 @@ pub fn ppo_update(
     normalise(&mut batch.advantages);
     let d = policy.act_dim();
     let old = policy.clone();
-    let old_means = old.means(&batch.obs);
+    let old_means = old.net_means(&batch.obs);
     let old_log_prob: Vec<f64> = batch
         .actions
         .chunks_exact(d)
@@ -242,7 +242,7 @@ pub fn ppo_update(
         clip_fraction = clipped / seen.max(1) as f64;
     }
     let after = clipped_surrogate(policy, batch, &old_log_prob, &all, f64::INFINITY).objective;
-    let new_means = policy.means(&batch.obs);
+    let new_means = policy.net_means(&batch.obs);
     let kl = old_means
         .chunks_exact(d)
         .zip(new_means.chunks_exact(d))

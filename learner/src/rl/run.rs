@@ -374,6 +374,9 @@ pub fn train(
             // run is one experiment, and its curves one configuration's.
             let mut kept = c.config;
             kept.env_steps = cfg.env_steps;
+            // A checkpoint written before the setting existed reads it as
+            // its default; its policy says how it was trained.
+            kept.policy.normalise_observations = c.state.policy.obs_norm.is_some();
             if kept != cfg {
                 eprintln!(
                     "learner: resuming {} with the configuration it started with; the one given \

@@ -11,6 +11,7 @@
 
 use super::env::RlEnvError;
 use super::gaussian::{Batch, GaussianPolicy, LinearBaseline, UpdateStats, gae};
+use super::obs_norm::ObsNorm;
 use super::ppo::{Adam, PpoConfig, ppo_update};
 use super::reward::{Outcome, normalised_return};
 use super::trpo::{TrpoConfig, trpo_step};
@@ -49,6 +50,12 @@ pub struct PolicyConfig {
     pub hidden: Vec<usize>,
     /// Initial log σ of every action component (pytorch-trpo: 0).
     pub init_log_std: f64,
+    /// Normalise the observations by their running mean and standard
+    /// deviation before the policy's network and the baseline
+    /// (pytorch-trpo's `ZFilter`: on).
+    pub normalise_observations: bool,
+    /// Normalised observations are clipped to ±this (pytorch-trpo: 5).
+    pub observation_clip: f64,
     /// Ridge regularisation of the baseline's least squares (grown ×10
     /// while the normal equations are not positive definite).
     pub baseline_ridge: f64,
@@ -67,6 +74,8 @@ impl Default for PolicyConfig {
             gae_lambda: 0.97,
             hidden: vec![64, 64],
             init_log_std: 0.0,
+            normalise_observations: true,
+            observation_clip: 5.0,
             baseline_ridge: 1e-5,
             trpo: TrpoConfig::default(),
             ppo: PpoConfig::default(),
@@ -89,6 +98,13 @@ impl PolicyConfig {
             return Err(FieldError::new(
                 "policy.baseline_ridge",
                 self.baseline_ridge,
+                "must be positive and finite",
+            ));
+        }
+        if !(self.observation_clip.is_finite() && self.observation_clip > 0.0) {
+            return Err(FieldError::new(
+                "policy.observation_clip",
+                self.observation_clip,
                 "must be positive and finite",
             ));
         }
@@ -183,6 +199,7 @@ impl IterationStats {
 /// Samples of one environment's current trajectory segment.
 #[derive(Debug, Clone, Default)]
 struct Segment {
+    /// The observations as the environment gave them.
     obs: Vec<f64>,
     actions: Vec<f64>,
     rewards: Vec<f64>,
@@ -192,7 +209,11 @@ struct Segment {
 /// A batch being collected, with what the baseline needs.
 #[derive(Debug, Default)]
 struct Collected {
+    /// Its `obs` is empty until the batch is complete: the network's inputs
+    /// are made from `raw` then, under the statistics that include it.
     batch: Batch,
+    /// The observations as the environment gave them.
+    raw: Vec<f64>,
     /// Step of each sample over the episode length.
     times: Vec<f64>,
     /// The baseline's value of each sample's state.
@@ -201,22 +222,24 @@ struct Collected {
 
 impl Collected {
     /// Moves a finished or cut segment in, with its advantages against
-    /// `baseline`; `last` is the state after it and its time (None: the
-    /// episode ended, by a fault or at the horizon: nothing to bootstrap).
+    /// `baseline` (which sees the observations as `policy`'s network does);
+    /// `last` is the state after it and its time (None: the episode ended,
+    /// by a fault or at the horizon: nothing to bootstrap).
     fn finish(
         &mut self,
         seg: &mut Segment,
         last: Option<(&[f64], f64)>,
         baseline: &LinearBaseline,
+        policy: &GaussianPolicy,
         cfg: &PolicyConfig,
     ) {
         if seg.rewards.is_empty() {
             return;
         }
-        let values = baseline.predict(&seg.obs, &seg.times);
-        let last_value = last.map_or(0.0, |(o, t)| baseline.predict(o, &[t])[0]);
+        let values = baseline.predict(&policy.inputs(&seg.obs), &seg.times);
+        let last_value = last.map_or(0.0, |(o, t)| baseline.predict(&policy.inputs(o), &[t])[0]);
         let adv = gae(&seg.rewards, &values, last_value, cfg.gamma, cfg.gae_lambda);
-        self.batch.obs.append(&mut seg.obs);
+        self.raw.append(&mut seg.obs);
         self.batch.actions.append(&mut seg.actions);
         self.batch.advantages.extend(adv);
         self.times.append(&mut seg.times);
@@ -266,13 +289,16 @@ impl<E: BatchEnv> Trainer<E> {
     pub fn new(env: E, cfg: PolicyConfig, seed: u64) -> Result<Self, RlEnvError> {
         cfg.validate()?;
         let mut rng = hw_sim::rng::seeded(seed, 900);
-        let policy = GaussianPolicy::new(
+        let mut policy = GaussianPolicy::new(
             env.obs_dim(),
             &cfg.hidden,
             env.act_dim(),
             cfg.init_log_std,
             &mut rng,
         );
+        if cfg.normalise_observations {
+            policy.obs_norm = Some(ObsNorm::new(env.obs_dim(), cfg.observation_clip));
+        }
         let state = TrainerState {
             policy,
             baseline: LinearBaseline::default(),
@@ -295,6 +321,31 @@ impl<E: BatchEnv> Trainer<E> {
             return Err(RlEnvError::Shape {
                 what: "policy input (observation size)",
                 got: state.policy.sizes.first().copied().unwrap_or(0),
+                expected: env.obs_dim(),
+            });
+        }
+        // The network only means something under the scaling it learned
+        // with: a policy trained without normalisation cannot gain it, nor
+        // lose it, by a setting.
+        let has_norm = state.policy.obs_norm.is_some();
+        if cfg.normalise_observations != has_norm {
+            return Err(RlEnvError::Config(FieldError::new(
+                "policy.normalise_observations",
+                cfg.normalise_observations,
+                if has_norm {
+                    "the policy to continue was trained with its observations normalised"
+                } else {
+                    "the policy to continue was trained without observation normalisation \
+                     (set it to false)"
+                },
+            )));
+        }
+        if let Some(n) = &state.policy.obs_norm
+            && n.dim() != env.obs_dim()
+        {
+            return Err(RlEnvError::Shape {
+                what: "observation normalisation",
+                got: n.dim(),
                 expected: env.obs_dim(),
             });
         }
@@ -369,7 +420,13 @@ impl<E: BatchEnv> Trainer<E> {
                     // step. Bootstrapping at the horizon fed the baseline's
                     // extrapolation to t = 1 (never fitted) back into its
                     // own targets, and the learned return fell.
-                    col.finish(seg, None, &self.state.baseline, &self.cfg);
+                    col.finish(
+                        seg,
+                        None,
+                        &self.state.baseline,
+                        &self.state.policy,
+                        &self.cfg,
+                    );
                     episodes.push(EpisodeStats {
                         seed: self.seeds[i],
                         reward: out.episode_reward,
@@ -387,14 +444,29 @@ impl<E: BatchEnv> Trainer<E> {
         for i in (0..n).filter(|&i| !self.pending[i]) {
             let last = (&obs[i * od..(i + 1) * od], self.t[i] as f64 / horizon);
             let mut seg = std::mem::take(&mut self.segments[i]);
-            col.finish(&mut seg, Some(last), &self.state.baseline, &self.cfg);
+            col.finish(
+                &mut seg,
+                Some(last),
+                &self.state.baseline,
+                &self.state.policy,
+                &self.cfg,
+            );
         }
         // The baseline learns the λ-returns (advantage + value) of this batch.
         let Collected {
             mut batch,
+            raw,
             times,
             values,
         } = col;
+        // The statistics take in this batch before the update, and the
+        // update and the baseline see the inputs the next batch's policy
+        // will (the actions were drawn under the previous statistics: a
+        // shift that shrinks as they settle, as in pytorch-trpo's ZFilter).
+        if let Some(n) = &mut self.state.policy.obs_norm {
+            n.update(&raw);
+        }
+        batch.obs = self.state.policy.inputs(&raw);
         let targets: Vec<f64> = batch
             .advantages
             .iter()

@@ -463,7 +463,7 @@ mod tests {
             assert!(stats.step_fraction > 0.0, "{stats:?}");
             assert!(stats.improvement > 0.0);
             // The KL recomputed from the two policies.
-            let (m0, m1) = (old.means(&batch.obs), p.means(&batch.obs));
+            let (m0, m1) = (old.net_means(&batch.obs), p.net_means(&batch.obs));
             let kl: f64 = m0
                 .chunks(2)
                 .zip(m1.chunks(2))
