@@ -244,6 +244,12 @@ pub fn run(
             Some(p) => policy_run::read_config(p)?,
             None => policy_run::TrainConfig::default(),
         };
+        // The ground truth's channels are scaled by hand, and normalised
+        // its free-space wrench noise is as loud as the position (docs/rl.md,
+        // "Observation normalisation"): the reference runs without it.
+        if observation == ObservationKind::GroundTruth {
+            pcfg.policy.normalise_observations = false;
+        }
         pcfg.observation = observation;
         if let Some(n) = cfg.policy.env_steps {
             pcfg.env_steps = n;
