@@ -4,8 +4,11 @@
 //! publishes the actions and logs every stream to MCAP, one file per
 //! episode.
 //!
-//! Real-time mode acts every 50 ms of wall time on the newest frame, as a
-//! deployed policy does. Lockstep mode answers each action request of a
+//! Real-time mode acts on the newest frame every 50 ms of the hardware's
+//! clock (the frames' `t_hw_ns`), as a deployed policy does. On a robot that
+//! clock is the wall clock; a simulated robot's (franky-sim's) runs slower
+//! than the wall clock when the machine is loaded, and the policies act at
+//! 20 Hz of the arm's time, as they were tuned and trained to. Lockstep mode answers each action request of a
 //! lockstep simulator: on the frame of step 50m−1 it publishes the action
 //! addressed to step 50m, so runs are deterministic.
 
@@ -624,8 +627,9 @@ struct LiveEpisode {
     seen: Seen,
     /// Actions sent this episode.
     actions: u64,
-    /// Wall time of the next action (real-time mode).
-    next_tick: u64,
+    /// Hardware time of the next action (real-time mode; None: act on the
+    /// first frame).
+    next_tick: Option<u64>,
     /// The frame step last acted on (lockstep mode).
     acted_for_step: u64,
     best_stage: Stage,
@@ -699,7 +703,7 @@ impl LiveEpisode {
             ),
             free_wrench: None,
             actions: 0,
-            next_tick: mono_now_ns(),
+            next_tick: None,
             acted_for_step: u64::MAX,
             best_stage: Stage::Failed,
             completed_at: None,
@@ -791,13 +795,13 @@ impl LiveEpisode {
     }
 
     /// Whether an action is due: in lockstep on the frame before each
-    /// action step (once), in real time at 20 Hz of wall time.
+    /// action step (once), in real time at 20 Hz of hardware time.
     fn due(&self, cfg: &LiveConfig, frame: &SensorFrame) -> bool {
         if cfg.lockstep {
             (frame.step + 1).is_multiple_of(ACTION_PERIOD_STEPS)
                 && self.acted_for_step != frame.step
         } else {
-            mono_now_ns() >= self.next_tick
+            self.next_tick.is_none_or(|t| frame.header.t_hw_ns >= t)
         }
     }
 
@@ -823,10 +827,13 @@ impl LiveEpisode {
         self.log.action(&m)?;
         self.actions += 1;
         self.acted_for_step = frame.step;
-        self.next_tick += ACTION_PERIOD_NS;
-        if self.next_tick < mono_now_ns() {
-            self.next_tick = mono_now_ns() + ACTION_PERIOD_NS;
-        }
+        // On the 50 ms grid; after a hold-up, a period from now rather
+        // than a burst to catch up.
+        let now = frame.header.t_hw_ns;
+        self.next_tick = Some(match self.next_tick {
+            Some(t) if t + ACTION_PERIOD_NS > now => t + ACTION_PERIOD_NS,
+            _ => now + ACTION_PERIOD_NS,
+        });
         Ok(())
     }
 
