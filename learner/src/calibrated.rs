@@ -13,7 +13,7 @@
 //! heuristic's goal, the hole's bottom centre.
 
 use crate::collect::EpisodePolicy;
-use crate::live::{PolicyNode, Seen};
+use crate::live::{ActionPacer, PolicyNode, Seen};
 use crate::log::events::{Event, Reset};
 use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
 use crate::policy::{
@@ -23,7 +23,6 @@ use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Vector3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
-use shared_mem_schema::rates::ACTION_PERIOD_NS;
 use shared_mem_schema::transport;
 use shared_mem_schema::{ControllerMode, ControllerStatus, SensorFrame, hw_time_s};
 use std::path::PathBuf;
@@ -179,7 +178,7 @@ fn episode(
     node.push_early(first);
     let goal = hole * nalgebra::Point3::new(0.0, 0.0, -cfg.task.depth_m);
     let mut actions = 0u64;
-    let mut next_tick = mono_now_ns();
+    let mut pacer = ActionPacer::default();
     let mut reached_at: Option<u64> = None;
     let last = loop {
         node.pump(stream, &mut seen, Some(&mut log))?;
@@ -218,7 +217,7 @@ fn episode(
         // Once at the bottom's level the node stops acting: the heuristic
         // would press on for a contact force free space never gives, and
         // the controller holds the last target.
-        if reached_at.is_some() || mono_now_ns() < next_tick {
+        if reached_at.is_some() || !pacer.due(t) {
             std::thread::sleep(Duration::from_micros(500));
             continue;
         }
@@ -228,10 +227,7 @@ fn episode(
         let m = node.send_action(stream, t, 0, a)?;
         log.action(&m)?;
         actions += 1;
-        next_tick += ACTION_PERIOD_NS;
-        if next_tick < mono_now_ns() {
-            next_tick = mono_now_ns() + ACTION_PERIOD_NS;
-        }
+        pacer.acted(t);
     };
     let path = log.finish()?;
     let outcome = CalibratedOutcome {
@@ -293,6 +289,7 @@ fn return_to(
         depth_m: 0.0,
     };
     let start = mono_now_ns();
+    let mut pacer = ActionPacer::default();
     loop {
         let frame = newest_frame(node)?;
         transport::drain(&node.status, |s| *status = Some(*s))?;
@@ -321,6 +318,9 @@ fn return_to(
             );
             return Ok(());
         }
+        if !pacer.due(frame.header.t_hw_ns) {
+            continue;
+        }
         let mut d = home_pose.rotation * -s;
         if d.norm() > 0.008 {
             d *= 0.008 / d.norm();
@@ -332,6 +332,6 @@ fn return_to(
             0,
             [d.x, d.y, d.z, roll],
         )?;
-        std::thread::sleep(Duration::from_nanos(ACTION_PERIOD_NS));
+        pacer.acted(frame.header.t_hw_ns);
     }
 }

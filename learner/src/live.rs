@@ -5,10 +5,11 @@
 //! episode.
 //!
 //! Real-time mode acts on the newest frame every 50 ms of the hardware's
-//! clock (the frames' `t_hw_ns`), as a deployed policy does. On a robot that
-//! clock is the wall clock; a simulated robot's (franky-sim's) runs slower
-//! than the wall clock when the machine is loaded, and the policies act at
-//! 20 Hz of the arm's time, as they were tuned and trained to. Lockstep mode answers each action request of a
+//! clock (the frames' `t_hw_ns`; [`ActionPacer`], which `calibrated.rs` uses
+//! too), as a deployed policy does. On a robot that clock is the wall clock;
+//! hw-sim's and franky-sim's run slower than the wall clock when the machine
+//! is loaded, and the policies act at 20 Hz of the arm's time, as they were
+//! tuned and trained to. Lockstep mode answers each action request of a
 //! lockstep simulator: on the frame of step 50m−1 it publishes the action
 //! addressed to step 50m, so runs are deterministic.
 
@@ -545,6 +546,32 @@ impl PolicyNode {
     }
 }
 
+/// 20 Hz of the hardware's clock (the frames' `t_hw_ns`): when a real-time
+/// node's next action is due. Its episode's frames only: hw-sim's clock
+/// starts again at a reset.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct ActionPacer {
+    /// Hardware time of the next action (None: the first frame's).
+    next: Option<u64>,
+}
+
+impl ActionPacer {
+    /// Whether an action is due on a frame of hardware time `t_hw`.
+    pub(crate) fn due(&self, t_hw: u64) -> bool {
+        self.next.is_none_or(|n| t_hw >= n)
+    }
+
+    /// An action was sent on a frame of hardware time `t_hw`: the next is
+    /// on the 50 ms grid, or a period after `t_hw` after a hold-up (no
+    /// burst to catch up).
+    pub(crate) fn acted(&mut self, t_hw: u64) {
+        self.next = Some(match self.next {
+            Some(n) if n + ACTION_PERIOD_NS > t_hw => n + ACTION_PERIOD_NS,
+            _ => t_hw + ACTION_PERIOD_NS,
+        });
+    }
+}
+
 /// The task as the policy needs it, from a simulator report.
 pub fn task_geometry(r: &EpisodeReport, world: &WorldConfig) -> TaskGeometry {
     TaskGeometry {
@@ -627,9 +654,8 @@ struct LiveEpisode {
     seen: Seen,
     /// Actions sent this episode.
     actions: u64,
-    /// Hardware time of the next action (real-time mode; None: act on the
-    /// first frame).
-    next_tick: Option<u64>,
+    /// When the next action is due (real-time mode).
+    pacer: ActionPacer,
     /// The frame step last acted on (lockstep mode).
     acted_for_step: u64,
     best_stage: Stage,
@@ -703,7 +729,7 @@ impl LiveEpisode {
             ),
             free_wrench: None,
             actions: 0,
-            next_tick: None,
+            pacer: ActionPacer::default(),
             acted_for_step: u64::MAX,
             best_stage: Stage::Failed,
             completed_at: None,
@@ -801,7 +827,7 @@ impl LiveEpisode {
             (frame.step + 1).is_multiple_of(ACTION_PERIOD_STEPS)
                 && self.acted_for_step != frame.step
         } else {
-            self.next_tick.is_none_or(|t| frame.header.t_hw_ns >= t)
+            self.pacer.due(frame.header.t_hw_ns)
         }
     }
 
@@ -827,13 +853,7 @@ impl LiveEpisode {
         self.log.action(&m)?;
         self.actions += 1;
         self.acted_for_step = frame.step;
-        // On the 50 ms grid; after a hold-up, a period from now rather
-        // than a burst to catch up.
-        let now = frame.header.t_hw_ns;
-        self.next_tick = Some(match self.next_tick {
-            Some(t) if t + ACTION_PERIOD_NS > now => t + ACTION_PERIOD_NS,
-            _ => now + ACTION_PERIOD_NS,
-        });
+        self.pacer.acted(frame.header.t_hw_ns);
         Ok(())
     }
 
@@ -891,5 +911,27 @@ impl LiveEpisode {
             log: path,
             sensor_gaps: self.seen.gaps.gaps().clone(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn actions_are_paced_by_the_hardware_clock() {
+        const MS: u64 = 1_000_000;
+        let mut p = ActionPacer::default();
+        assert!(p.due(7 * MS), "the first frame acts");
+        p.acted(7 * MS);
+        // Wall time does not enter: only the frames' hardware time does.
+        assert!(!p.due(56 * MS));
+        assert!(p.due(57 * MS));
+        // Acted 3 ms late: the grid is kept (107, not 110).
+        p.acted(60 * MS);
+        assert!(!p.due(106 * MS) && p.due(107 * MS));
+        // Held up for 200 ms: one action, then a period later, no burst.
+        p.acted(300 * MS);
+        assert!(!p.due(301 * MS) && !p.due(349 * MS) && p.due(350 * MS));
     }
 }

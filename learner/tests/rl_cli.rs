@@ -243,6 +243,20 @@ fn a_run_can_start_from_another_runs_policy() {
     wide.policy.hidden = vec![32, 32];
     let e = train(wide, &dir.path().join("w"), false, &|| false).unwrap_err();
     assert!(e.to_string().contains("policy.hidden"), "{e}");
+    // So is another observation normalisation than the source policy's,
+    // or another clip, naming the file and the setting.
+    let mut raw = cfg.clone();
+    raw.policy.normalise_observations = !base.policy.normalise_observations;
+    let mut clip = cfg.clone();
+    clip.policy.observation_clip = 3.0;
+    for (k, other) in [raw, clip].into_iter().enumerate() {
+        let e = train(other, &dir.path().join(format!("n{k}")), false, &|| false).unwrap_err();
+        assert!(
+            e.to_string().contains("a/checkpoint.json")
+                && e.to_string().contains("policy.normalise_observations"),
+            "{e}"
+        );
+    }
     // A policy of another observation is refused, naming the file.
     let mut other =
         learner::rl::run::read_checkpoint(&dir.path().join("a/checkpoint.json")).unwrap();

@@ -76,6 +76,14 @@ impl TrainedPolicy {
                 observer.dim()
             ));
         }
+        if let Some(n) = &policy.obs_norm
+            && n.dim() != input
+        {
+            return Err(format!(
+                "the policy's observation normalisation has {} components, its network {input}                  inputs",
+                n.dim()
+            ));
+        }
         Ok(Self {
             policy,
             observer,
@@ -119,5 +127,47 @@ pub fn task_state(r: &EpisodeReport) -> TaskState {
         in_hole: stage_now >= Stage::Inserted,
         stage_now,
         best_stage: r.best_stage(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rl::observe::GroundTruth;
+    use crate::rl::{ObsNorm, RlEnv};
+
+    #[test]
+    fn a_deployed_policy_acts_on_its_normalised_observation() {
+        let mut env = RlEnv::new(&Default::default()).unwrap();
+        env.reset(5, false).unwrap();
+        env.step(&[0.3, -0.2, -0.5, 0.1], false).unwrap();
+        let view = env.view().unwrap();
+        let mut obs = vec![0.0; GroundTruth.dim()];
+        GroundTruth.observe(std::slice::from_ref(&view), &mut obs);
+        let mut rng = hw_sim::rng::seeded(1, 0);
+        let mut policy = GaussianPolicy::new(obs.len(), &[8], 4, 0.0, &mut rng);
+        // Statistics far from the identity: every component shifted and
+        // spread around values unlike this observation's.
+        let mut norm = ObsNorm::new(obs.len(), 5.0);
+        let seen: Vec<f64> = (0..4 * obs.len())
+            .map(|k| 0.3 * (k % 7) as f64 - 0.8)
+            .collect();
+        norm.update(&seen);
+        policy.obs_norm = Some(norm.clone());
+        let scale = ActionScale::default();
+        let p = TrainedPolicy::new(
+            policy.clone(),
+            Arc::new(GroundTruth),
+            scale.clone(),
+            PegShape::Square,
+        )
+        .unwrap();
+        let acted = p.act(&view);
+        assert_eq!(acted, scale.to_delta(&policy.net_means(&norm.apply(&obs))));
+        assert_ne!(acted, scale.to_delta(&policy.net_means(&obs)));
+        // A normaliser of another size than the network's input is refused.
+        policy.obs_norm = Some(ObsNorm::new(3, 5.0));
+        let e = TrainedPolicy::new(policy, Arc::new(GroundTruth), scale, PegShape::Square);
+        assert!(e.err().unwrap().contains("normalisation"));
     }
 }

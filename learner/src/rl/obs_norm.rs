@@ -131,7 +131,7 @@ mod tests {
     fn apply_scales_shifts_and_clips() {
         let mut n = ObsNorm::new(2, 1.5);
         assert_eq!(n.apply(&[3.0, 4.0]), vec![3.0, 4.0], "identity at first");
-        // Component 0: mean 1, sd 1; component 1 constant.
+        // Component 0: mean 1, sd √2; component 1 constant.
         n.update(&[0.0, 5.0, 2.0, 5.0]);
         let out = n.apply(&[1.5, 5.0, 9.0, 6.0]);
         assert!((out[0] - 0.5 / 2f64.sqrt()).abs() < 1e-6, "{out:?}");

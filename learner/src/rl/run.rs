@@ -367,34 +367,45 @@ pub fn train(
 ) -> Result<Checkpoint, RunError> {
     std::fs::create_dir_all(out).map_err(io(out))?;
     let ckpt_path = checkpoint_path(out);
-    let (cfg, state, mut history, mut best, mut validations, mut best_validated) =
-        if resume && ckpt_path.exists() {
-            let c = read_checkpoint(&ckpt_path)?;
-            // The file's configuration rules, except the length of the run: a
-            // run is one experiment, and its curves one configuration's.
-            let mut kept = c.config;
-            kept.env_steps = cfg.env_steps;
-            // A checkpoint written before the setting existed reads it as
-            // its default; its policy says how it was trained.
-            kept.policy.normalise_observations = c.state.policy.obs_norm.is_some();
-            if kept != cfg {
-                eprintln!(
-                    "learner: resuming {} with the configuration it started with; the one given \
+    let (cfg, state, mut history, mut best, mut validations, mut best_validated) = if resume
+        && ckpt_path.exists()
+    {
+        let c = read_checkpoint(&ckpt_path)?;
+        // The file's configuration rules, except the length of the run: a
+        // run is one experiment, and its curves one configuration's.
+        let mut kept = c.config;
+        kept.env_steps = cfg.env_steps;
+        // A checkpoint written before the setting existed reads it as
+        // its default; its policy says how it was trained.
+        let normalised = c.state.policy.obs_norm.is_some();
+        kept.policy.normalise_observations = normalised;
+        if cfg.policy.normalise_observations != normalised {
+            eprintln!(
+                "learner: resuming {}: its policy was trained {} observation                      normalisation, and goes on so",
+                ckpt_path.display(),
+                if normalised { "with" } else { "without" }
+            );
+        }
+        let mut given = cfg.clone();
+        given.policy.normalise_observations = normalised;
+        if kept != given {
+            eprintln!(
+                "learner: resuming {} with the configuration it started with; the one given \
                  differs in more than env_steps and is not used",
-                    ckpt_path.display()
-                );
-            }
-            (
-                kept,
-                Some(c.state),
-                c.history,
-                c.best,
-                c.validations,
-                c.best_validated,
-            )
-        } else {
-            (cfg, None, Vec::new(), None, Vec::new(), None)
-        };
+                ckpt_path.display()
+            );
+        }
+        (
+            kept,
+            Some(c.state),
+            c.history,
+            c.best,
+            c.validations,
+            c.best_validated,
+        )
+    } else {
+        (cfg, None, Vec::new(), None, Vec::new(), None)
+    };
     if cfg.validation.every > 0 && cfg.validation.episodes == 0 {
         return Err(RlEnvError::Config(hw_sim::FieldError::new(
             "validation.episodes",
@@ -420,6 +431,26 @@ pub fn train(
                         "init_from: its policy observes {:?}, this run {:?}",
                         c.config.observation, cfg.observation
                     ),
+                });
+            }
+            // The network only means something under the scaling it was
+            // trained with, which it keeps (statistics and clip).
+            let norm = &c.state.policy.obs_norm;
+            if norm.is_some() != cfg.policy.normalise_observations
+                || norm
+                    .as_ref()
+                    .is_some_and(|n| n.clip != cfg.policy.observation_clip)
+            {
+                return Err(RunError::Parse {
+                    path: from.clone(),
+                    detail: match norm {
+                        Some(n) => format!(
+                            "init_from: its policy was trained with its observations normalised                              and clipped to ±{}: set policy.normalise_observations = true and                              policy.observation_clip = {}",
+                            n.clip, n.clip
+                        ),
+                        None => "init_from: its policy was trained without observation                                  normalisation: set policy.normalise_observations = false"
+                            .into(),
+                    },
                 });
             }
             // The policy keeps its own layers: this run's `policy.hidden`

@@ -333,7 +333,8 @@ impl<E: BatchEnv> Trainer<E> {
                 "policy.normalise_observations",
                 cfg.normalise_observations,
                 if has_norm {
-                    "the policy to continue was trained with its observations normalised"
+                    "the policy to continue was trained with its observations normalised \
+                     (set it to true)"
                 } else {
                     "the policy to continue was trained without observation normalisation \
                      (set it to false)"
@@ -461,8 +462,10 @@ impl<E: BatchEnv> Trainer<E> {
         } = col;
         // The statistics take in this batch before the update, and the
         // update and the baseline see the inputs the next batch's policy
-        // will (the actions were drawn under the previous statistics: a
-        // shift that shrinks as they settle, as in pytorch-trpo's ZFilter).
+        // will: old and new policy are compared under the statistics the
+        // new one acts with (OpenAI baselines' trpo_mpi and ppo1 update
+        // their `ob_rms` so). The actions were drawn under the previous
+        // statistics, a mismatch that shrinks as they settle.
         if let Some(n) = &mut self.state.policy.obs_norm {
             n.update(&raw);
         }
