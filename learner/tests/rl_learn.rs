@@ -7,7 +7,7 @@
 
 use learner::rl::env::{RlEnvError, StepOutcome};
 use learner::rl::reward::{Outcome, RewardStage};
-use learner::rl::{Algorithm, BatchEnv, PolicyConfig, Trainer};
+use learner::rl::{Algorithm, BaselineKind, BatchEnv, PolicyConfig, Trainer};
 
 /// A point on a line: observation (x, goal), action a clipped to [−1, 1]
 /// moves x by 0.1·a; reward −|x − goal| per step; 20 steps.
@@ -153,11 +153,24 @@ fn observation_normalisation_lets_a_policy_tell_nearby_observations_apart() {
 /// Trains 30 updates of 400 steps and checks the success rate before and
 /// after.
 fn learns_a_reach(algorithm: Algorithm) {
-    let cfg = PolicyConfig {
+    learns_a_reach_with(PolicyConfig {
         algorithm,
         batch_steps: 400,
         ..Default::default()
-    };
+    });
+}
+
+#[test]
+fn trpo_learns_a_reach_with_the_value_network() {
+    learns_a_reach_with(PolicyConfig {
+        batch_steps: 400,
+        baseline: BaselineKind::Network,
+        ..Default::default()
+    });
+}
+
+fn learns_a_reach_with(cfg: PolicyConfig) {
+    let algorithm = cfg.algorithm;
     let mut trainer = Trainer::new(Reach::new(10), cfg, 7).unwrap();
     let before = evaluate(&trainer);
     let mut returns = Vec::new();
@@ -202,15 +215,20 @@ fn ppo_learns_a_reach_within_30_updates() {
 
 #[test]
 fn a_resumed_run_continues_where_the_checkpoint_left() {
-    for algorithm in [Algorithm::Trpo, Algorithm::Ppo] {
-        resumes_exactly(algorithm);
+    for (algorithm, baseline) in [
+        (Algorithm::Trpo, BaselineKind::Linear),
+        (Algorithm::Ppo, BaselineKind::Linear),
+        (Algorithm::Trpo, BaselineKind::Network),
+    ] {
+        resumes_exactly(algorithm, baseline);
     }
 }
 
-fn resumes_exactly(algorithm: Algorithm) {
+fn resumes_exactly(algorithm: Algorithm, baseline: BaselineKind) {
     let cfg = PolicyConfig {
         algorithm,
         batch_steps: 200,
+        baseline,
         ..Default::default()
     };
     let mut a = Trainer::new(Reach::new(10), cfg.clone(), 3).unwrap();

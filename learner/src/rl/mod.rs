@@ -2,8 +2,8 @@
 //! ([`env`], [`vec`]), what the policy observes ([`observe`], the frozen
 //! representation in [`represent`]), the paper's
 //! staged reward and outcome categories ([`reward`]), the Gaussian policy
-//! with its observation normalisation ([`obs_norm`]) and value baseline
-//! ([`gaussian`], on the small differentiable network of
+//! with its observation normalisation ([`obs_norm`]), the value baselines
+//! ([`gaussian`], [`value`], on the small differentiable network of
 //! [`mlp`]), TRPO ([`trpo`]) and PPO ([`ppo`]), and the training loop
 //! ([`train`]). docs/rl.md gives every
 //! constant and setting with its source or reason.
@@ -20,6 +20,7 @@ pub mod reward;
 pub mod run;
 pub mod train;
 pub mod trpo;
+pub mod value;
 pub mod vec;
 
 pub use deploy::TrainedPolicy;
@@ -32,4 +33,5 @@ pub use represent::Representation;
 pub use reward::{Outcome, RewardConfig, RewardStage};
 pub use train::{Algorithm, EpisodeStats, IterationStats, PolicyConfig, Trainer, TrainerState};
 pub use trpo::TrpoConfig;
+pub use value::{Baseline, BaselineKind, ValueConfig, ValueNet};
 pub use vec::{BatchEnv, VecEnv};

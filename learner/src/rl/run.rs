@@ -272,6 +272,10 @@ pub struct CurvePoint {
     pub kl: f64,
     /// Mean σ of the policy.
     pub mean_std: f64,
+    /// The share of the batch's λ-returns the baseline explained before
+    /// its fit (absent from runs before it was recorded: 0).
+    #[serde(default)]
+    pub baseline_explained: f64,
 }
 
 impl CurvePoint {
@@ -285,6 +289,7 @@ impl CurvePoint {
             outcomes: s.outcome_shares(),
             kl: s.update.kl,
             mean_std: s.mean_std,
+            baseline_explained: s.baseline_explained,
         }
     }
 }
@@ -536,12 +541,13 @@ pub fn train(
         progress.update(
             s.env_steps.min(cfg.env_steps),
             format!(
-                "update {} | {:.2} episodes/s | mean return {:.1} (normalised {:.3}) | completed {:.0}%",
+                "update {} | {:.2} episodes/s | mean return {:.1} (normalised {:.3}) | completed {:.0}% | baseline explained {:.2}",
                 s.iteration,
                 rate,
                 p.mean_return.unwrap_or(f64::NAN),
                 p.mean_normalised.unwrap_or(f64::NAN),
-                100.0 * p.outcomes[Outcome::CompletedInsertion.index()]
+                100.0 * p.outcomes[Outcome::CompletedInsertion.index()],
+                p.baseline_explained
             ),
         );
         history.push(p);
@@ -612,12 +618,12 @@ pub fn write_curves(
     let path = out.join("curve.csv");
     let mut f = std::fs::File::create(&path).map_err(io(&path))?;
     let mut text = String::from(
-        "iteration,env_steps,episodes,mean_return,mean_normalised,completed_insertion,inserted_into_hole,touched_the_box,failed,kl,mean_std\n",
+        "iteration,env_steps,episodes,mean_return,mean_normalised,completed_insertion,inserted_into_hole,touched_the_box,failed,kl,mean_std,baseline_explained\n",
     );
     for p in history {
         let o = p.outcomes;
         text += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
             p.iteration,
             p.env_steps,
             p.episodes,
@@ -628,7 +634,8 @@ pub fn write_curves(
             o[1],
             o[0],
             p.kl,
-            p.mean_std
+            p.mean_std,
+            p.baseline_explained
         );
     }
     f.write_all(text.as_bytes()).map_err(io(&path))?;

@@ -10,11 +10,12 @@
 //! stream, so a run is the same whatever the number of threads.
 
 use super::env::RlEnvError;
-use super::gaussian::{Batch, GaussianPolicy, LinearBaseline, UpdateStats, gae};
+use super::gaussian::{Batch, GaussianPolicy, UpdateStats, gae};
 use super::obs_norm::ObsNorm;
 use super::ppo::{Adam, PpoConfig, ppo_update};
 use super::reward::{Outcome, normalised_return};
 use super::trpo::{TrpoConfig, trpo_step};
+use super::value::{Baseline, BaselineKind, ValueConfig, explained_variance};
 use super::vec::BatchEnv;
 use hw_sim::FieldError;
 use serde::{Deserialize, Serialize};
@@ -56,9 +57,14 @@ pub struct PolicyConfig {
     pub normalise_observations: bool,
     /// Normalised observations are clipped to ±this (pytorch-trpo: 5).
     pub observation_clip: f64,
-    /// Ridge regularisation of the baseline's least squares (grown ×10
-    /// while the normal equations are not positive definite).
+    /// The value baseline: `linear` (rllab's features) or `network`
+    /// (pytorch-trpo's value MLP).
+    pub baseline: BaselineKind,
+    /// Ridge regularisation of the linear baseline's least squares (grown
+    /// ×10 while the normal equations are not positive definite).
     pub baseline_ridge: f64,
+    /// The value network's shape and fitting.
+    pub value: ValueConfig,
     /// TRPO's settings.
     pub trpo: TrpoConfig,
     /// PPO's settings.
@@ -76,7 +82,9 @@ impl Default for PolicyConfig {
             init_log_std: 0.0,
             normalise_observations: true,
             observation_clip: 5.0,
+            baseline: BaselineKind::Linear,
             baseline_ridge: 1e-5,
+            value: ValueConfig::default(),
             trpo: TrpoConfig::default(),
             ppo: PpoConfig::default(),
         }
@@ -131,6 +139,7 @@ impl PolicyConfig {
         }
         // Both are checked whichever runs: a configuration is valid or not
         // as a whole.
+        self.value.validate()?;
         self.trpo.validate()?;
         self.ppo.validate()
     }
@@ -166,6 +175,10 @@ pub struct IterationStats {
     pub update: UpdateStats,
     /// Mean σ of the policy after the update.
     pub mean_std: f64,
+    /// The share of the batch's λ-returns the baseline explained before
+    /// it was fitted to them ([`explained_variance`]).
+    #[serde(default)]
+    pub baseline_explained: f64,
 }
 
 impl IterationStats {
@@ -229,7 +242,7 @@ impl Collected {
         &mut self,
         seg: &mut Segment,
         last: Option<(&[f64], f64)>,
-        baseline: &LinearBaseline,
+        baseline: &Baseline,
         policy: &GaussianPolicy,
         cfg: &PolicyConfig,
     ) {
@@ -254,7 +267,8 @@ pub struct TrainerState {
     /// The policy.
     pub policy: GaussianPolicy,
     /// The value baseline.
-    pub baseline: LinearBaseline,
+    #[serde(default)]
+    pub baseline: Baseline,
     /// Updates done.
     pub iteration: u64,
     /// Environment steps taken.
@@ -299,9 +313,11 @@ impl<E: BatchEnv> Trainer<E> {
         if cfg.normalise_observations {
             policy.obs_norm = Some(ObsNorm::new(env.obs_dim(), cfg.observation_clip));
         }
+        let mut rng = hw_sim::rng::seeded(seed, 901);
+        let baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
         let state = TrainerState {
             policy,
-            baseline: LinearBaseline::default(),
+            baseline,
             iteration: 0,
             env_steps: 0,
             episodes_started: 0,
@@ -340,6 +356,14 @@ impl<E: BatchEnv> Trainer<E> {
                      (set it to false)"
                 },
             )));
+        }
+        // The baseline does not change what the policy does: one of another
+        // kind than the configuration's (a policy continued with
+        // `init_from`) is replaced by a fresh one.
+        let mut state = state;
+        if state.baseline.kind() != cfg.baseline {
+            let mut rng = hw_sim::rng::seeded(state.seed, 901);
+            state.baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
         }
         if let Some(n) = &state.policy.obs_norm
             && n.dim() != env.obs_dim()
@@ -476,6 +500,7 @@ impl<E: BatchEnv> Trainer<E> {
             .zip(&values)
             .map(|(a, v)| a + v)
             .collect();
+        let baseline_explained = explained_variance(&values, &targets);
         let update = match self.cfg.algorithm {
             Algorithm::Trpo => trpo_step(&mut self.state.policy, &mut batch, &self.cfg.trpo),
             Algorithm::Ppo => {
@@ -493,9 +518,16 @@ impl<E: BatchEnv> Trainer<E> {
                 )
             }
         };
-        self.state
-            .baseline
-            .fit(&batch.obs, &times, &targets, self.cfg.baseline_ridge);
+        // The value network's minibatch order from its own stream (3·2³² + k).
+        let mut order = hw_sim::rng::seeded(self.state.seed, (3 << 32) + self.state.iteration);
+        self.state.baseline.fit(
+            &batch.obs,
+            &times,
+            &targets,
+            self.cfg.baseline_ridge,
+            &self.cfg.value,
+            &mut order,
+        );
         self.state.iteration += 1;
         let ls = &self.state.policy.log_std;
         Ok(IterationStats {
@@ -504,6 +536,7 @@ impl<E: BatchEnv> Trainer<E> {
             episodes,
             update,
             mean_std: ls.iter().map(|l| l.exp()).sum::<f64>() / ls.len() as f64,
+            baseline_explained,
         })
     }
 }
