@@ -3,12 +3,12 @@
 //! chosen by `policy.baseline`.
 //!
 //! Why the network: the linear baseline fits `[o, o², t, t², t³, 1]`, 2d + 4
-//! weights, to one batch (2000 states of four episodes). For the 18 ground-
-//! truth values that is 40 weights; for a representation's 128 z means it is
-//! 260, which one batch's four episodes fit closely and the next batch's
-//! episodes do not follow, so the advantages are mostly the baseline's
-//! error. The network shares its hidden layers across inputs and is fitted
-//! with an L2 penalty, as pytorch-trpo fits its value MLP.
+//! weights, to one batch (2000 states of four episodes): 40 for the 18
+//! ground-truth values, 260 for a representation's 128 z means. On those it
+//! explained most of the next batch's returns but now and then less than
+//! their mean (docs/rl.md, "Baselines"); the network shares its hidden
+//! layers across inputs and is fitted with an L2 penalty, as pytorch-trpo
+//! fits its value MLP.
 
 use super::gaussian::LinearBaseline;
 use super::mlp::{Cache, Mlp};
