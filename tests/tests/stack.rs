@@ -706,7 +706,7 @@ fn policy_checkpoint(
     observation: learner::rl::observe::ObservationKind,
 ) -> std::path::PathBuf {
     use learner::rl::run::{Checkpoint, TrainConfig};
-    use learner::rl::{LinearBaseline, TrainerState};
+    use learner::rl::{Baseline, TrainerState};
     let mut config = TrainConfig {
         observation,
         ..TrainConfig::default()
@@ -718,7 +718,7 @@ fn policy_checkpoint(
         config,
         state: TrainerState {
             policy,
-            baseline: LinearBaseline::default(),
+            baseline: Baseline::default(),
             iteration: 0,
             env_steps: 0,
             episodes_started: 0,
