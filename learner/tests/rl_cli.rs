@@ -233,6 +233,13 @@ fn a_run_can_start_from_another_runs_policy() {
     assert_eq!(b.state.baseline, a.state.baseline);
     assert_eq!((b.state.iteration, b.state.env_steps), (0, 0));
     assert!(b.history.is_empty());
+    // With a value network where the source had the linear baseline: the
+    // same policy, a fresh network.
+    let mut net = cfg.clone();
+    net.policy.baseline = learner::rl::BaselineKind::Network;
+    let n = train(net, &dir.path().join("net"), false, &|| false).unwrap();
+    assert_eq!(n.state.policy, a.state.policy);
+    assert_eq!(n.state.baseline.kind(), learner::rl::BaselineKind::Network);
     // It trains on from there.
     cfg.env_steps = 40;
     let c = train(cfg.clone(), &dir.path().join("c"), false, &|| false).unwrap();

@@ -267,3 +267,20 @@ fn a_policy_cannot_gain_or_lose_its_normalisation_by_a_setting() {
         );
     }
 }
+
+#[test]
+fn a_state_with_another_baseline_than_the_configurations_is_refused() {
+    let linear = PolicyConfig {
+        batch_steps: 200,
+        ..Default::default()
+    };
+    let network = PolicyConfig {
+        baseline: BaselineKind::Network,
+        ..linear.clone()
+    };
+    let state = Trainer::new(Reach::new(2), linear, 3).unwrap().state;
+    let e = Trainer::resume(Reach::new(2), network, state)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("policy.baseline"), "{e}");
+}

@@ -194,6 +194,9 @@ pub fn normalise(x: &mut [f64]) {
 /// o clipped to ±10 and t the step over the episode length, fitted by
 /// ridge-regularised least squares (faer's Cholesky).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+// No unknown fields, and no defaults: the untagged `value::Baseline` tells
+// this from a value network by its fields.
+#[serde(deny_unknown_fields)]
 pub struct LinearBaseline {
     /// Fitted weights (empty: predicts 0).
     pub weights: Vec<f64>,

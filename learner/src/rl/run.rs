@@ -8,7 +8,8 @@ use super::observe::ObservationKind;
 use super::reward::{Outcome, normalised_return};
 use super::train::{Algorithm, PolicyConfig};
 use super::train::{IterationStats, Trainer, TrainerState};
-use super::vec::{VecEnv, all_cores, par_map};
+use super::value::Baseline;
+use super::vec::{BatchEnv, VecEnv, all_cores, par_map};
 use crate::plot::{Chart, Series};
 use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
@@ -471,9 +472,25 @@ pub fn train(
                     ),
                 });
             }
+            // The baseline does not change what the policy does: one that
+            // is not this configuration's is replaced by a fresh one.
+            let mut baseline = c.state.baseline;
+            if !baseline.fits(cfg.policy.baseline, env.obs_dim(), &cfg.policy.value) {
+                eprintln!(
+                    "learner: init_from {}: its value baseline is not this run's                      (policy.baseline, policy.value.hidden); a fresh one is fitted",
+                    from.display()
+                );
+                let mut rng = hw_sim::rng::seeded(cfg.seed, 901);
+                baseline = Baseline::new(
+                    cfg.policy.baseline,
+                    env.obs_dim(),
+                    &cfg.policy.value,
+                    &mut rng,
+                );
+            }
             Some(TrainerState {
                 policy: c.state.policy,
-                baseline: c.state.baseline,
+                baseline,
                 iteration: 0,
                 env_steps: 0,
                 episodes_started: 0,

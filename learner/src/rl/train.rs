@@ -357,13 +357,24 @@ impl<E: BatchEnv> Trainer<E> {
                 },
             )));
         }
-        // The baseline does not change what the policy does: one of another
-        // kind than the configuration's (a policy continued with
-        // `init_from`) is replaced by a fresh one.
-        let mut state = state;
         if state.baseline.kind() != cfg.baseline {
-            let mut rng = hw_sim::rng::seeded(state.seed, 901);
-            state.baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
+            return Err(RlEnvError::Config(FieldError::new(
+                "policy.baseline",
+                format!("{:?}", cfg.baseline),
+                format!(
+                    "the state to continue has a {:?} baseline",
+                    state.baseline.kind()
+                ),
+            )));
+        }
+        if let Baseline::Network(v) = &state.baseline
+            && v.sizes.first() != Some(&(env.obs_dim() + 1))
+        {
+            return Err(RlEnvError::Shape {
+                what: "value network input (observation size + 1)",
+                got: v.sizes.first().copied().unwrap_or(0),
+                expected: env.obs_dim() + 1,
+            });
         }
         if let Some(n) = &state.policy.obs_norm
             && n.dim() != env.obs_dim()
@@ -506,7 +517,7 @@ impl<E: BatchEnv> Trainer<E> {
             Algorithm::Ppo => {
                 // Minibatch order from its own stream: the same run on any
                 // number of threads, and after a resume.
-                // (Stream 2³² + k: apart from the action noise's 1000 + k.)
+                // (Stream 2·2³² + k: apart from the action noise's 1000 + k.)
                 let mut order =
                     hw_sim::rng::seeded(self.state.seed, (2 << 32) + self.state.iteration);
                 ppo_update(

@@ -74,13 +74,19 @@ impl ValueConfig {
                 "must be at least 1",
             ));
         }
-        for (name, v) in [
-            ("policy.value.learning_rate", self.learning_rate),
-            ("policy.value.l2", self.l2),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(FieldError::new(name, v, "must be finite and not negative"));
-            }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return Err(FieldError::new(
+                "policy.value.learning_rate",
+                self.learning_rate,
+                "must be positive and finite",
+            ));
+        }
+        if !(self.l2.is_finite() && self.l2 >= 0.0) {
+            return Err(FieldError::new(
+                "policy.value.l2",
+                self.l2,
+                "must be finite and not negative",
+            ));
         }
         Ok(())
     }
@@ -89,13 +95,17 @@ impl ValueConfig {
 /// A value network: an MLP (tanh hidden layers) over the policy's inputs
 /// and the step over the episode length, its output times `scale`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ValueNet {
     /// Layer sizes (input + 1, hidden…, 1).
     pub sizes: Vec<usize>,
     /// The MLP's parameters.
     pub net: Vec<f64>,
-    /// Returns are fitted divided by this: the spread of the first batch's
-    /// targets (0: not fitted yet), so that the output is of unit size.
+    /// Returns are fitted divided by this: the first batch's target spread,
+    /// at least 1 (0: not fitted yet), fixed from then on so that the
+    /// network's function does not move under it. The mean is not taken
+    /// out: returns that grow tenfold in training are fitted at about ten
+    /// times unit size.
     pub scale: f64,
     /// The optimiser's moments (kept across updates).
     pub adam: Adam,
@@ -211,6 +221,19 @@ impl Baseline {
         match kind {
             BaselineKind::Linear => Self::default(),
             BaselineKind::Network => Self::Network(ValueNet::new(input, &cfg.hidden, rng)),
+        }
+    }
+
+    /// Whether it is what `kind` and `cfg` describe for `input` values per
+    /// state (a value network of those hidden layers).
+    pub fn fits(&self, kind: BaselineKind, input: usize, cfg: &ValueConfig) -> bool {
+        match self {
+            Self::Linear(_) => kind == BaselineKind::Linear,
+            Self::Network(v) => {
+                kind == BaselineKind::Network
+                    && v.sizes.first() == Some(&(input + 1))
+                    && v.sizes.get(1..v.sizes.len().saturating_sub(1)) == Some(&cfg.hidden[..])
+            }
         }
     }
 
