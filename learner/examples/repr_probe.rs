@@ -4,6 +4,9 @@
 //! environment under random actions (uniform in [−1, 1] per component, as an
 //! untrained policy's noise).
 //!
+//! The same from z through an MLP (64, 64, the value network's code) shows
+//! what a policy's network could read beyond a linear map.
+//!
 //! Targets: the tip relative to the hole (x, y, z in the hole frame), the
 //! hole's position in the base frame (x, y: only the camera sees where the
 //! randomised box is), and the tip's base-frame position (x, y). Each is
@@ -16,7 +19,8 @@
 use faer::Mat;
 use faer::prelude::*;
 use learner::rl::observe::ObservationKind;
-use learner::rl::{RlEnv, RlEnvConfig};
+use learner::rl::value::explained_variance;
+use learner::rl::{RlEnv, RlEnvConfig, ValueConfig, ValueNet};
 
 /// Ridge fit on rows `train` (features standardised by the training
 /// rows' mean and deviation, ridge 10⁻³ per row), R² per target on rows
@@ -64,6 +68,56 @@ fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec
                 ss_tot += (y[i][t] - mean).powi(2);
             }
             1.0 - ss_res / ss_tot.max(1e-300)
+        })
+        .collect()
+}
+
+/// An MLP probe (the value network's code: 64, 64 tanh, Adam with an L2
+/// penalty) per target, fitted on rows `train`, R² on rows `test`.
+fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<f64> {
+    let d = x[0].len();
+    let n = train.len() as f64;
+    let mean: Vec<f64> = (0..d)
+        .map(|c| train.iter().map(|&i| x[i][c]).sum::<f64>() / n)
+        .collect();
+    let sd: Vec<f64> = (0..d)
+        .map(|c| {
+            let v = train
+                .iter()
+                .map(|&i| (x[i][c] - mean[c]).powi(2))
+                .sum::<f64>()
+                / n;
+            v.sqrt().max(1e-12)
+        })
+        .collect();
+    let rows = |idx: &[usize]| -> Vec<f64> {
+        let (mean, sd) = (&mean, &sd);
+        idx.iter()
+            .flat_map(|&i| (0..d).map(move |c| (x[i][c] - mean[c]) / sd[c]))
+            .collect()
+    };
+    let (xtr, xte) = (rows(train), rows(test));
+    let (ttr, tte) = (vec![0.0; train.len()], vec![0.0; test.len()]);
+    let cfg = ValueConfig {
+        epochs: 100,
+        ..Default::default()
+    };
+    let mut rng = hw_sim::rng::seeded(12, 0);
+    (0..y[0].len())
+        .map(|t| {
+            let ytr: Vec<f64> = train.iter().map(|&i| y[i][t]).collect();
+            let yte: Vec<f64> = test.iter().map(|&i| y[i][t]).collect();
+            // Centred and scaled, so that the network's fixed scale is the
+            // target's spread.
+            let m = ytr.iter().sum::<f64>() / n;
+            let s = (ytr.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n)
+                .sqrt()
+                .max(1e-12);
+            let ytr: Vec<f64> = ytr.iter().map(|v| (v - m) / s).collect();
+            let mut net = ValueNet::new(d, &cfg.hidden, &mut rng);
+            net.fit(&xtr, &ttr, &ytr, &cfg, &mut rng);
+            let pred: Vec<f64> = net.predict(&xte, &tte).iter().map(|v| v * s + m).collect();
+            explained_variance(&pred, &yte)
         })
         .collect()
 }
@@ -123,8 +177,12 @@ fn main() {
     ];
     let from_z = probe(&z, &targets, &train, &test);
     let from_own = probe(&own, &targets, &train, &test);
-    println!("test R²      from z    from tip pose");
+    let from_z_mlp = mlp_probe(&z, &targets, &train, &test);
+    println!("test R²      from z    from tip pose   from z (MLP)");
     for (i, n) in names.iter().enumerate() {
-        println!("{n:<12} {:>7.3} {:>10.3}", from_z[i], from_own[i]);
+        println!(
+            "{n:<12} {:>7.3} {:>10.3} {:>14.3}",
+            from_z[i], from_own[i], from_z_mlp[i]
+        );
     }
 }
