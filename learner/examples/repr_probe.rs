@@ -22,6 +22,24 @@ use learner::rl::observe::ObservationKind;
 use learner::rl::value::explained_variance;
 use learner::rl::{RlEnv, RlEnvConfig, ValueConfig, ValueNet};
 
+/// Mean and standard deviation (at least 10⁻¹²) of each feature over the
+/// rows `train`.
+fn standardiser(x: &[Vec<f64>], train: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    let n = train.len() as f64;
+    let mean: Vec<f64> = (0..x[0].len())
+        .map(|c| train.iter().map(|&i| x[i][c]).sum::<f64>() / n)
+        .collect();
+    let sd = mean
+        .iter()
+        .enumerate()
+        .map(|(c, m)| {
+            let v = train.iter().map(|&i| (x[i][c] - m).powi(2)).sum::<f64>() / n;
+            v.sqrt().max(1e-12)
+        })
+        .collect();
+    (mean, sd)
+}
+
 /// Ridge fit on rows `train` (features standardised by the training
 /// rows' mean and deviation, ridge 10⁻³ per row), R² per target on rows
 /// `test`.
@@ -29,19 +47,7 @@ fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec
     let d = x[0].len() + 1;
     let k = y[0].len();
     let n = train.len() as f64;
-    let mean: Vec<f64> = (0..d - 1)
-        .map(|c| train.iter().map(|&i| x[i][c]).sum::<f64>() / n)
-        .collect();
-    let sd: Vec<f64> = (0..d - 1)
-        .map(|c| {
-            let v = train
-                .iter()
-                .map(|&i| (x[i][c] - mean[c]).powi(2))
-                .sum::<f64>()
-                / n;
-            v.sqrt().max(1e-12)
-        })
-        .collect();
+    let (mean, sd) = standardiser(x, train);
     let row = |i: usize| {
         (0..d - 1)
             .map(|c| (x[i][c] - mean[c]) / sd[c])
@@ -77,19 +83,7 @@ fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec
 fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<f64> {
     let d = x[0].len();
     let n = train.len() as f64;
-    let mean: Vec<f64> = (0..d)
-        .map(|c| train.iter().map(|&i| x[i][c]).sum::<f64>() / n)
-        .collect();
-    let sd: Vec<f64> = (0..d)
-        .map(|c| {
-            let v = train
-                .iter()
-                .map(|&i| (x[i][c] - mean[c]).powi(2))
-                .sum::<f64>()
-                / n;
-            v.sqrt().max(1e-12)
-        })
-        .collect();
+    let (mean, sd) = standardiser(x, train);
     let rows = |idx: &[usize]| -> Vec<f64> {
         let (mean, sd) = (&mean, &sd);
         idx.iter()
