@@ -80,7 +80,8 @@ impl TrainedPolicy {
             && n.dim() != input
         {
             return Err(format!(
-                "the policy's observation normalisation has {} components, its network {input}                  inputs",
+                "the policy's observation normalisation has {} components, its network {input} \
+                 inputs",
                 n.dim()
             ));
         }

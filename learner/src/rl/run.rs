@@ -373,45 +373,45 @@ pub fn train(
 ) -> Result<Checkpoint, RunError> {
     std::fs::create_dir_all(out).map_err(io(out))?;
     let ckpt_path = checkpoint_path(out);
-    let (cfg, state, mut history, mut best, mut validations, mut best_validated) = if resume
-        && ckpt_path.exists()
-    {
-        let c = read_checkpoint(&ckpt_path)?;
-        // The file's configuration rules, except the length of the run: a
-        // run is one experiment, and its curves one configuration's.
-        let mut kept = c.config;
-        kept.env_steps = cfg.env_steps;
-        // A checkpoint written before the setting existed reads it as
-        // its default; its policy says how it was trained.
-        let normalised = c.state.policy.obs_norm.is_some();
-        kept.policy.normalise_observations = normalised;
-        if cfg.policy.normalise_observations != normalised {
-            eprintln!(
-                "learner: resuming {}: its policy was trained {} observation                      normalisation, and goes on so",
-                ckpt_path.display(),
-                if normalised { "with" } else { "without" }
-            );
-        }
-        let mut given = cfg.clone();
-        given.policy.normalise_observations = normalised;
-        if kept != given {
-            eprintln!(
-                "learner: resuming {} with the configuration it started with; the one given \
-                 differs in more than env_steps and is not used",
-                ckpt_path.display()
-            );
-        }
-        (
-            kept,
-            Some(c.state),
-            c.history,
-            c.best,
-            c.validations,
-            c.best_validated,
-        )
-    } else {
-        (cfg, None, Vec::new(), None, Vec::new(), None)
-    };
+    let (cfg, state, mut history, mut best, mut validations, mut best_validated) =
+        if resume && ckpt_path.exists() {
+            let c = read_checkpoint(&ckpt_path)?;
+            // The file's configuration rules, except the length of the run: a
+            // run is one experiment, and its curves one configuration's.
+            let mut kept = c.config;
+            kept.env_steps = cfg.env_steps;
+            // A checkpoint written before the setting existed reads it as
+            // its default; its policy says how it was trained.
+            let normalised = c.state.policy.obs_norm.is_some();
+            kept.policy.normalise_observations = normalised;
+            if cfg.policy.normalise_observations != normalised {
+                eprintln!(
+                    "learner: resuming {}: its policy was trained {} observation \
+                     normalisation, and goes on so",
+                    ckpt_path.display(),
+                    if normalised { "with" } else { "without" }
+                );
+            }
+            let mut given = cfg.clone();
+            given.policy.normalise_observations = normalised;
+            if kept != given {
+                eprintln!(
+                    "learner: resuming {} with the configuration it started with; the one given \
+                     differs in more than env_steps and is not used",
+                    ckpt_path.display()
+                );
+            }
+            (
+                kept,
+                Some(c.state),
+                c.history,
+                c.best,
+                c.validations,
+                c.best_validated,
+            )
+        } else {
+            (cfg, None, Vec::new(), None, Vec::new(), None)
+        };
     if cfg.validation.every > 0 && cfg.validation.episodes == 0 {
         return Err(RlEnvError::Config(hw_sim::FieldError::new(
             "validation.episodes",
@@ -451,10 +451,13 @@ pub fn train(
                     path: from.clone(),
                     detail: match norm {
                         Some(n) => format!(
-                            "init_from: its policy was trained with its observations normalised                              and clipped to ±{}: set policy.normalise_observations = true and                              policy.observation_clip = {}",
+                            "init_from: its policy was trained with its observations normalised \
+                             and clipped to ±{}: set policy.normalise_observations = true and \
+                             policy.observation_clip = {}",
                             n.clip, n.clip
                         ),
-                        None => "init_from: its policy was trained without observation                                  normalisation: set policy.normalise_observations = false"
+                        None => "init_from: its policy was trained without observation \
+                                 normalisation: set policy.normalise_observations = false"
                             .into(),
                     },
                 });
@@ -477,7 +480,8 @@ pub fn train(
             let mut baseline = c.state.baseline;
             if !baseline.fits(cfg.policy.baseline, env.obs_dim(), &cfg.policy.value) {
                 eprintln!(
-                    "learner: init_from {}: its value baseline is not this run's                      (policy.baseline, policy.value.hidden); a fresh one is fitted",
+                    "learner: init_from {}: its value baseline is not this run's \
+                     (policy.baseline, policy.value.hidden); a fresh one is fitted",
                     from.display()
                 );
                 let mut rng = hw_sim::rng::seeded(cfg.seed, 901);
