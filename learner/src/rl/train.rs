@@ -357,24 +357,18 @@ impl<E: BatchEnv> Trainer<E> {
                 },
             )));
         }
-        if state.baseline.kind() != cfg.baseline {
+        if !state.baseline.fits(cfg.baseline, env.obs_dim(), &cfg.value) {
             return Err(RlEnvError::Config(FieldError::new(
                 "policy.baseline",
                 format!("{:?}", cfg.baseline),
                 format!(
-                    "the state to continue has a {:?} baseline",
-                    state.baseline.kind()
+                    "the state to continue has a {:?} baseline that is not this one \
+                     (policy.value.hidden {:?} over {} observation values)",
+                    state.baseline.kind(),
+                    cfg.value.hidden,
+                    env.obs_dim()
                 ),
             )));
-        }
-        if let Baseline::Network(v) = &state.baseline
-            && v.sizes.first() != Some(&(env.obs_dim() + 1))
-        {
-            return Err(RlEnvError::Shape {
-                what: "value network input (observation size + 1)",
-                got: v.sizes.first().copied().unwrap_or(0),
-                expected: env.obs_dim() + 1,
-            });
         }
         if let Some(n) = &state.policy.obs_norm
             && n.dim() != env.obs_dim()

@@ -278,13 +278,12 @@ pub fn explained_variance(values: &[f64], targets: &[f64]) -> f64 {
     if n == 0 {
         return 0.0;
     }
-    let var = |it: &mut dyn Iterator<Item = f64>| {
-        let v: Vec<f64> = it.collect();
+    let var = |v: &[f64]| {
         let m = v.iter().sum::<f64>() / n as f64;
         v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n as f64
     };
-    let vy = var(&mut targets.iter().copied());
-    let vr = var(&mut targets.iter().zip(values).map(|(y, v)| y - v));
+    let residuals: Vec<f64> = targets.iter().zip(values).map(|(y, v)| y - v).collect();
+    let (vy, vr) = (var(targets), var(&residuals));
     if vy == 0.0 { 0.0 } else { 1.0 - vr / vy }
 }
 
