@@ -3,6 +3,7 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
+use super::conv_train::conv2d;
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
@@ -134,15 +135,16 @@ impl FlowDecoder {
         let coarsest = &maps[5];
         let [b, d, s, _] = coarsest.dims();
         let tiled = feature.reshape([b, d, 1, 1]).expand([b, d, s, s]);
-        let mut x = act(self
-            .entry
-            .forward(Tensor::cat(vec![coarsest.clone(), tiled], 1)));
+        let mut x = act(conv2d(
+            &self.entry,
+            Tensor::cat(vec![coarsest.clone(), tiled], 1),
+        ));
         for (i, u) in self.ups.iter().enumerate() {
             x = act(u.forward(x));
             x = Tensor::cat(vec![x, maps[4 - i].clone()], 1);
         }
-        let mask_logits = self.mask.forward(x.clone());
-        let flow = self.flow.forward(x) * sigmoid(mask_logits.clone());
+        let mask_logits = conv2d(&self.mask, x.clone());
+        let flow = conv2d(&self.flow, x) * sigmoid(mask_logits.clone());
         FlowPrediction {
             flow: upsample(flow, 4),
             mask_logits: upsample(mask_logits, 4),
@@ -215,7 +217,7 @@ impl ReconDecoders {
         let mut x = act(self.rgb_fc.forward(z.clone())).reshape([b, RECON_START, s, s]);
         let last = self.rgb_convs.len() - 1;
         for (i, c) in self.rgb_convs.iter().enumerate() {
-            x = c.forward(upsample(x, 2));
+            x = conv2d(c, upsample(x, 2));
             if i < last {
                 x = act(x);
             }

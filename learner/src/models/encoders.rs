@@ -8,6 +8,8 @@ use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
+use super::conv_train::conv2d;
+
 /// Slope of every leaky ReLU (the authors' code uses 0.1).
 pub const LEAKY_SLOPE: f64 = 0.1;
 
@@ -96,7 +98,7 @@ impl RgbEncoder {
     pub fn forward(&self, mut x: Tensor<4>) -> (Tensor<2>, Vec<Tensor<4>>) {
         let mut maps = Vec::with_capacity(self.convs.len());
         for c in &self.convs {
-            x = act(c.forward(x));
+            x = act(conv2d(c, x));
             maps.push(x.clone());
         }
         (self.fc.forward(x.flatten(1, 3)), maps)
@@ -137,7 +139,7 @@ impl DepthEncoder {
     /// `[B, 1, S, S]` → `[B, 2d]`.
     pub fn forward(&self, mut x: Tensor<4>) -> Tensor<2> {
         for c in &self.convs {
-            x = act(c.forward(x));
+            x = act(conv2d(c, x));
         }
         self.fc.forward(x.flatten(1, 3))
     }

@@ -17,6 +17,7 @@
 //! nothing here reads files except the exported model's loader.
 
 pub mod config;
+pub mod conv_train;
 pub mod decoders;
 pub mod encoder;
 pub mod encoders;

@@ -1,0 +1,658 @@
+//! The training path's 2-D convolution on the CPU.
+//!
+//! burn's `flex` backend runs a convolution's forward pass through its own
+//! general kernels and its backward pass through burn's generic rules (the
+//! input gradient as a transposed convolution, the weight gradient as a
+//! convolution with batch and channels swapped), with layout conversions
+//! around each. A profile of a training step put most of its time there
+//! (docs/performance.md). [`ConvTrain`] is a burn backend extension that
+//! gives `flex` one im2col and one faer product per sample for each of the
+//! three passes:
+//!
+//! - forward: `y = W · im2col(x) + b`;
+//! - input gradient: `dx = col2im(Wᵀ · dy)`;
+//! - weight gradient: `dW = Σ dy · im2col(x)ᵀ`, the bias's `db = Σ dy`.
+//!
+//! Other backends (CUDA) keep burn's own convolution through the trait's
+//! default bodies, and autodiff wraps either with the backward above, so the
+//! model code calls [`conv2d`] whatever the device. The parameters stay in
+//! burn's [`Conv2d`] module: records and checkpoints do not change.
+
+use burn::backend::autodiff::{
+    Autodiff,
+    checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
+    grads::Gradients,
+    ops::{Backward, Ops, OpsKind},
+};
+use burn::backend::ops::{ConvOptions, FloatTensorOps, ModuleOps};
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Backend, Dispatch, TensorMetadata, backend_extension};
+use burn::backend::{DType, Flex, flex::FlexTensor};
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use burn::prelude::*;
+use faer::{Accum, MatMut, MatRef, Par};
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// A square-kernel convolution with equal stride and padding on both axes
+/// (every convolution of the models), differentiable in its input, weight
+/// and bias.
+#[backend_extension(Flex, Cube: cfg(feature = "cuda"), Autodiff)]
+pub trait ConvTrain: Backend {
+    /// `x [B, Cin, H, W]`, `weight [Cout, Cin, k, k]`, `bias [Cout]` →
+    /// `[B, Cout, Ho, Wo]`.
+    fn conv2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        Self::conv2d(x, weight, Some(bias), options(stride, pad))
+    }
+
+    /// The gradient of [`ConvTrain::conv2d_train`] with respect to `x`.
+    fn conv2d_train_x_backward(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        Self::conv2d_x_backward(x, weight, grad, options(stride, pad))
+    }
+
+    /// The gradients with respect to the weight and the bias.
+    fn conv2d_train_wb_backward(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let cout = weight.shape()[0];
+        let dw = Self::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
+        let db = Self::float_sum_dim(Self::float_sum_dim(grad, 3), 2);
+        let db = Self::float_sum_dim(db, 0);
+        (dw, Self::float_reshape(db, [cout].into()))
+    }
+}
+
+fn options(stride: usize, pad: usize) -> ConvOptions<2> {
+    ConvOptions::new([stride, stride], [pad, pad], [1, 1], 1)
+}
+
+/// `c.forward(x)`, through [`ConvTrain`].
+///
+/// # Panics
+/// If the convolution is not one [`ConvTrain`] covers: no bias, a
+/// non-square kernel, unequal strides or paddings, dilation or groups (none
+/// of the models has one).
+pub fn conv2d(c: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    if burns_own() {
+        return c.forward(x);
+    }
+    let [_, _, kh, kw] = c.weight.dims();
+    let pad = match c.padding {
+        PaddingConfig2d::Explicit(t, l, b, r) if t == l && l == b && b == r => t,
+        PaddingConfig2d::Valid => 0,
+        ref p => panic!("conv2d: unsupported padding {p:?}"),
+    };
+    assert!(
+        kh == kw && c.stride[0] == c.stride[1] && c.dilation == [1, 1] && c.groups == 1,
+        "conv2d: only square kernels with one stride, no dilation and no groups"
+    );
+    let bias = c.bias.as_ref().expect("conv2d: a convolution with a bias");
+    Tensor::from_dispatch(<Dispatch as ConvTrain>::conv2d_train(
+        x.into_dispatch(),
+        c.weight.val().into_dispatch(),
+        bias.val().into_dispatch(),
+        c.stride[0],
+        pad,
+    ))
+}
+
+/// `LEARNER_CONV=burn` in the environment sends [`conv2d`] through burn's
+/// own convolution instead: the A/B switch of the training benchmark
+/// (docs/performance.md), and a way to rule this path out.
+fn burns_own() -> bool {
+    static BURN: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
+}
+
+#[cfg(feature = "cuda")]
+impl ConvTrain for burn::backend::Cube {}
+
+/// The shapes of one convolution.
+#[derive(Clone, Copy, Debug)]
+struct Geometry {
+    batch: usize,
+    cin: usize,
+    cout: usize,
+    h: usize,
+    w: usize,
+    k: usize,
+    stride: usize,
+    pad: usize,
+    ho: usize,
+    wo: usize,
+}
+
+impl Geometry {
+    fn new(x: &[usize], weight: &[usize], stride: usize, pad: usize) -> Self {
+        let (batch, cin, h, w) = (x[0], x[1], x[2], x[3]);
+        let (cout, k) = (weight[0], weight[2]);
+        assert_eq!(weight[1], cin, "conv2d: weight and input channels differ");
+        assert!(
+            h + 2 * pad >= k && w + 2 * pad >= k,
+            "conv2d: input smaller than the kernel"
+        );
+        Self {
+            batch,
+            cin,
+            cout,
+            h,
+            w,
+            k,
+            stride,
+            pad,
+            ho: (h + 2 * pad - k) / stride + 1,
+            wo: (w + 2 * pad - k) / stride + 1,
+        }
+    }
+
+    /// Rows of the im2col matrix (one per input channel and tap).
+    fn taps(&self) -> usize {
+        self.cin * self.k * self.k
+    }
+
+    /// Output positions per sample.
+    fn outs(&self) -> usize {
+        self.ho * self.wo
+    }
+
+    /// A 1×1 convolution of stride 1 without padding reads its input as
+    /// the im2col matrix itself.
+    fn is_pointwise(&self) -> bool {
+        self.k == 1 && self.stride == 1 && self.pad == 0
+    }
+
+    /// The output columns `ox` whose input column `ox·stride + kx − pad`
+    /// lies inside the image.
+    fn inside(&self, kx: usize) -> std::ops::Range<usize> {
+        let (s, p) = (self.stride, self.pad);
+        let lo = p.saturating_sub(kx).div_ceil(s);
+        // ox·s + kx − p ≤ w − 1  ⇔  ox ≤ (w − 1 + p − kx)/s
+        let hi = if self.w + p > kx {
+            ((self.w - 1 + p - kx) / s + 1).min(self.wo)
+        } else {
+            0
+        };
+        lo.min(hi)..hi
+    }
+}
+
+/// Output rows per band: a band's im2col tile (`taps × rows·Wo` values)
+/// stays within about 256 KB, so that it is still in the core's cache when
+/// the product reads it (a whole sample's matrix, 2.4 MB for a 16-channel
+/// 3×3 layer at 64², was not, and copying it in and out cost as much as
+/// the product).
+fn band_rows(g: &Geometry) -> usize {
+    const TILE: usize = 64 * 1024;
+    (TILE / (g.taps() * g.wo).max(1)).clamp(1, g.ho)
+}
+
+/// The output rows of band `i`.
+fn band(g: &Geometry, rows: usize, i: usize) -> Range<usize> {
+    i * rows..((i + 1) * rows).min(g.ho)
+}
+
+/// One sample's `x [Cin, H, W]` → the im2col tile of the output rows `oy`:
+/// `col [Cin·k·k, oy.len()·Wo]`, zeros where a tap falls in the padding.
+fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32]) {
+    let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
+    for c in 0..g.cin {
+        let plane = &x[c * g.h * g.w..][..g.h * g.w];
+        for ky in 0..k {
+            for kx in 0..k {
+                let row = &mut col[((c * k + ky) * k + kx) * n..][..n];
+                let cols = g.inside(kx);
+                for (r, y) in oy.clone().enumerate() {
+                    let dst = &mut row[r * g.wo..][..g.wo];
+                    let iy = (y * s + ky) as isize - g.pad as isize;
+                    if iy < 0 || iy >= g.h as isize || cols.is_empty() {
+                        dst.fill(0.0);
+                        continue;
+                    }
+                    let src = &plane[iy as usize * g.w..][..g.w];
+                    dst[..cols.start].fill(0.0);
+                    dst[cols.end..].fill(0.0);
+                    let x0 = cols.start * s + kx - g.pad;
+                    if s == 1 {
+                        dst[cols.clone()].copy_from_slice(&src[x0..x0 + cols.len()]);
+                    } else {
+                        let taps = src[x0..].iter().step_by(s);
+                        for (d, &v) in dst[cols.clone()].iter_mut().zip(taps) {
+                            *d = v;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The adjoint of [`im2col`]: adds each tap of the tile `col` of the
+/// output rows `oy` back onto the input position it was read from, into
+/// `dx [Cin, H, W]`.
+fn col2im(g: &Geometry, col: &[f32], oy: Range<usize>, dx: &mut [f32]) {
+    let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
+    for c in 0..g.cin {
+        let plane = &mut dx[c * g.h * g.w..][..g.h * g.w];
+        for ky in 0..k {
+            for kx in 0..k {
+                let row = &col[((c * k + ky) * k + kx) * n..][..n];
+                let cols = g.inside(kx);
+                if cols.is_empty() {
+                    continue;
+                }
+                let x0 = cols.start * s + kx - g.pad;
+                for (r, y) in oy.clone().enumerate() {
+                    let iy = (y * s + ky) as isize - g.pad as isize;
+                    if iy < 0 || iy >= g.h as isize {
+                        continue;
+                    }
+                    let src = &row[r * g.wo..][..g.wo][cols.clone()];
+                    let dst = &mut plane[iy as usize * g.w..][..g.w];
+                    if s == 1 {
+                        for (d, v) in dst[x0..x0 + src.len()].iter_mut().zip(src) {
+                            *d += v;
+                        }
+                    } else {
+                        for (d, v) in dst[x0..].iter_mut().step_by(s).zip(src) {
+                            *d += v;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `dst (m × n) = lhs (m × k) · rhs (k × n)`, or `+=` with `add`.
+fn gemm(dst: MatMut<'_, f32>, lhs: MatRef<'_, f32>, rhs: MatRef<'_, f32>, add: bool) {
+    let accum = if add { Accum::Add } else { Accum::Replace };
+    faer::linalg::matmul::matmul(dst, accum, lhs, rhs, 1.0f32, Par::Seq);
+}
+
+/// Samples per rayon task: the batch split once per thread, so that each
+/// thread keeps one scratch tile and one weight-gradient accumulator.
+fn per_task(batch: usize) -> usize {
+    batch.div_ceil(rayon::current_num_threads().max(1)).max(1)
+}
+
+/// The columns of the output rows `oy` in a `[C, Ho·Wo]` matrix.
+fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a, f32> {
+    m.subcols(oy.start * g.wo, oy.len() * g.wo)
+}
+
+/// The forward pass on contiguous f32 arrays.
+fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+    let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
+    let wm = MatRef::from_row_major_slice(w, g.cout, taps);
+    y.par_chunks_mut(g.cout * outs)
+        .zip(x.par_chunks(g.cin * g.h * g.w))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            || vec![0.0f32; taps * rows * g.wo],
+            |col, (ys, xs)| {
+                let mut ym = MatMut::from_row_major_slice_mut(ys, g.cout, outs);
+                if g.is_pointwise() {
+                    gemm(ym, wm, MatRef::from_row_major_slice(xs, taps, outs), false);
+                } else {
+                    for i in 0..g.ho.div_ceil(rows) {
+                        let oy = band(g, rows, i);
+                        let n = oy.len() * g.wo;
+                        im2col(g, xs, oy.clone(), &mut col[..taps * n]);
+                        gemm(
+                            ym.as_mut().subcols_mut(oy.start * g.wo, n),
+                            wm,
+                            MatRef::from_row_major_slice(&col[..taps * n], taps, n),
+                            false,
+                        );
+                    }
+                }
+                for (row, &bias) in ys.chunks_exact_mut(outs).zip(b) {
+                    row.iter_mut().for_each(|v| *v += bias);
+                }
+            },
+        );
+}
+
+/// The input gradient on contiguous f32 arrays.
+fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+    let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
+    let wt = MatRef::from_row_major_slice(w, g.cout, taps).transpose();
+    dx.par_chunks_mut(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            || vec![0.0f32; taps * rows * g.wo],
+            |col, (dxs, dys)| {
+                let dym = MatRef::from_row_major_slice(dys, g.cout, outs);
+                if g.is_pointwise() {
+                    let dxm = MatMut::from_row_major_slice_mut(dxs, taps, outs);
+                    gemm(dxm, wt, dym, false);
+                    return;
+                }
+                dxs.fill(0.0);
+                for i in 0..g.ho.div_ceil(rows) {
+                    let oy = band(g, rows, i);
+                    let n = oy.len() * g.wo;
+                    let colm = MatMut::from_row_major_slice_mut(&mut col[..taps * n], taps, n);
+                    gemm(colm, wt, columns(dym, g, &oy), false);
+                    col2im(g, &col[..taps * n], oy, dxs);
+                }
+            },
+        );
+}
+
+/// The weight and bias gradients on contiguous f32 arrays.
+fn wb_backward(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
+    let zero = || {
+        (
+            vec![0.0f32; taps * rows * g.wo],
+            vec![0.0f32; g.cout * taps],
+            vec![0.0f32; g.cout],
+        )
+    };
+    let (_, dw, db) = x
+        .par_chunks(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .fold(zero, |(mut col, mut dw, mut db), (xs, dys)| {
+            let dym = MatRef::from_row_major_slice(dys, g.cout, outs);
+            if g.is_pointwise() {
+                let xm = MatRef::from_row_major_slice(xs, taps, outs);
+                let dwm = MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps);
+                gemm(dwm, dym, xm.transpose(), true);
+            } else {
+                for i in 0..g.ho.div_ceil(rows) {
+                    let oy = band(g, rows, i);
+                    let n = oy.len() * g.wo;
+                    im2col(g, xs, oy.clone(), &mut col[..taps * n]);
+                    let colm = MatRef::from_row_major_slice(&col[..taps * n], taps, n);
+                    let dwm = MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps);
+                    gemm(dwm, columns(dym, g, &oy), colm.transpose(), true);
+                }
+            }
+            for (d, row) in db.iter_mut().zip(dys.chunks_exact(outs)) {
+                *d += row.iter().sum::<f32>();
+            }
+            (col, dw, db)
+        })
+        .reduce(zero, |(c, mut dw, mut db), (_, dw2, db2)| {
+            dw.iter_mut().zip(&dw2).for_each(|(a, b)| *a += b);
+            db.iter_mut().zip(&db2).for_each(|(a, b)| *a += b);
+            (c, dw, db)
+        });
+    (dw, db)
+}
+
+/// A contiguous f32 copy's values, or `None` for another dtype.
+fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
+    (t.dtype() == DType::F32).then(|| t.to_contiguous())
+}
+
+fn flex_tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
+    FlexTensor::from_data(burn::tensor::TensorData::new(values, shape))
+}
+
+impl ConvTrain for Flex {
+    fn conv2d_train(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> FlexTensor {
+        let (Some(xc), Some(wc), Some(bc)) = (f32s(&x), f32s(&weight), f32s(&bias)) else {
+            return Flex::conv2d(x, weight, Some(bias), options(stride, pad));
+        };
+        let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
+        let mut y = vec![0.0f32; g.batch * g.cout * g.outs()];
+        forward(
+            &g,
+            xc.storage::<f32>(),
+            wc.storage::<f32>(),
+            bc.storage::<f32>(),
+            &mut y,
+        );
+        flex_tensor(y, vec![g.batch, g.cout, g.ho, g.wo])
+    }
+
+    fn conv2d_train_x_backward(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> FlexTensor {
+        let (Some(wc), Some(dyc)) = (f32s(&weight), f32s(&grad)) else {
+            return Flex::conv2d_x_backward(x, weight, grad, options(stride, pad));
+        };
+        let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
+        let mut dx = vec![0.0f32; g.batch * g.cin * g.h * g.w];
+        x_backward(&g, wc.storage::<f32>(), dyc.storage::<f32>(), &mut dx);
+        flex_tensor(dx, vec![g.batch, g.cin, g.h, g.w])
+    }
+
+    fn conv2d_train_wb_backward(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> (FlexTensor, FlexTensor) {
+        let (Some(xc), Some(dyc)) = (f32s(&x), f32s(&grad)) else {
+            let cout = weight.shape()[0];
+            let dw = Flex::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
+            let db = Flex::float_sum_dim(Flex::float_sum_dim(grad, 3), 2);
+            let db = Flex::float_sum_dim(db, 0);
+            return (dw, Flex::float_reshape(db, [cout].into()));
+        };
+        let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
+        let (dw, db) = wb_backward(&g, xc.storage::<f32>(), dyc.storage::<f32>());
+        (
+            flex_tensor(dw, vec![g.cout, g.cin, g.k, g.k]),
+            flex_tensor(db, vec![g.cout]),
+        )
+    }
+}
+
+impl<B: Backend + ConvTrain, C: CheckpointStrategy> ConvTrain for Autodiff<B, C> {
+    fn conv2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ConvBackward;
+
+        impl<B: Backend + ConvTrain> Backward<B, 3> for ConvBackward {
+            type State = (FloatTensor<B>, FloatTensor<B>, usize, usize);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 3>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_w, node_b] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (x, w, stride, pad) = ops.state;
+                if let Some(node) = node_x {
+                    let dx =
+                        B::conv2d_train_x_backward(x.clone(), w.clone(), grad.clone(), stride, pad);
+                    grads.register::<B>(node.id, dx);
+                }
+                if node_w.is_some() || node_b.is_some() {
+                    let (dw, db) = B::conv2d_train_wb_backward(x, w, grad, stride, pad);
+                    if let Some(node) = node_w {
+                        grads.register::<B>(node.id, dw);
+                    }
+                    if let Some(node) = node_b {
+                        grads.register::<B>(node.id, db);
+                    }
+                }
+            }
+        }
+
+        match ConvBackward
+            .prepare::<C>([x.node(), weight.node(), bias.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp) = (x.primitive().clone(), weight.primitive().clone());
+                let y = B::conv2d_train(xp.clone(), wp.clone(), bias.into_primitive(), stride, pad);
+                prep.finish((xp, wp, stride, pad), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv2d_train(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+                stride,
+                pad,
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::nn::conv::Conv2dConfig;
+
+    fn filled(shape: [usize; 4], seed: u64, device: &Device) -> Tensor<4> {
+        let n: usize = shape.iter().product();
+        let mut rng = fastrand::Rng::with_seed(seed);
+        let v: Vec<f32> = (0..n).map(|_| rng.f32() * 2.0 - 1.0).collect();
+        Tensor::<1>::from_floats(v.as_slice(), device).reshape(shape)
+    }
+
+    fn close(a: Tensor<4>, b: Tensor<4>, what: &str) {
+        let (a, b) = (
+            a.try_into_vec_as::<f32>().expect("f32 values"),
+            b.try_into_vec_as::<f32>().expect("f32 values"),
+        );
+        assert_eq!(a.len(), b.len(), "{what}: sizes");
+        let scale = b.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-4 * scale,
+                "{what}[{i}]: {x} against burn's {y}"
+            );
+        }
+    }
+
+    /// Forward values and all three gradients against burn's own
+    /// convolution, for the geometries the models use (strided, padded,
+    /// 1×1, odd sides where the last taps fall off the edge).
+    #[test]
+    fn matches_burns_convolution_and_its_gradients() {
+        let device = Device::flex().autodiff();
+        let cases = [
+            // (batch, cin, cout, side, k, stride, pad)
+            (2, 3, 4, 9, 7, 2, 3),
+            (3, 2, 5, 8, 5, 2, 2),
+            (2, 4, 3, 7, 3, 1, 1),
+            (2, 3, 2, 6, 3, 2, 1),
+            (2, 5, 4, 4, 1, 1, 0),
+            (1, 2, 3, 5, 3, 1, 0),
+            // Several row bands (`band_rows`), the last one short.
+            (2, 16, 3, 40, 3, 1, 1),
+            (1, 8, 2, 50, 5, 2, 2),
+        ];
+        for (seed, &(b, cin, cout, side, k, s, p)) in cases.iter().enumerate() {
+            let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
+            let rows = band_rows(&g);
+            assert!(
+                side < 40 || (rows < g.ho && !g.ho.is_multiple_of(rows)),
+                "side {side}: meant to have several bands, the last one short"
+            );
+            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
+            let c = Conv2dConfig::new([cin, cout], [k, k])
+                .with_stride([s, s])
+                .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
+                .init(&device);
+            let x = filled([b, cin, side, side], seed as u64, &device).require_grad();
+            let ours = conv2d(&c, x.clone());
+            let theirs = c.forward(x.clone());
+            close(ours.clone(), theirs.clone(), &format!("{what}: y"));
+            // A loss that weighs every output differently.
+            let r = filled(ours.dims(), 100 + seed as u64, &device);
+            let g1 = (ours * r.clone()).sum().backward();
+            let g2 = (theirs * r).sum().backward();
+            close(
+                x.grad(&g1).unwrap(),
+                x.grad(&g2).unwrap(),
+                &format!("{what}: dx"),
+            );
+            close(
+                c.weight.grad(&g1).unwrap(),
+                c.weight.grad(&g2).unwrap(),
+                &format!("{what}: dw"),
+            );
+            let (db1, db2) = (
+                c.bias.as_ref().unwrap().grad(&g1).unwrap(),
+                c.bias.as_ref().unwrap().grad(&g2).unwrap(),
+            );
+            close(
+                db1.reshape([1, 1, 1, cout]),
+                db2.reshape([1, 1, 1, cout]),
+                &format!("{what}: db"),
+            );
+        }
+    }
+
+    /// Without autodiff (inference through burn) it is the same function.
+    #[test]
+    fn runs_without_autodiff() {
+        let device = Device::flex();
+        let c = Conv2dConfig::new([3, 4], [3, 3])
+            .with_stride([2, 2])
+            .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+            .init(&device);
+        let x = filled([2, 3, 10, 10], 7, &device);
+        close(conv2d(&c, x.clone()), c.forward(x), "y");
+    }
+
+    /// The columns kept inside the image, against a direct count.
+    #[test]
+    fn inside_columns_are_exactly_those_in_the_image() {
+        for (w, k, s, p) in [
+            (9, 7, 2, 3),
+            (8, 5, 2, 2),
+            (7, 3, 1, 1),
+            (5, 3, 1, 0),
+            (4, 1, 1, 0),
+        ] {
+            let g = Geometry::new(&[1, 1, w, w], &[1, 1, k, k], s, p);
+            for kx in 0..k {
+                let want: Vec<usize> = (0..g.wo)
+                    .filter(|&ox| {
+                        let ix = (ox * s + kx) as isize - p as isize;
+                        ix >= 0 && ix < w as isize
+                    })
+                    .collect();
+                let got: Vec<usize> = g.inside(kx).collect();
+                assert_eq!(got, want, "w {w} k {k} s {s} p {p} kx {kx}");
+            }
+        }
+    }
+}
