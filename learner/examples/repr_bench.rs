@@ -92,8 +92,14 @@ fn main() {
             }
         }
         let step = median(times);
+        // `LEARNER_CONV=burn`: burn's own convolution (learner::models::conv_train).
+        let side = if std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn") {
+            "burn-flex"
+        } else {
+            "ours-conv"
+        };
         println!(
-            "{{\"side\": \"burn-flex\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}}}",
+            "{{\"side\": \"{side}\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}}}",
             b as f64 / step,
             cfg.depth_convs_per_stage
         );

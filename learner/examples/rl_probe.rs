@@ -1,8 +1,9 @@
-//! Diagnosis of RL episodes on the ground truth: how episodes end (fault
-//! codes, the step of termination), how close the tip gets to the hole, and
-//! the outcome, for a trained checkpoint's policy (mean, or sampled with its
-//! own σ) or a scripted proportional policy. One line per episode and a
-//! summary.
+//! Diagnosis of RL episodes: how episodes end (fault codes, the step of
+//! termination), how close the tip gets to the hole, and the outcome, for a
+//! trained checkpoint's policy (mean, or sampled with its own σ; observing
+//! what it was trained on, the ground truth or a representation's z means)
+//! or a scripted proportional policy. One line per episode and a summary;
+//! `RL_PROBE_PATH=N` also prints where the tip is every N steps.
 //!
 //! Usage: `rl_probe CHECKPOINT|scripted|heuristic|impactMM EPISODES [sample]`
 //! (`scripted`: centre over the hole, then descend; `heuristic`: the data
@@ -10,7 +11,7 @@
 //! `learner policy eval` does. `impactMM`: come down onto the box's top
 //! face 12 mm beside the hole at a constant step of MM mm per policy step.
 
-use learner::rl::observe::{GroundTruth, Observer};
+use learner::rl::observe::{GroundTruth, ObservationKind, Observer};
 use learner::rl::run::read_checkpoint;
 use learner::rl::{Outcome, RlEnv, RlEnvConfig};
 
@@ -21,6 +22,7 @@ fn main() {
     let episodes: u64 = args.get(2).expect(usage).parse().expect(usage);
     let sample = args.get(3).is_some_and(|a| a == "sample");
     let impact_mm: Option<f64> = what.strip_prefix("impact").map(|v| v.parse().expect(usage));
+    let mut observation = ObservationKind::GroundTruth;
     let (cfg, policy) = if what == "scripted" || what == "heuristic" || impact_mm.is_some() {
         // Scripted steps up to the controller's 1 cm clamp.
         let mut cfg = RlEnvConfig::default();
@@ -32,15 +34,23 @@ fn main() {
             .chosen_policy(std::env::var_os("RL_PROBE_LAST").is_some())
             .policy
             .clone();
+        observation = c.config.observation.clone();
         (c.config.env.clone(), Some(p))
     };
+    // What the policy observes: the ground truth or the representation's z
+    // means (the latter needs the camera rendered every step).
+    let observer = observation.observer().expect("observer");
+    let camera = observer.needs_camera();
+    let path_every: Option<u32> = std::env::var("RL_PROBE_PATH")
+        .ok()
+        .map(|v| v.parse().expect("RL_PROBE_PATH: steps"));
     let mut env = RlEnv::new(&cfg).expect("env");
     let mut heuristic = learner::policy::HeuristicPolicy::new(Default::default());
     let mut rng = hw_sim::rng::seeded(7, 0);
     let mut counts = [0u32; 4];
     let mut terminated = 0;
     for ep in 0..episodes {
-        env.reset(1_000_000 + ep, false).expect("reset");
+        env.reset(1_000_000 + ep, camera).expect("reset");
         heuristic.reset();
         let mut min_xy = f64::MAX;
         let mut min_z = f64::MAX;
@@ -49,9 +59,11 @@ fn main() {
         let (end, o) = loop {
             let mut obs = [0.0; learner::rl::observe::GROUND_TRUTH_DIM];
             GroundTruth.observe(&[env.view().unwrap()], &mut obs);
+            let mut seen = vec![0.0; observer.dim()];
+            observer.observe(&[env.view().unwrap()], &mut seen);
             let a: Vec<f64> = match &policy {
-                Some(p) if sample => p.sample(&obs, &mut rng),
-                Some(p) => p.means(&obs),
+                Some(p) if sample => p.sample(&seen, &mut rng),
+                Some(p) => p.means(&seen),
                 None if what == "heuristic" => {
                     let d = heuristic.act(
                         env.observation().unwrap(),
@@ -98,8 +110,24 @@ fn main() {
                     sc.from_delta(&[d.x, d.y, d.z, roll]).to_vec()
                 }
             };
-            let o = env.step(&a, false).expect("step");
+            let o = env.step(&a, camera).expect("step");
             let t = env.task();
+            if path_every.is_some_and(|n| o.steps.is_multiple_of(n)) {
+                println!(
+                    "  step {:3} s ({:6.1}, {:6.1}, {:6.1}) mm psi {:6.3} reward {:.2} ({:?}) contact {} a {:?}",
+                    o.steps,
+                    t.s_m.x * 1e3,
+                    t.s_m.y * 1e3,
+                    t.s_m.z * 1e3,
+                    t.s_psi_rad,
+                    o.reward,
+                    o.stage,
+                    t.in_contact,
+                    a.iter()
+                        .map(|v| (v * 100.0).round() / 100.0)
+                        .collect::<Vec<_>>()
+                );
+            }
             if std::env::var_os("RL_PROBE_TRACE").is_some() && t.s_m.z < 0.003 {
                 let w = env.fast().sensor_frame().wrench;
                 println!(
@@ -152,9 +180,9 @@ fn main() {
                 break (o.steps, o);
             }
         };
-        let mut obs = [0.0; learner::rl::observe::GROUND_TRUTH_DIM];
-        GroundTruth.observe(&[env.view().unwrap()], &mut obs);
-        let mean = policy.as_ref().map(|p| p.means(&obs)).unwrap_or_default();
+        let mut seen = vec![0.0; observer.dim()];
+        observer.observe(&[env.view().unwrap()], &mut seen);
+        let mean = policy.as_ref().map(|p| p.means(&seen)).unwrap_or_default();
         let hole_z = env.task_geometry().hole_pose.rotation * nalgebra::Vector3::z();
         let peg_z = env.observation().unwrap().ee_rot * nalgebra::Vector3::z();
         println!(

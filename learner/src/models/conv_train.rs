@@ -297,8 +297,199 @@ fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a
     m.subcols(oy.start * g.wo, oy.len() * g.wo)
 }
 
+/// A stride-1 convolution without im2col. With the input zero-padded into
+/// planes of `Hp × Wp` and the output computed over `Ho × Wp` positions (the
+/// last `k − 1` of each row are discarded), tap `(ky, kx)` reads the padded
+/// input as one matrix `[Cin, Ho·Wp]` starting at `ky·Wp + kx`: each layer
+/// is `k²` products of `[Cout, Cin]` weights with views of the padded input,
+/// and nothing is copied per tap. The depth encoder's twelve stride-1 3×3
+/// layers are most of its work.
+#[derive(Clone, Copy, Debug)]
+struct Shifted {
+    /// Padded row length.
+    wp: usize,
+    /// Values per padded channel plane, with `k − 1` zeros after it so
+    /// that the last tap's view stays inside.
+    plane: usize,
+    /// Output positions computed per channel (`Ho·Wp`).
+    n: usize,
+}
+
+impl Shifted {
+    fn of(g: &Geometry) -> Option<Self> {
+        (g.stride == 1 && g.k > 1).then(|| {
+            let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
+            Self {
+                wp,
+                plane: hp * wp + g.k - 1,
+                n: g.ho * wp,
+            }
+        })
+    }
+
+    /// Where tap `t` (`ky·k + kx`) starts in a padded plane.
+    fn offset(&self, g: &Geometry, t: usize) -> usize {
+        (t / g.k) * self.wp + t % g.k
+    }
+
+    /// One sample's `x [Cin, H, W]` into its padded planes.
+    fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
+        xp.fill(0.0);
+        for c in 0..g.cin {
+            for iy in 0..g.h {
+                let at = c * self.plane + (iy + g.pad) * self.wp + g.pad;
+                xp[at..at + g.w].copy_from_slice(&x[(c * g.h + iy) * g.w..][..g.w]);
+            }
+        }
+    }
+
+    /// The padded input seen from tap `t`: `[Cin, Ho·Wp]`.
+    fn view<'a>(&self, g: &Geometry, xp: &'a [f32], t: usize) -> MatRef<'a, f32> {
+        let off = self.offset(g, t);
+        MatRef::from_row_major_slice_with_stride(&xp[off..], g.cin, self.n, self.plane)
+    }
+}
+
+/// `weight [Cout, Cin, k, k]` → tap-major `[k·k][Cout, Cin]`.
+fn taps_major(g: &Geometry, w: &[f32]) -> Vec<f32> {
+    let kk = g.k * g.k;
+    let mut out = vec![0.0f32; w.len()];
+    for (i, &v) in w.iter().enumerate() {
+        let (oc, t) = (i / kk, i % kk);
+        out[t * g.cout * g.cin + oc] = v;
+    }
+    out
+}
+
+/// Tap `t`'s `[Cout, Cin]` block of [`taps_major`]'s layout.
+fn tap<'a>(g: &Geometry, wt: &'a [f32], t: usize) -> MatRef<'a, f32> {
+    MatRef::from_row_major_slice(&wt[t * g.cout * g.cin..][..g.cout * g.cin], g.cout, g.cin)
+}
+
+/// [`forward`] for a [`Shifted`] convolution.
+fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+    let wt = taps_major(g, w);
+    let outs = g.outs();
+    y.par_chunks_mut(g.cout * outs)
+        .zip(x.par_chunks(g.cin * g.h * g.w))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            || (vec![0.0f32; g.cin * sh.plane], vec![0.0f32; g.cout * sh.n]),
+            |(xp, yp), (ys, xs)| {
+                sh.pad(g, xs, xp);
+                let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
+                for t in 0..g.k * g.k {
+                    gemm(ypm.as_mut(), tap(g, &wt, t), sh.view(g, xp, t), t > 0);
+                }
+                for ((row, src), &bias) in
+                    ys.chunks_exact_mut(outs).zip(yp.chunks_exact(sh.n)).zip(b)
+                {
+                    for oy in 0..g.ho {
+                        let (d, s) = (&mut row[oy * g.wo..][..g.wo], &src[oy * sh.wp..][..g.wo]);
+                        for (d, s) in d.iter_mut().zip(s) {
+                            *d = s + bias;
+                        }
+                    }
+                }
+            },
+        );
+}
+
+/// One sample's `dy [Cout, Ho·Wo]` spread into `[Cout, Ho·Wp]` with zeros
+/// at the discarded positions, so that they add nothing.
+fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
+    dyp.fill(0.0);
+    for (co, row) in dy.chunks_exact(g.outs()).enumerate() {
+        for oy in 0..g.ho {
+            dyp[co * sh.n + oy * sh.wp..][..g.wo].copy_from_slice(&row[oy * g.wo..][..g.wo]);
+        }
+    }
+}
+
+/// [`x_backward`] for a stride-1 convolution: the input gradient is itself
+/// a stride-1 convolution of `dy`, padded by `k − 1 − pad`, with the kernel
+/// flipped and its channels swapped, so it takes [`forward_shifted`] (whose
+/// products only read strided views; a product into a strided view of the
+/// padded gradient corrupted the heap in faer 0.24.4).
+fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+    let k = g.k;
+    let gt = Geometry::new(
+        &[g.batch, g.cout, g.ho, g.wo],
+        &[g.cin, g.cout, k, k],
+        1,
+        k - 1 - g.pad,
+    );
+    debug_assert_eq!((gt.ho, gt.wo), (g.h, g.w));
+    let mut flipped = vec![0.0f32; w.len()];
+    for co in 0..g.cout {
+        for ci in 0..g.cin {
+            for t in 0..k * k {
+                let (ky, kx) = (t / k, t % k);
+                let src = (co * g.cin + ci) * k * k + t;
+                flipped[(ci * g.cout + co) * k * k + (k - 1 - ky) * k + (k - 1 - kx)] = w[src];
+            }
+        }
+    }
+    let sh = Shifted::of(&gt).expect("stride 1");
+    forward_shifted(&gt, sh, dy, &flipped, &vec![0.0; g.cin], dx);
+}
+
+/// [`wb_backward`] for a [`Shifted`] convolution.
+fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let (kk, outs) = (g.k * g.k, g.outs());
+    let zero = || {
+        (
+            vec![0.0f32; g.cin * sh.plane],
+            vec![0.0f32; g.cout * sh.n],
+            vec![0.0f32; g.cout * g.cin * kk],
+            vec![0.0f32; g.cout],
+        )
+    };
+    let (_, _, dwt, db) = x
+        .par_chunks(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .fold(zero, |(mut xp, mut dyp, mut dwt, mut db), (xs, dys)| {
+            sh.pad(g, xs, &mut xp);
+            spread(g, sh, dys, &mut dyp);
+            let dym = MatRef::from_row_major_slice(&dyp, g.cout, sh.n);
+            for t in 0..kk {
+                let dst = MatMut::from_row_major_slice_mut(
+                    &mut dwt[t * g.cout * g.cin..][..g.cout * g.cin],
+                    g.cout,
+                    g.cin,
+                );
+                gemm(dst, dym, sh.view(g, &xp, t).transpose(), true);
+            }
+            for (d, row) in db.iter_mut().zip(dys.chunks_exact(outs)) {
+                *d += row.iter().sum::<f32>();
+            }
+            (xp, dyp, dwt, db)
+        })
+        .reduce(zero, |(a, b, mut dwt, mut db), (_, _, dwt2, db2)| {
+            dwt.iter_mut().zip(&dwt2).for_each(|(x, y)| *x += y);
+            db.iter_mut().zip(&db2).for_each(|(x, y)| *x += y);
+            (a, b, dwt, db)
+        });
+    // Back to [Cout, Cin, k, k].
+    let mut dw = vec![0.0f32; dwt.len()];
+    for (i, d) in dw.iter_mut().enumerate() {
+        let (oc, t) = (i / kk, i % kk);
+        *d = dwt[t * g.cout * g.cin + oc];
+    }
+    (dw, db)
+}
+
 /// The forward pass on contiguous f32 arrays.
 fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+    match Shifted::of(g) {
+        Some(sh) => forward_shifted(g, sh, x, w, b, y),
+        None => forward_banded(g, x, w, b, y),
+    }
+}
+
+/// [`forward`] through im2col in row bands (or none, for a 1×1).
+fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
     let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
     let wm = MatRef::from_row_major_slice(w, g.cout, taps);
     y.par_chunks_mut(g.cout * outs)
@@ -332,6 +523,14 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
 
 /// The input gradient on contiguous f32 arrays.
 fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+    match Shifted::of(g) {
+        Some(_) if g.pad < g.k => x_backward_shifted(g, w, dy, dx),
+        _ => x_backward_banded(g, w, dy, dx),
+    }
+}
+
+/// [`x_backward`] through col2im in row bands (or none, for a 1×1).
+fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
     let wt = MatRef::from_row_major_slice(w, g.cout, taps).transpose();
     dx.par_chunks_mut(g.cin * g.h * g.w)
@@ -360,6 +559,14 @@ fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
 
 /// The weight and bias gradients on contiguous f32 arrays.
 fn wb_backward(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    match Shifted::of(g) {
+        Some(sh) => wb_backward_shifted(g, sh, x, dy),
+        None => wb_backward_banded(g, x, dy),
+    }
+}
+
+/// [`wb_backward`] through im2col in row bands (or none, for a 1×1).
+fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
     let zero = || {
         (
@@ -630,6 +837,47 @@ mod tests {
             .init(&device);
         let x = filled([2, 3, 10, 10], 7, &device);
         close(conv2d(&c, x.clone()), c.forward(x), "y");
+    }
+
+    /// The stride-1 path without im2col against the im2col path, on raw
+    /// arrays, one pass at a time.
+    #[test]
+    fn shifted_stride_one_path_matches_im2col() {
+        for (b, cin, cout, side, k, p) in
+            [(2, 4, 3, 7, 3, 1), (1, 2, 3, 5, 3, 0), (2, 3, 5, 9, 5, 2)]
+        {
+            let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], 1, p);
+            let sh = Shifted::of(&g).expect("stride 1");
+            let mut rng = fastrand::Rng::with_seed(3);
+            let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
+            let (x, w, bias) = (
+                vals(b * cin * side * side),
+                vals(cout * cin * k * k),
+                vals(cout),
+            );
+            let dy = vals(b * cout * g.outs());
+            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} pad {p}");
+            let near = |a: &[f32], b: &[f32], pass: &str| {
+                assert_eq!(a.len(), b.len());
+                for (i, (u, v)) in a.iter().zip(b).enumerate() {
+                    assert!((u - v).abs() < 1e-4, "{what} {pass}[{i}]: {u} against {v}");
+                }
+            };
+            let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
+            forward_shifted(&g, sh, &x, &w, &bias, &mut y1);
+            forward_banded(&g, &x, &w, &bias, &mut y2);
+            near(&y1, &y2, "y");
+            let (mut dx1, mut dx2) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+            x_backward_shifted(&g, &w, &dy, &mut dx1);
+            x_backward_banded(&g, &w, &dy, &mut dx2);
+            near(&dx1, &dx2, "dx");
+            let ((dw1, db1), (dw2, db2)) = (
+                wb_backward_shifted(&g, sh, &x, &dy),
+                wb_backward_banded(&g, &x, &dy),
+            );
+            near(&dw1, &dw2, "dw");
+            near(&db1, &db2, "db");
+        }
     }
 
     /// The columns kept inside the image, against a direct count.
