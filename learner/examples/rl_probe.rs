@@ -192,6 +192,17 @@ fn main() {
                 .map(|v| (v * 1000.0).round() / 1000.0)
                 .collect::<Vec<_>>()
         );
+        // Where the tip ended and where the hole was, base frame: a policy
+        // that does not see the box goes to the same place every episode.
+        let hole = env.task_geometry().hole_pose.translation.vector;
+        let tip = env.observation().unwrap().ee_pos;
+        println!(
+            "   base frame: tip ({:.1}, {:.1}) mm, hole ({:.1}, {:.1}) mm",
+            tip.x * 1e3,
+            tip.y * 1e3,
+            hole.x * 1e3,
+            hole.y * 1e3
+        );
         counts[o.outcome.index()] += 1;
         println!(
             "ep {ep}: {:?} steps {end} fault {fault} min_xy {:.1} mm min_z {:.1} mm max|F| {:.0} N norm {:.3} final s ({:.1}, {:.1}, {:.1}) mm psi {:.3}",

@@ -93,6 +93,24 @@ pub fn conv2d(c: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     if burns_own() {
         return c.forward(x);
     }
+    let (_, stride, pad) = square(c);
+    let bias = c.bias.as_ref().expect("conv2d: a convolution with a bias");
+    Tensor::from_dispatch(<Dispatch as ConvTrain>::conv2d_train(
+        x.into_dispatch(),
+        c.weight.val().into_dispatch(),
+        bias.val().into_dispatch(),
+        stride,
+        pad,
+    ))
+}
+
+/// The kernel side, stride and padding of a convolution with a square
+/// kernel and the same stride and padding on both axes (every convolution
+/// of the models).
+///
+/// # Panics
+/// On any other convolution (or one with dilation or groups).
+pub(crate) fn square(c: &Conv2d) -> (usize, usize, usize) {
     let [_, _, kh, kw] = c.weight.dims();
     let pad = match c.padding {
         PaddingConfig2d::Explicit(t, l, b, r) if t == l && l == b && b == r => t,
@@ -103,14 +121,7 @@ pub fn conv2d(c: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         kh == kw && c.stride[0] == c.stride[1] && c.dilation == [1, 1] && c.groups == 1,
         "conv2d: only square kernels with one stride, no dilation and no groups"
     );
-    let bias = c.bias.as_ref().expect("conv2d: a convolution with a bias");
-    Tensor::from_dispatch(<Dispatch as ConvTrain>::conv2d_train(
-        x.into_dispatch(),
-        c.weight.val().into_dispatch(),
-        bias.val().into_dispatch(),
-        c.stride[0],
-        pad,
-    ))
+    (kh, c.stride[0], pad)
 }
 
 /// `LEARNER_CONV=burn` in the environment sends [`conv2d`] through burn's

@@ -20,7 +20,7 @@ use crate::policy::WRENCH_WINDOW;
 use crate::proprio::PROPRIO;
 use burn::module::Param;
 use burn::nn::conv::{Conv1d, Conv2d};
-use burn::nn::{Linear, PaddingConfig1d, PaddingConfig2d};
+use burn::nn::{Linear, PaddingConfig1d};
 use burn::prelude::*;
 use faer::{Accum, MatMut, MatRef, Par};
 use std::sync::Mutex;
@@ -133,21 +133,15 @@ struct Conv {
 
 impl Conv {
     fn new(c: &Conv2d) -> Self {
-        let [cout, cin, kh, kw] = c.weight.val().dims();
-        assert!(kh == kw && c.stride[0] == c.stride[1] && c.groups == 1);
-        assert_eq!(c.dilation, [1, 1]);
-        let pad = match c.padding {
-            PaddingConfig2d::Explicit(t, l, b, r) if t == l && l == b && b == r => t,
-            PaddingConfig2d::Valid => 0,
-            ref p => panic!("unsupported padding {p:?}"),
-        };
+        let [cout, cin, _, _] = c.weight.val().dims();
+        let (k, stride, pad) = super::conv_train::square(c);
         Self {
-            k: kh,
-            stride: c.stride[0],
+            k,
+            stride,
             pad,
             cin,
             cout,
-            w: taps_first(&values(&c.weight), cout, cin, kh * kw),
+            w: taps_first(&values(&c.weight), cout, cin, k * k),
             b: bias(&c.bias, cout),
         }
     }
