@@ -5,6 +5,9 @@
 //! One test runs the phases in order on one simulator: connect, hold under
 //! gravity, follow policy actions with the impedance law, stop on SIGTERM
 //! with a final hold; the status carries the cycles and the compute time.
+//! The wrench comes from an external F/T sensor (`wrench = "net_ft"`): a
+//! stand-in on the loopback interface streaming ATI RDT records, whose
+//! values the sensor frames must carry.
 //! Every wait is bounded by the robot's own clock (the sensor frames'
 //! hardware time) or by a generous wall-clock limit that only turns a hang
 //! into a failure.
@@ -15,12 +18,45 @@
 //! `$FRANKY_SIM_REQUIRED=1` or `$CI` is set: then it fails (scripts/test.sh
 //! sets it).
 
+use rt_controller::daemon::netft::{CMD_START, Record, request};
 use shared_mem_schema::transport::{self, Sub};
 use shared_mem_schema::{ControllerMode, ControllerStatus, PolicyAction, SensorFrame};
+use std::net::UdpSocket;
 use std::path::PathBuf;
 use std::process::{Child, Command};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use test_support::franky_sim;
+
+/// The stand-in sensor's reading: counts, and at 10⁶ counts per N and per
+/// N·m, newtons and newton-metres.
+const FT_COUNTS: [i32; 6] = [1_500_000, -250_000, 9_810_000, 100_000, -200_000, 50_000];
+
+/// A stand-in ATI Net F/T: waits for the start request, then streams
+/// [`FT_COUNTS`] about every millisecond until `stop`.
+fn ft_sensor(stop: Arc<AtomicBool>) -> (String, std::thread::JoinHandle<()>) {
+    let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let addr = s.local_addr().unwrap().to_string();
+    let h = std::thread::spawn(move || {
+        let mut buf = [0u8; 16];
+        let (n, from) = s.recv_from(&mut buf).unwrap();
+        assert_eq!(&buf[..n], &request(CMD_START, 0), "the start request");
+        let mut seq = 0u32;
+        while !stop.load(Ordering::Relaxed) {
+            seq += 1;
+            let r = Record {
+                rdt_sequence: seq,
+                ft_sequence: seq,
+                status: 0,
+                counts: FT_COUNTS,
+            };
+            let _ = s.send_to(&r.to_bytes(), from);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    });
+    (addr, h)
+}
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -80,6 +116,8 @@ fn the_daemon_drives_franky_sim() {
             .spawn()
             .expect("start franky-sim"),
     );
+    let stop_ft = Arc::new(AtomicBool::new(false));
+    let (ft_addr, ft) = ft_sensor(stop_ft.clone());
     let config = dir.join("rt-controller.toml");
     std::fs::write(
         &config,
@@ -92,6 +130,12 @@ kind = "franka"
 namespace = "{ns}"
 [backend.franka]
 address = "{addr}"
+wrench = "net_ft"
+[backend.franka.net_ft]
+address = "{ft_addr}"
+# A stand-in thread paced by sleeps: generous, so that a busy machine does
+# not fault it.
+timeout_ms = 2000.0
 [timing]
 clock = "hardware"
 # franky-sim starts (imports MuJoCo) while the daemon retries.
@@ -148,6 +192,14 @@ enabled = false
         }
     }
     eprintln!("hold: largest joint drift over 3 s: {drift:.5} rad");
+    // The wrench is the external sensor's, in newtons and newton-metres.
+    for (w, c) in last.wrench.iter().zip(FT_COUNTS) {
+        assert!(
+            (w - f64::from(c) * 1e-6).abs() < 1e-9,
+            "sensor frame wrench {:?}, the F/T sensor sends {FT_COUNTS:?} counts",
+            last.wrench
+        );
+    }
     // The impedance holds the pose; a gravity model that did not match the
     // robot's would sag by tenths of a radian.
     assert!(drift < 0.02, "joints drifted {drift} rad while holding");
@@ -264,5 +316,7 @@ enabled = false
         text.contains(", 0 from the heap; 0 frees to the heap"),
         "the control loop reached the heap; log:\n{text}"
     );
+    stop_ft.store(true, Ordering::Relaxed);
+    ft.join().expect("the F/T stand-in");
     eprintln!("whole run {:.1} s", started.elapsed().as_secs_f64());
 }

@@ -50,9 +50,10 @@ pub trait Hardware {
     /// Sends a torque command.
     fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError>;
     /// Ends the control session after the loop's last command (the
-    /// shutdown hold's end); called outside the real-time section. The
-    /// Franka backend finishes its motion there, so that the robot's own
-    /// controller takes the arm over without a jump.
+    /// shutdown hold's end), or after the loop ended in an error; called
+    /// outside the real-time section. The Franka backend finishes its
+    /// motion there, so that the robot's own controller takes the arm over
+    /// without a jump.
     fn finish(&mut self) -> Result<(), HardwareError> {
         Ok(())
     }

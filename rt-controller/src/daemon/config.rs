@@ -64,6 +64,65 @@ pub enum WrenchSource {
     RobotEstimate,
     /// None: the wrench reads zero (the force supervision then sees none).
     None,
+    /// An external ATI Net F/T on the wrist (`[backend.franka.net_ft]`),
+    /// in the sensor's frame (daemon::netft).
+    NetFt,
+}
+
+/// An ATI Net F/T streaming over RDT (`wrench = "net_ft"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NetFtConfig {
+    /// The sensor's address, a host name or IP, optionally `:port` (the RDT
+    /// port, 49152, by default).
+    pub address: String,
+    /// Counts per newton of the sensor's calibration (its web page, or
+    /// `netftapi2.xml`).
+    pub counts_per_force: f64,
+    /// Counts per newton-metre of the sensor's calibration.
+    pub counts_per_torque: f64,
+    /// A sensor silent for longer than this is a Fault, ms.
+    pub timeout_ms: f64,
+    /// How long the start-up waits for the sensor's first record, s.
+    pub start_timeout_s: f64,
+}
+
+impl Default for NetFtConfig {
+    fn default() -> Self {
+        // ATI's factory address and the counts of its common calibrations
+        // (check them against the sensor's own: they differ by calibration).
+        Self {
+            address: "192.168.1.1".into(),
+            counts_per_force: 1_000_000.0,
+            counts_per_torque: 1_000_000.0,
+            timeout_ms: 10.0,
+            start_timeout_s: 2.0,
+        }
+    }
+}
+
+impl NetFtConfig {
+    fn validate(&self) -> Result<(), FieldError> {
+        ensure(
+            !self.address.is_empty() && !self.address.contains(char::is_whitespace),
+            "backend.franka.net_ft.address",
+            format_args!("{:?}", self.address),
+            "must be a host name or IP address, optionally with :port",
+        )?;
+        positive(
+            "backend.franka.net_ft.counts_per_force",
+            self.counts_per_force,
+        )?;
+        positive(
+            "backend.franka.net_ft.counts_per_torque",
+            self.counts_per_torque,
+        )?;
+        positive("backend.franka.net_ft.timeout_ms", self.timeout_ms)?;
+        positive(
+            "backend.franka.net_ft.start_timeout_s",
+            self.start_timeout_s,
+        )
+    }
 }
 
 /// The Franka backend (`backend.kind = "franka"`).
@@ -102,8 +161,10 @@ pub struct FrankaConfig {
     /// reflex left by an earlier run). Off by default: a reflex is for an
     /// operator to look at.
     pub error_recovery: bool,
-    /// `robot_estimate` or `none`.
+    /// `robot_estimate`, `net_ft` or `none`.
     pub wrench: WrenchSource,
+    /// The external sensor of `wrench = "net_ft"`.
+    pub net_ft: NetFtConfig,
 }
 
 impl Default for FrankaConfig {
@@ -120,6 +181,7 @@ impl Default for FrankaConfig {
             cutoff_hz: 1000.0,
             error_recovery: false,
             wrench: WrenchSource::RobotEstimate,
+            net_ft: NetFtConfig::default(),
         }
     }
 }
@@ -156,6 +218,9 @@ impl FrankaConfig {
                     "must be at least the contact threshold of the same entry",
                 )?;
             }
+        }
+        if self.wrench == WrenchSource::NetFt {
+            self.net_ft.validate()?;
         }
         Ok(())
     }
@@ -483,12 +548,35 @@ mod tests {
                  [backend.franka]\naddress = \"\"\n",
                 "backend.franka.address",
             ),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+                 [backend.franka]\nwrench = \"net_ft\"\n\
+                 [backend.franka.net_ft]\ncounts_per_force = 0.0\n",
+                "backend.franka.net_ft.counts_per_force",
+            ),
+            (
+                "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+                 [backend.franka]\nwrench = \"net_ft\"\n\
+                 [backend.franka.net_ft]\naddress = \"a b\"\n",
+                "backend.franka.net_ft.address",
+            ),
         ] {
             let e = DaemonConfig::from_toml(toml, "x.toml")
                 .unwrap_err()
                 .to_string();
             assert!(e.contains(field), "{toml}: {e}");
         }
+        // The sensor's settings are read whatever the source, and checked
+        // only when it is the source.
+        let c = DaemonConfig::from_toml(
+            "[backend]\nkind = \"franka\"\n[timing]\nclock = \"hardware\"\n\
+             [backend.franka]\nwrench = \"net_ft\"\n\
+             [backend.franka.net_ft]\naddress = \"10.0.0.5\"\ncounts_per_torque = 1e6\n",
+            "x.toml",
+        )
+        .unwrap();
+        assert_eq!(c.backend.franka.wrench, WrenchSource::NetFt);
+        assert_eq!(c.backend.franka.net_ft.address, "10.0.0.5");
         let e = DaemonConfig::from_toml("[backend.franka]\ngeneration = \"fr2\"\n", "x.toml")
             .unwrap_err();
         assert!(e.to_string().contains("fr2"), "{e}");

@@ -21,6 +21,7 @@
 
 use super::backend::{Hardware, HardwareError};
 use super::config::{FrankaConfig, FrankaGeneration, WrenchSource};
+use super::netft::NetFt;
 use super::shared::{
     FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX,
 };
@@ -151,6 +152,8 @@ pub struct FrankaBackend<'r> {
     /// Lowest `control_command_success_rate` the robot reported (1: no
     /// command missed in its window).
     pub min_success_rate: f64,
+    /// The external F/T sensor of `wrench = "net_ft"`.
+    netft: Option<NetFt>,
 }
 
 impl<'r> FrankaBackend<'r> {
@@ -170,6 +173,12 @@ impl<'r> FrankaBackend<'r> {
         }
         let mut effort = [0.0; JOINTS];
         effort.copy_from_slice(model.effort_limits().as_slice());
+        // The sensor streams before the motion starts, so the first state
+        // already has its reading.
+        let netft = match cfg.wrench {
+            WrenchSource::NetFt => Some(NetFt::connect(&cfg.net_ft, mono_now_ns())?),
+            _ => None,
+        };
         Ok(Self {
             robot,
             control: None,
@@ -187,6 +196,7 @@ impl<'r> FrankaBackend<'r> {
             last_command_seq: 0,
             finished: false,
             min_success_rate: 1.0,
+            netft,
         })
     }
 
@@ -206,7 +216,8 @@ impl<'r> FrankaBackend<'r> {
         st.tau_measured[..JOINTS].copy_from_slice(&s.tau_J);
         st.wrench = match self.cfg.wrench {
             WrenchSource::RobotEstimate => flange_wrench(s),
-            WrenchSource::None => [0.0; 6],
+            // Read in `poll`, which can fail.
+            WrenchSource::NetFt | WrenchSource::None => [0.0; 6],
         };
         self.q = s.q;
         self.tau_j_d = s.tau_J_d;
@@ -294,6 +305,11 @@ impl Hardware for FrankaBackend<'_> {
         };
         self.take_state(&s);
         self.pending = true;
+        if let Some(ft) = &mut self.netft {
+            // A silent or faulted sensor ends the run like a robot error;
+            // the state stays pending, so `finish` answers it.
+            self.state.wrench = ft.read(mono_now_ns())?;
+        }
         Ok(Some(&self.state))
     }
 
@@ -422,6 +438,7 @@ mod tests {
         polls: u64,
         fail_at: u64,
         sent: u64,
+        finished: bool,
     }
 
     impl Hardware for FailingRobot {
@@ -444,6 +461,10 @@ mod tests {
         }
         fn send(&mut self, _: &TorqueCommand) -> Result<(), HardwareError> {
             self.sent += 1;
+            Ok(())
+        }
+        fn finish(&mut self) -> Result<(), HardwareError> {
+            self.finished = true;
             Ok(())
         }
     }
@@ -469,6 +490,7 @@ mod tests {
             polls: 0,
             fail_at: 50,
             sent: 0,
+            finished: false,
         };
         let node = transport::create_node("franka-fault").unwrap();
         let statuses = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
@@ -483,6 +505,9 @@ mod tests {
             "{reason}"
         );
         assert!(daemon.hardware().sent >= 40, "{}", daemon.hardware().sent);
+        // The hardware ends what it can after the error too (a sensor's
+        // fault leaves the robot's motion running until then).
+        assert!(daemon.hardware().finished, "finish after the error");
         assert_eq!(daemon.mode(), ControllerMode::Fault);
         assert_eq!(daemon.fault_code(), FAULT_ROBOT_LIMIT);
         let mut last = None;

@@ -25,6 +25,7 @@ pub mod backend;
 pub mod config;
 pub mod control;
 pub mod franka;
+pub mod netft;
 mod queue;
 pub mod rt;
 pub mod rt_alloc;
@@ -37,7 +38,7 @@ pub use backend::{Hardware, HardwareError, SimBackend};
 pub use control::{CycleOutcome, Daemon, DaemonError};
 pub use franka::FrankaBackend;
 pub use shared::{
-    FAULT_HARDWARE_SILENT, FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER,
-    FAULT_ROBOT_REFLEX, Shared,
+    FAULT_FT_SENSOR, FAULT_HARDWARE_SILENT, FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT,
+    FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX, Shared,
 };
 pub use stats::{RunSummary, Stats};

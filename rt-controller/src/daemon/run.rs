@@ -23,7 +23,17 @@ impl<H: Hardware> Daemon<H> {
     ) -> Result<RunSummary, HardwareError> {
         let result = self.run_loop(stop, on_ready);
         rt_alloc::leave_realtime();
-        let result = result.and_then(|summary| self.hw.finish().map(|()| summary));
+        let result = match result {
+            Ok(summary) => self.hw.finish().map(|()| summary),
+            // After an error the hardware still ends what it can (the
+            // Franka's motion, when the robot itself has not already ended
+            // it, e.g. after an external sensor's fault); the first error
+            // is the one reported.
+            Err(e) => {
+                let _ = self.hw.finish();
+                Err(e)
+            }
+        };
         if let Err(HardwareError::Robot { code, .. }) = &result {
             self.latch_robot_fault(*code, mono_now_ns());
         }

@@ -16,6 +16,9 @@ pub const FAULT_ROBOT_REFLEX: u32 = 103;
 /// Fault code of any other robot error (emergency stop, a command the robot
 /// refused, a lost connection, a protocol error).
 pub const FAULT_ROBOT_OTHER: u32 = 104;
+/// Fault code of the external F/T sensor (`wrench = "net_ft"`): silent for
+/// longer than its time-out, or reporting a fault in its status word.
+pub const FAULT_FT_SENSOR: u32 = 105;
 
 /// State the loop shares with its low-priority monitor thread (logging,
 /// systemd watchdog) through atomics only.

@@ -1,0 +1,366 @@
+//! An external 6-axis force/torque sensor as the Franka backend's wrench
+//! source: an ATI Net F/T (the paper's real robot carried an ATI Gamma)
+//! over its RDT ("raw data transfer") UDP protocol.
+//!
+//! The protocol, from ATI's Net F/T manual: the client sends an 8-byte
+//! request to UDP port 49152 (big-endian `u16` header 0x1234, `u16`
+//! command, `u32` sample count; command 2 with count 0 streams until
+//! command 0 stops it); the sensor answers with 36-byte records (big-endian
+//! `u32` RDT sequence, `u32` F/T sequence, `u32` status, then six `i32`
+//! counts Fx, Fy, Fz, Tx, Ty, Tz), at the rate set on its web page (up to
+//! 7 kHz). Counts become newtons and newton-metres through the
+//! calibration's counts per force and per torque (the sensor's web page and
+//! its `netftapi2.xml` give them).
+//!
+//! In the loop, [`NetFt::read`] takes every record that has arrived from a
+//! non-blocking socket into a stack buffer, keeps the newest, and never
+//! waits or allocates. A sensor silent for longer than `timeout_ms`, or a
+//! record whose status word is not zero (a saturated gauge, a broken
+//! gauge, an internal error), is the daemon's Fault [`FAULT_FT_SENSOR`]
+//! with the reason; the values are the sensor's own, in its frame, as the
+//! robot descriptions' wrist sensor reads them (docs/franka.md).
+
+use super::backend::HardwareError;
+use super::config::NetFtConfig;
+use super::shared::FAULT_FT_SENSOR;
+use std::net::UdpSocket;
+use std::time::{Duration, Instant};
+
+/// The RDT port of a Net F/T.
+pub const RDT_PORT: u16 = 49152;
+/// The header word of an RDT request.
+const HEADER: u16 = 0x1234;
+/// RDT command: stop streaming.
+pub const CMD_STOP: u16 = 0x0000;
+/// RDT command: start real-time streaming.
+pub const CMD_START: u16 = 0x0002;
+/// Bytes of one RDT record.
+pub const RECORD_BYTES: usize = 36;
+
+/// An RDT request: `command`, then `count` records (0: until stopped).
+pub fn request(command: u16, count: u32) -> [u8; 8] {
+    let mut r = [0u8; 8];
+    r[0..2].copy_from_slice(&HEADER.to_be_bytes());
+    r[2..4].copy_from_slice(&command.to_be_bytes());
+    r[4..8].copy_from_slice(&count.to_be_bytes());
+    r
+}
+
+/// One RDT record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Record {
+    /// The packet's sequence number.
+    pub rdt_sequence: u32,
+    /// The sensor's internal sample number.
+    pub ft_sequence: u32,
+    /// The status word: 0 when healthy.
+    pub status: u32,
+    /// Fx, Fy, Fz, Tx, Ty, Tz in counts.
+    pub counts: [i32; 6],
+}
+
+impl Record {
+    /// Reads a record; `None` if `b` is not one record long.
+    pub fn parse(b: &[u8]) -> Option<Self> {
+        if b.len() != RECORD_BYTES {
+            return None;
+        }
+        let word = |i: usize| [b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]];
+        let mut counts = [0i32; 6];
+        for (j, c) in counts.iter_mut().enumerate() {
+            *c = i32::from_be_bytes(word(3 + j));
+        }
+        Some(Self {
+            rdt_sequence: u32::from_be_bytes(word(0)),
+            ft_sequence: u32::from_be_bytes(word(1)),
+            status: u32::from_be_bytes(word(2)),
+            counts,
+        })
+    }
+
+    /// The record's 36 bytes (what a sensor sends).
+    pub fn to_bytes(&self) -> [u8; RECORD_BYTES] {
+        let mut b = [0u8; RECORD_BYTES];
+        b[0..4].copy_from_slice(&self.rdt_sequence.to_be_bytes());
+        b[4..8].copy_from_slice(&self.ft_sequence.to_be_bytes());
+        b[8..12].copy_from_slice(&self.status.to_be_bytes());
+        for (j, c) in self.counts.iter().enumerate() {
+            b[12 + 4 * j..16 + 4 * j].copy_from_slice(&c.to_be_bytes());
+        }
+        b
+    }
+}
+
+/// A streaming Net F/T.
+#[derive(Debug)]
+pub struct NetFt {
+    socket: UdpSocket,
+    cfg: NetFtConfig,
+    wrench: [f64; 6],
+    /// When the newest record arrived (the loop's clock, ns).
+    last_ns: u64,
+    /// Records read, and datagrams that were not one record.
+    records: u64,
+    malformed: u64,
+}
+
+fn sensor_error(reason: String) -> HardwareError {
+    HardwareError::Robot {
+        code: FAULT_FT_SENSOR,
+        reason,
+    }
+}
+
+impl NetFt {
+    /// Starts the stream of the sensor at `cfg.address` and waits up to
+    /// `cfg.start_timeout_s` for its first healthy record (a sensor that
+    /// does not answer is an error naming the address). Not real-time:
+    /// called before the loop starts; `now_ns` is the loop's clock then.
+    pub fn connect(cfg: &NetFtConfig, now_ns: u64) -> Result<Self, HardwareError> {
+        let at = format!("`backend.franka.net_ft.address` = {:?}", cfg.address);
+        let io = |what: &str, e: std::io::Error| sensor_error(format!("{what} {at}: {e}"));
+        let target = if cfg.address.contains(':') {
+            cfg.address.clone()
+        } else {
+            format!("{}:{RDT_PORT}", cfg.address)
+        };
+        let socket = UdpSocket::bind("0.0.0.0:0").map_err(|e| io("binding a socket for", e))?;
+        socket
+            .connect(&target)
+            .map_err(|e| io("addressing the F/T sensor at", e))?;
+        let mut s = Self {
+            socket,
+            cfg: cfg.clone(),
+            wrench: [0.0; 6],
+            last_ns: now_ns,
+            records: 0,
+            malformed: 0,
+        };
+        // The start request again every 100 ms until a record comes: UDP
+        // may lose the first one.
+        let start = Instant::now();
+        let deadline = Duration::from_secs_f64(cfg.start_timeout_s);
+        s.socket
+            .set_read_timeout(Some(Duration::from_millis(100)))
+            .map_err(|e| io("configuring the socket of", e))?;
+        let mut buf = [0u8; 64];
+        loop {
+            // A refused send (nothing listening yet on a local address)
+            // is retried like a lost request.
+            let _ = s.socket.send(&request(CMD_START, 0));
+            match s.socket.recv(&mut buf) {
+                Ok(n) => {
+                    if let Some(r) = Record::parse(&buf[..n]) {
+                        s.take(&r, now_ns)?;
+                        break;
+                    }
+                    s.malformed += 1;
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::ConnectionRefused
+                    ) => {}
+                Err(e) => return Err(io("reading the F/T sensor at", e)),
+            }
+            if start.elapsed() > deadline {
+                return Err(sensor_error(format!(
+                    "the F/T sensor at {at} sent no record in {} s (is it on, streaming RDT \
+                     on UDP {RDT_PORT}, and is the address right?)",
+                    cfg.start_timeout_s
+                )));
+            }
+        }
+        s.socket
+            .set_nonblocking(true)
+            .map_err(|e| io("configuring the socket of", e))?;
+        Ok(s)
+    }
+
+    fn take(&mut self, r: &Record, now_ns: u64) -> Result<(), HardwareError> {
+        if r.status != 0 {
+            return Err(sensor_error(format!(
+                "the F/T sensor reports status {:#010x} (record {}): a gauge saturated or \
+                 failed, see the sensor's manual",
+                r.status, r.rdt_sequence
+            )));
+        }
+        for (j, (w, &c)) in self.wrench.iter_mut().zip(&r.counts).enumerate() {
+            let per = if j < 3 {
+                self.cfg.counts_per_force
+            } else {
+                self.cfg.counts_per_torque
+            };
+            *w = f64::from(c) / per;
+        }
+        self.last_ns = now_ns;
+        self.records += 1;
+        Ok(())
+    }
+
+    /// The newest wrench (N, N·m, the sensor's frame) after taking every
+    /// record that has arrived; an error if the newest is older than
+    /// `timeout_ms` at `now_ns` or reports a fault. Never blocks or
+    /// allocates.
+    pub fn read(&mut self, now_ns: u64) -> Result<[f64; 6], HardwareError> {
+        let mut buf = [0u8; 64];
+        loop {
+            match self.socket.recv(&mut buf) {
+                Ok(n) => match Record::parse(&buf[..n]) {
+                    Some(r) => self.take(&r, now_ns)?,
+                    None => self.malformed += 1,
+                },
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                // A refusal (an ICMP error from a sensor that went away)
+                // shows as silence below.
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => break,
+                Err(e) => {
+                    return Err(sensor_error(format!("reading the F/T sensor: {e}")));
+                }
+            }
+        }
+        let age_ms = now_ns.saturating_sub(self.last_ns) as f64 * 1e-6;
+        if age_ms > self.cfg.timeout_ms {
+            return Err(sensor_error(format!(
+                "the F/T sensor at {:?} has sent nothing for {age_ms:.1} ms \
+                 (`backend.franka.net_ft.timeout_ms` = {})",
+                self.cfg.address, self.cfg.timeout_ms
+            )));
+        }
+        Ok(self.wrench)
+    }
+
+    /// Records taken, and datagrams that were not a record.
+    pub fn counts(&self) -> (u64, u64) {
+        (self.records, self.malformed)
+    }
+}
+
+impl Drop for NetFt {
+    fn drop(&mut self) {
+        // Stops the stream; a lost stop leaves the sensor streaming to a
+        // closed port, which is harmless.
+        let _ = self.socket.send(&request(CMD_STOP, 0));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Against a sensor stand-in on the loopback interface that speaks
+    //! the manual's RDT format (no Net F/T is reachable here; docs/franka.md
+    //! says what has and has not been run).
+    use super::*;
+
+    fn cfg(address: String) -> NetFtConfig {
+        NetFtConfig {
+            address,
+            counts_per_force: 1_000_000.0,
+            counts_per_torque: 2_000_000.0,
+            timeout_ms: 10.0,
+            start_timeout_s: 10.0,
+        }
+    }
+
+    fn record(seq: u32, status: u32, counts: [i32; 6]) -> Record {
+        Record {
+            rdt_sequence: seq,
+            ft_sequence: seq * 3,
+            status,
+            counts,
+        }
+    }
+
+    /// A stand-in sensor: waits for the start request, then sends `records`.
+    fn sensor(records: Vec<Record>) -> (String, std::thread::JoinHandle<[u8; 8]>) {
+        let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let addr = s.local_addr().unwrap().to_string();
+        let h = std::thread::spawn(move || {
+            let mut buf = [0u8; 16];
+            let (n, from) = s.recv_from(&mut buf).unwrap();
+            assert_eq!(n, 8, "a request is 8 bytes");
+            for r in records {
+                s.send_to(&r.to_bytes(), from).unwrap();
+            }
+            // A datagram that is not a record.
+            s.send_to(&[1, 2, 3], from).unwrap();
+            let mut req = [0u8; 8];
+            req.copy_from_slice(&buf[..8]);
+            req
+        });
+        (addr, h)
+    }
+
+    #[test]
+    fn requests_and_records_are_the_manuals_bytes() {
+        assert_eq!(request(CMD_START, 0), [0x12, 0x34, 0, 2, 0, 0, 0, 0]);
+        assert_eq!(request(CMD_STOP, 0), [0x12, 0x34, 0, 0, 0, 0, 0, 0]);
+        let r = record(7, 0, [1, -2, 3, -4, 5, -6]);
+        let b = r.to_bytes();
+        assert_eq!(&b[0..4], &[0, 0, 0, 7]);
+        assert_eq!(&b[16..20], &(-2i32).to_be_bytes());
+        assert_eq!(Record::parse(&b), Some(r));
+        assert_eq!(Record::parse(&b[..35]), None);
+    }
+
+    #[test]
+    fn the_newest_record_becomes_the_wrench_in_newtons() {
+        let (addr, h) = sensor(vec![
+            record(1, 0, [0; 6]),
+            record(2, 0, [1_500_000, -250_000, 9_810_000, 200_000, -400_000, 0]),
+        ]);
+        let mut ft = NetFt::connect(&cfg(addr), 0).unwrap();
+        assert_eq!(h.join().unwrap(), request(CMD_START, 0));
+        // The stand-in has sent everything (joined): a blocking wait for
+        // the rest is not needed, but UDP on loopback may still be in
+        // flight; read until the second record is in.
+        let mut w = ft.read(1_000_000).unwrap();
+        for _ in 0..1000 {
+            if ft.counts().0 == 2 && ft.counts().1 == 1 {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+            w = ft.read(1_000_000).unwrap();
+        }
+        assert_eq!(ft.counts(), (2, 1), "records, malformed");
+        let want = [1.5, -0.25, 9.81, 0.1, -0.2, 0.0];
+        for (a, b) in w.iter().zip(want) {
+            assert!((a - b).abs() < 1e-12, "{w:?}");
+        }
+        // Silent past the time-out (10 ms after the newest record): a
+        // Fault naming the sensor, on the loop's clock, not the machine's.
+        let e = ft.read(1_000_000 + 11_000_000).unwrap_err();
+        let HardwareError::Robot { code, reason } = e else {
+            panic!("{e:?}")
+        };
+        assert_eq!(code, FAULT_FT_SENSOR);
+        assert!(reason.contains("has sent nothing"), "{reason}");
+    }
+
+    #[test]
+    fn a_record_with_a_fault_status_is_a_fault() {
+        let (addr, _h) = sensor(vec![record(1, 0x8001_0000, [0; 6])]);
+        let e = NetFt::connect(&cfg(addr), 0).unwrap_err();
+        let HardwareError::Robot { code, reason } = e else {
+            panic!("{e:?}")
+        };
+        assert_eq!(code, FAULT_FT_SENSOR);
+        assert!(reason.contains("0x80010000"), "{reason}");
+    }
+
+    #[test]
+    fn a_sensor_that_never_answers_is_named() {
+        // A bound socket that reads nothing.
+        let quiet = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let mut c = cfg(quiet.local_addr().unwrap().to_string());
+        c.start_timeout_s = 0.3;
+        let e = NetFt::connect(&c, 0).unwrap_err();
+        let HardwareError::Robot { code, reason } = e else {
+            panic!("{e:?}")
+        };
+        assert_eq!(code, FAULT_FT_SENSOR);
+        assert!(reason.contains("sent no record"), "{reason}");
+        assert!(reason.contains("net_ft.address"), "{reason}");
+    }
+}
