@@ -40,6 +40,16 @@ fn main() {
     // What the policy observes: the ground truth or the representation's z
     // means (the latter needs the camera rendered every step).
     let observer = observation.observer().expect("observer");
+    if let Some(p) = &policy {
+        assert_eq!(
+            p.mlp().input(),
+            observer.dim(),
+            "the checkpoint's policy takes {} inputs; its observation {:?} gives {}",
+            p.mlp().input(),
+            observation,
+            observer.dim()
+        );
+    }
     let camera = observer.needs_camera();
     let path_every: Option<u32> = std::env::var("RL_PROBE_PATH")
         .ok()

@@ -6,17 +6,22 @@
 //! convolution with batch and channels swapped), with layout conversions
 //! around each. A profile of a training step put most of its time there
 //! (docs/performance.md). [`ConvTrain`] is a burn backend extension that
-//! gives `flex` one im2col and one faer product per sample for each of the
-//! three passes:
+//! gives `flex` its own three passes, per sample and split over rayon's
+//! threads:
 //!
-//! - forward: `y = W · im2col(x) + b`;
-//! - input gradient: `dx = col2im(Wᵀ · dy)`;
-//! - weight gradient: `dW = Σ dy · im2col(x)ᵀ`, the bias's `db = Σ dy`.
+//! - strided layers, through im2col in bands of output rows (a tile that
+//!   stays in cache) and one faer product per band: `y = W · im2col(x) + b`,
+//!   `dx = col2im(Wᵀ · dy)`, `dW = Σ dy · im2col(x)ᵀ`;
+//! - stride-1 layers, without im2col ([`Shifted`]): k² products of each
+//!   tap's weights with a view of the zero-padded input; the input gradient
+//!   is the same kind of convolution of `dy` with the kernel flipped;
+//! - 1×1 layers read their input as the matrix; the bias's `db = Σ dy`.
 //!
-//! Other backends (CUDA) keep burn's own convolution through the trait's
-//! default bodies, and autodiff wraps either with the backward above, so the
-//! model code calls [`conv2d`] whatever the device. The parameters stay in
-//! burn's [`Conv2d`] module: records and checkpoints do not change.
+//! Other backends (CUDA) run burn's own convolution kernels through the
+//! trait's default bodies; under autodiff every backend goes through this
+//! file's backward node, which calls the backend's kernels. The model code
+//! calls [`conv2d`] whatever the device. The parameters stay in burn's
+//! [`Conv2d`] module: records and checkpoints do not change.
 
 use burn::backend::autodiff::{
     Autodiff,
@@ -419,9 +424,13 @@ fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
 
 /// [`x_backward`] for a stride-1 convolution: the input gradient is itself
 /// a stride-1 convolution of `dy`, padded by `k − 1 − pad`, with the kernel
-/// flipped and its channels swapped, so it takes [`forward_shifted`] (whose
-/// products only read strided views; a product into a strided view of the
-/// padded gradient corrupted the heap in faer 0.24.4).
+/// flipped and its channels swapped, so it takes [`forward_shifted`], whose
+/// products only read strided views. (Accumulating `Wᵀ·dy` tap by tap into
+/// strided views of a padded gradient would need faer 0.24.4's
+/// `from_row_major_slice_with_stride_mut`, which builds its view with the
+/// two strides swapped, row stride 1 and column stride the row stride, so a
+/// product into it writes outside the view: measured here, a heap
+/// corruption. The read-only constructor is right.)
 fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     let k = g.k;
     let gt = Geometry::new(
@@ -780,9 +789,14 @@ mod tests {
 
     /// Forward values and all three gradients against burn's own
     /// convolution, for the geometries the models use (strided, padded,
-    /// 1×1, odd sides where the last taps fall off the edge).
+    /// 1×1, odd sides where the last taps fall off the edge, the 2×2 and
+    /// 1×1 maps of the last stages, several row bands).
     #[test]
     fn matches_burns_convolution_and_its_gradients() {
+        assert!(
+            !burns_own(),
+            "LEARNER_CONV=burn is set: these tests would compare burn with burn"
+        );
         let device = Device::flex().autodiff();
         let cases = [
             // (batch, cin, cout, side, k, stride, pad)
@@ -792,15 +806,22 @@ mod tests {
             (2, 3, 2, 6, 3, 2, 1),
             (2, 5, 4, 4, 1, 1, 0),
             (1, 2, 3, 5, 3, 1, 0),
-            // Several row bands (`band_rows`), the last one short.
+            // The last stages' small maps: 2×2 → 2×2, 2×2 → 1×1, 1×1 → 1×1.
+            (2, 8, 4, 2, 3, 1, 1),
+            (2, 4, 4, 2, 3, 2, 1),
+            (1, 4, 3, 1, 3, 1, 1),
+            // A stride-1 layer of the depth encoder's size (the shifted path).
             (2, 16, 3, 40, 3, 1, 1),
+            // Strided layers in several row bands (`band_rows`), the last
+            // one short.
             (1, 8, 2, 50, 5, 2, 2),
+            (1, 16, 2, 64, 3, 2, 1),
         ];
         for (seed, &(b, cin, cout, side, k, s, p)) in cases.iter().enumerate() {
             let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
             let rows = band_rows(&g);
             assert!(
-                side < 40 || (rows < g.ho && !g.ho.is_multiple_of(rows)),
+                side < 40 || s == 1 || (rows < g.ho && !g.ho.is_multiple_of(rows)),
                 "side {side}: meant to have several bands, the last one short"
             );
             let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
@@ -841,6 +862,7 @@ mod tests {
     /// Without autodiff (inference through burn) it is the same function.
     #[test]
     fn runs_without_autodiff() {
+        assert!(!burns_own(), "LEARNER_CONV=burn is set");
         let device = Device::flex();
         let c = Conv2dConfig::new([3, 4], [3, 3])
             .with_stride([2, 2])

@@ -25,9 +25,10 @@ pub enum HardwareError {
         namespace: String,
     },
     /// The robot stopped the control session (a reflex, a limit, a
-    /// communication constraint violation, a lost connection): the
-    /// daemon's Fault, with the robot's own words.
-    #[error("the robot reported an error (fault code {code}): {reason}")]
+    /// communication constraint violation, a lost connection), or a sensor
+    /// of the robot's failed: the daemon's Fault, with the robot's (or the
+    /// sensor's) own words.
+    #[error("the robot or its sensor reported an error (fault code {code}): {reason}")]
     Robot {
         /// The fault code published in the status
         /// (`crate::daemon::FAULT_ROBOT_*`).

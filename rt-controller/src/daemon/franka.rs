@@ -288,11 +288,17 @@ impl Hardware for FrankaBackend<'_> {
         }
         let control = match &mut self.control {
             Some(c) => c,
-            None => self.control.insert(
-                self.robot
+            None => {
+                let c = self
+                    .robot
                     .start_torque_control()
-                    .map_err(|e| robot_error(&e, "starting torque control"))?,
-            ),
+                    .map_err(|e| robot_error(&e, "starting torque control"))?;
+                if let Some(ft) = &mut self.netft {
+                    // What the sensor sent before the motion is old now.
+                    ft.discard_queued(mono_now_ns());
+                }
+                self.control.insert(c)
+            }
         };
         let (s, _since_last) = match control.read_once() {
             Ok(r) => r,

@@ -147,6 +147,7 @@ impl NetFt {
         loop {
             // A refused send (nothing listening yet on a local address)
             // is retried like a lost request.
+            let sent = Instant::now();
             let _ = s.socket.send(&request(CMD_START, 0));
             match s.socket.recv(&mut buf) {
                 Ok(n) => {
@@ -159,10 +160,13 @@ impl NetFt {
                 Err(e)
                     if matches!(
                         e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::ConnectionRefused
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
                     ) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                    // The refusal (ICMP) comes back at once: wait out the
+                    // 100 ms rather than flood the address.
+                    std::thread::sleep(Duration::from_millis(100).saturating_sub(sent.elapsed()));
+                }
                 Err(e) => return Err(io("reading the F/T sensor at", e)),
             }
             if start.elapsed() > deadline {
@@ -230,6 +234,17 @@ impl NetFt {
             )));
         }
         Ok(self.wrench)
+    }
+
+    /// Drops every record that has arrived without taking it, and starts
+    /// the time-out at `now_ns`: called when the motion starts, so that the
+    /// loop's first reads are of records sent since, not of those queued
+    /// since [`NetFt::connect`] (the socket's buffer keeps the oldest when
+    /// it fills). Never blocks or allocates.
+    pub fn discard_queued(&mut self, now_ns: u64) {
+        let mut buf = [0u8; 64];
+        while self.socket.recv(&mut buf).is_ok() {}
+        self.last_ns = now_ns;
     }
 
     /// Records taken, and datagrams that were not a record.
@@ -336,6 +351,28 @@ mod tests {
         };
         assert_eq!(code, FAULT_FT_SENSOR);
         assert!(reason.contains("has sent nothing"), "{reason}");
+    }
+
+    #[test]
+    fn records_queued_before_the_motion_are_discarded() {
+        let (addr, h) = sensor(vec![record(1, 0, [0; 6]), record(2, 0, [5; 6])]);
+        let mut ft = NetFt::connect(&cfg(addr), 0).unwrap();
+        h.join().unwrap();
+        // Wait (bounded) until the rest has arrived, without taking it.
+        let mut buf = [0u8; 64];
+        let start = Instant::now();
+        while ft.socket.peek(&mut buf).is_err() {
+            assert!(start.elapsed() < Duration::from_secs(10), "nothing queued");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        ft.discard_queued(50_000_000);
+        assert_eq!(ft.counts(), (1, 0), "nothing taken by the discard");
+        // Nothing new after it: silent once the time-out has passed since
+        // the discard, not since the connection.
+        assert!(ft.read(55_000_000).is_ok());
+        let e = ft.read(61_000_000).unwrap_err();
+        assert!(e.to_string().contains("has sent nothing"), "{e}");
     }
 
     #[test]

@@ -23,21 +23,26 @@ impl<H: Hardware> Daemon<H> {
     ) -> Result<RunSummary, HardwareError> {
         let result = self.run_loop(stop, on_ready);
         rt_alloc::leave_realtime();
-        let result = match result {
-            Ok(summary) => self.hw.finish().map(|()| summary),
-            // After an error the hardware still ends what it can (the
-            // Franka's motion, when the robot itself has not already ended
-            // it, e.g. after an external sensor's fault); the first error
-            // is the one reported.
+        match result {
+            Ok(summary) => {
+                let finished = self.hw.finish().map(|()| summary);
+                if let Err(HardwareError::Robot { code, .. }) = &finished {
+                    self.latch_robot_fault(*code, mono_now_ns());
+                }
+                finished
+            }
             Err(e) => {
+                // The Fault is published first; then the hardware still
+                // ends what it can (the Franka's motion, when the robot has
+                // not ended it itself, e.g. after an external sensor's
+                // fault). The first error is the one reported.
+                if let HardwareError::Robot { code, .. } = &e {
+                    self.latch_robot_fault(*code, mono_now_ns());
+                }
                 let _ = self.hw.finish();
                 Err(e)
             }
-        };
-        if let Err(HardwareError::Robot { code, .. }) = &result {
-            self.latch_robot_fault(*code, mono_now_ns());
         }
-        result
     }
 
     fn run_loop(
