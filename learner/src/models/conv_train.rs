@@ -29,7 +29,7 @@ use burn::backend::autodiff::{
     grads::Gradients,
     ops::{Backward, Ops, OpsKind},
 };
-use burn::backend::ops::{ConvOptions, FloatTensorOps, ModuleOps};
+use burn::backend::ops::{ConvOptions, ModuleOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::backend::{DType, Flex, flex::FlexTensor};
@@ -76,16 +76,27 @@ pub trait ConvTrain: Backend {
         stride: usize,
         pad: usize,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let cout = weight.shape()[0];
-        let dw = Self::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
-        let db = Self::float_sum_dim(Self::float_sum_dim(grad, 3), 2);
-        let db = Self::float_sum_dim(db, 0);
-        (dw, Self::float_reshape(db, [cout].into()))
+        burns_wb_backward::<Self>(x, weight, grad, stride, pad)
     }
 }
 
 fn options(stride: usize, pad: usize) -> ConvOptions<2> {
     ConvOptions::new([stride, stride], [pad, pad], [1, 1], 1)
+}
+
+/// burn's own weight and bias gradients on backend `B`.
+fn burns_wb_backward<B: Backend>(
+    x: FloatTensor<B>,
+    weight: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    stride: usize,
+    pad: usize,
+) -> (FloatTensor<B>, FloatTensor<B>) {
+    let cout = weight.shape()[0];
+    let dw = B::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
+    let db = B::float_sum_dim(B::float_sum_dim(grad, 3), 2);
+    let db = B::float_sum_dim(db, 0);
+    (dw, B::float_reshape(db, [cout].into()))
 }
 
 /// `c.forward(x)`, through [`ConvTrain`].
@@ -684,11 +695,7 @@ impl ConvTrain for Flex {
         pad: usize,
     ) -> (FlexTensor, FlexTensor) {
         let (Some(xc), Some(dyc)) = (f32s(&x), f32s(&grad)) else {
-            let cout = weight.shape()[0];
-            let dw = Flex::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
-            let db = Flex::float_sum_dim(Flex::float_sum_dim(grad, 3), 2);
-            let db = Flex::float_sum_dim(db, 0);
-            return (dw, Flex::float_reshape(db, [cout].into()));
+            return burns_wb_backward::<Flex>(x, weight, grad, stride, pad);
         };
         let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
         let (dw, db) = wb_backward(&g, xc.storage::<f32>(), dyc.storage::<f32>());
