@@ -101,14 +101,20 @@ impl Default for NetFtConfig {
     }
 }
 
+/// A host name or IP address, optionally with `:port`, of the device at
+/// `field`.
+fn network_address(field: &str, address: &str) -> Result<(), FieldError> {
+    ensure(
+        !address.is_empty() && !address.contains(char::is_whitespace),
+        field,
+        format_args!("{address:?}"),
+        "must be a host name or IP address, optionally with :port",
+    )
+}
+
 impl NetFtConfig {
     fn validate(&self) -> Result<(), FieldError> {
-        ensure(
-            !self.address.is_empty() && !self.address.contains(char::is_whitespace),
-            "backend.franka.net_ft.address",
-            format_args!("{:?}", self.address),
-            "must be a host name or IP address, optionally with :port",
-        )?;
+        network_address("backend.franka.net_ft.address", &self.address)?;
         positive(
             "backend.franka.net_ft.counts_per_force",
             self.counts_per_force,
@@ -188,12 +194,7 @@ impl Default for FrankaConfig {
 
 impl FrankaConfig {
     fn validate(&self) -> Result<(), FieldError> {
-        ensure(
-            !self.address.is_empty() && !self.address.contains(char::is_whitespace),
-            "backend.franka.address",
-            format_args!("{:?}", self.address),
-            "must be a host name or IP address, optionally with :port",
-        )?;
+        network_address("backend.franka.address", &self.address)?;
         within("backend.franka.cutoff_hz", self.cutoff_hz, 0.0..=1000.0)?;
         positive("backend.franka.cutoff_hz", self.cutoff_hz)?;
         for (field, lower, upper) in [
