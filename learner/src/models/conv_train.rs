@@ -319,6 +319,19 @@ fn per_task(batch: usize) -> usize {
     batch.div_ceil(rayon::current_num_threads().max(1)).max(1)
 }
 
+/// `acc += v`, element by element (a thread's weight-gradient sums into
+/// another's).
+fn add(acc: &mut [f32], v: &[f32]) {
+    acc.iter_mut().zip(v).for_each(|(a, b)| *a += b);
+}
+
+/// `db[c] += Σ dy[c, ·]` for one sample's `dy [Cout, outs]`.
+fn add_bias_grad(db: &mut [f32], dy: &[f32], outs: usize) {
+    for (d, row) in db.iter_mut().zip(dy.chunks_exact(outs)) {
+        *d += row.iter().sum::<f32>();
+    }
+}
+
 /// The columns of the output rows `oy` in a `[C, Ho·Wo]` matrix.
 fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a, f32> {
     m.subcols(oy.start * g.wo, oy.len() * g.wo)
@@ -492,14 +505,12 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
                 );
                 gemm(dst, dym, sh.view(g, &xp, t).transpose(), true);
             }
-            for (d, row) in db.iter_mut().zip(dys.chunks_exact(outs)) {
-                *d += row.iter().sum::<f32>();
-            }
+            add_bias_grad(&mut db, dys, outs);
             (xp, dyp, dwt, db)
         })
         .reduce(zero, |(a, b, mut dwt, mut db), (_, _, dwt2, db2)| {
-            dwt.iter_mut().zip(&dwt2).for_each(|(x, y)| *x += y);
-            db.iter_mut().zip(&db2).for_each(|(x, y)| *x += y);
+            add(&mut dwt, &dwt2);
+            add(&mut db, &db2);
             (a, b, dwt, db)
         });
     // Back to [Cout, Cin, k, k].
@@ -626,20 +637,19 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
                     gemm(dwm, columns(dym, g, &oy), colm.transpose(), true);
                 }
             }
-            for (d, row) in db.iter_mut().zip(dys.chunks_exact(outs)) {
-                *d += row.iter().sum::<f32>();
-            }
+            add_bias_grad(&mut db, dys, outs);
             (col, dw, db)
         })
         .reduce(zero, |(c, mut dw, mut db), (_, dw2, db2)| {
-            dw.iter_mut().zip(&dw2).for_each(|(a, b)| *a += b);
-            db.iter_mut().zip(&db2).for_each(|(a, b)| *a += b);
+            add(&mut dw, &dw2);
+            add(&mut db, &db2);
             (c, dw, db)
         });
     (dw, db)
 }
 
-/// A contiguous f32 copy's values, or `None` for another dtype.
+/// The tensor in contiguous layout (copied only if it is not), or `None`
+/// for another dtype than f32.
 fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
     (t.dtype() == DType::F32).then(|| t.to_contiguous())
 }

@@ -173,8 +173,8 @@ impl<'r> FrankaBackend<'r> {
         }
         let mut effort = [0.0; JOINTS];
         effort.copy_from_slice(model.effort_limits().as_slice());
-        // The sensor streams before the motion starts, so the first state
-        // already has its reading.
+        // The sensor is found and streaming before the motion starts: one
+        // that does not answer is a start-up error, not a Fault in the loop.
         let netft = match cfg.wrench {
             WrenchSource::NetFt => Some(NetFt::connect(&cfg.net_ft, mono_now_ns())?),
             _ => None,

@@ -278,6 +278,14 @@ mod tests {
         }
     }
 
+    /// The fault code and reason of a sensor error.
+    fn fault(e: HardwareError) -> (u32, String) {
+        match e {
+            HardwareError::Robot { code, reason } => (code, reason),
+            e => panic!("not a sensor fault: {e:?}"),
+        }
+    }
+
     fn record(seq: u32, status: u32, counts: [i32; 6]) -> Record {
         Record {
             rdt_sequence: seq,
@@ -346,9 +354,7 @@ mod tests {
         // Silent past the time-out (10 ms after the newest record): a
         // Fault naming the sensor, on the loop's clock, not the machine's.
         let e = ft.read(1_000_000 + 11_000_000).unwrap_err();
-        let HardwareError::Robot { code, reason } = e else {
-            panic!("{e:?}")
-        };
+        let (code, reason) = fault(e);
         assert_eq!(code, FAULT_FT_SENSOR);
         assert!(reason.contains("has sent nothing"), "{reason}");
     }
@@ -379,9 +385,7 @@ mod tests {
     fn a_record_with_a_fault_status_is_a_fault() {
         let (addr, _h) = sensor(vec![record(1, 0x8001_0000, [0; 6])]);
         let e = NetFt::connect(&cfg(addr), 0).unwrap_err();
-        let HardwareError::Robot { code, reason } = e else {
-            panic!("{e:?}")
-        };
+        let (code, reason) = fault(e);
         assert_eq!(code, FAULT_FT_SENSOR);
         assert!(reason.contains("0x80010000"), "{reason}");
     }
@@ -393,9 +397,7 @@ mod tests {
         let mut c = cfg(quiet.local_addr().unwrap().to_string());
         c.start_timeout_s = 0.3;
         let e = NetFt::connect(&c, 0).unwrap_err();
-        let HardwareError::Robot { code, reason } = e else {
-            panic!("{e:?}")
-        };
+        let (code, reason) = fault(e);
         assert_eq!(code, FAULT_FT_SENSOR);
         assert!(reason.contains("sent no record"), "{reason}");
         assert!(reason.contains("net_ft.address"), "{reason}");
