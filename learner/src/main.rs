@@ -203,6 +203,21 @@ enum PolicyCmd {
         #[arg(long, value_enum)]
         algorithm: Option<AlgorithmArg>,
     },
+    /// DAgger: a student policy on one observation (the representation)
+    /// learns the actions of a trained teacher on another (the ground
+    /// truth); writes a checkpoint that `policy eval` and `init_from` take
+    /// (docs/rl.md, "Distillation").
+    Distill {
+        /// Distillation configuration (TOML, see configs/policy/).
+        #[arg(long)]
+        config: PathBuf,
+        /// Run directory.
+        #[arg(long, default_value = "runs/distill")]
+        out: PathBuf,
+        /// Continue the run in `--out` from its last finished round.
+        #[arg(long)]
+        resume: bool,
+    },
     /// Runs a checkpoint's policy (its mean action) for N episodes: the
     /// four outcome categories and the normalised episode reward.
     Eval {
@@ -410,6 +425,25 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             )?;
             println!(
                 "{} updates, {} environment steps; checkpoint {}",
+                c.state.iteration,
+                c.state.env_steps,
+                run::checkpoint_path(&out).display()
+            );
+        }
+        PolicyCmd::Distill {
+            config,
+            out,
+            resume,
+        } => {
+            let cfg = learner::rl::distill::read_config(&config)?;
+            let c = learner::rl::distill::distill(
+                cfg,
+                &out,
+                resume,
+                &shared_mem_schema::process::termination_requested,
+            )?;
+            println!(
+                "{} rounds, {} environment steps; checkpoint {}",
                 c.state.iteration,
                 c.state.env_steps,
                 run::checkpoint_path(&out).display()

@@ -8,7 +8,9 @@
 //! outputs × inputs) then the biases. Hidden layers are tanh, the output is
 //! linear.
 
+use super::ppo::Adam;
 use hw_sim::rng::{self, SimRng};
+use rand::seq::SliceRandom;
 
 /// The network's shape; parameters are kept apart (a flat slice) so that
 /// TRPO can try candidates without copying the network.
@@ -221,6 +223,78 @@ impl Mlp {
                 o
             })
             .collect()
+    }
+}
+
+/// Least-squares regression of an [`Mlp`]'s outputs onto targets with Adam:
+/// what the value network's fit and a distilled policy's fit share.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MseFit {
+    /// Passes over the samples, each in a fresh random order.
+    pub epochs: usize,
+    /// Samples per Adam step.
+    pub minibatch: usize,
+    /// Adam's step size.
+    pub learning_rate: f64,
+    /// L2 penalty on every parameter.
+    pub l2: f64,
+}
+
+impl MseFit {
+    /// Fits `params` to the rows of `y` (batch × output) from the rows of
+    /// `x` (batch × input): per minibatch one Adam step on the squared error
+    /// summed over outputs and averaged over samples, plus the L2 penalty.
+    /// Returns the mean of that error over the last epoch's minibatches
+    /// (before each step; NaN when there is nothing to fit).
+    pub fn run(
+        &self,
+        mlp: &Mlp,
+        params: &mut [f64],
+        adam: &mut Adam,
+        x: &[f64],
+        y: &[f64],
+        rng: &mut SimRng,
+    ) -> f64 {
+        let (d, k) = (mlp.input(), mlp.output());
+        let n = x.len() / d;
+        assert_eq!(y.len(), n * k, "one target row per input row");
+        if n == 0 || self.epochs == 0 {
+            return f64::NAN;
+        }
+        let mut order: Vec<usize> = (0..n).collect();
+        let mut cache = Cache::default();
+        let (mut xb, mut dout) = (Vec::new(), Vec::new());
+        let mut grad = vec![0.0; params.len()];
+        let mut last = (0.0, 0usize);
+        for _ in 0..self.epochs {
+            order.shuffle(rng);
+            last = (0.0, 0);
+            for idx in order.chunks(self.minibatch.max(1)) {
+                xb.clear();
+                for &i in idx {
+                    xb.extend_from_slice(&x[i * d..(i + 1) * d]);
+                }
+                mlp.forward(params, &xb, &mut cache);
+                let m = idx.len() as f64;
+                dout.clear();
+                let mut loss = 0.0;
+                for (r, &i) in idx.iter().enumerate() {
+                    for c in 0..k {
+                        let e = cache.output()[r * k + c] - y[i * k + c];
+                        loss += e * e / m;
+                        dout.push(-2.0 * e / m);
+                    }
+                }
+                last = (last.0 + loss, last.1 + 1);
+                // Descent on the loss is ascent on its negative gradient.
+                for (g, w) in grad.iter_mut().zip(params.iter()) {
+                    *g = -2.0 * self.l2 * w;
+                }
+                mlp.backward(params, &cache, &dout, &mut grad);
+                adam.ascend(params, &grad, self.learning_rate);
+            }
+        }
+        last.0 / last.1.max(1) as f64
     }
 }
 

@@ -5,10 +5,12 @@
 //! with its observation normalisation ([`obs_norm`]), the value baselines
 //! ([`gaussian`], [`value`], on the small differentiable network of
 //! [`mlp`]), TRPO ([`trpo`]) and PPO ([`ppo`]), and the training loop
-//! ([`train`]). docs/rl.md gives every
+//! ([`train`]), and DAgger from a privileged teacher ([`distill`]).
+//! docs/rl.md gives every
 //! constant and setting with its source or reason.
 
 pub mod deploy;
+pub mod distill;
 pub mod env;
 pub mod gaussian;
 pub mod mlp;

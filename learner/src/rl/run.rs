@@ -88,7 +88,7 @@ pub struct ValidationPoint {
 impl ValidationPoint {
     /// Whether it beats `other`: more completed insertions, then a higher
     /// reward.
-    fn beats(&self, other: &ValidationPoint) -> bool {
+    pub(crate) fn beats(&self, other: &ValidationPoint) -> bool {
         let c = Outcome::CompletedInsertion.index();
         (self.outcomes[c], self.mean_normalised) > (other.outcomes[c], other.mean_normalised)
     }

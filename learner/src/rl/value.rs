@@ -15,7 +15,6 @@ use super::mlp::{Cache, Mlp};
 use super::ppo::Adam;
 use hw_sim::FieldError;
 use hw_sim::rng::SimRng;
-use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 
 /// Which baseline (`policy.baseline`).
@@ -165,36 +164,22 @@ impl ValueNet {
             let var = targets.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / n as f64;
             self.scale = var.sqrt().max(1.0);
         }
-        let mlp = Mlp::new(&self.sizes);
-        let d = self.sizes[0];
         let x = Self::rows(obs, times);
-        let mut order: Vec<usize> = (0..n).collect();
-        let mut cache = Cache::default();
-        let (mut xb, mut dout) = (Vec::new(), Vec::new());
-        let mut grad = vec![0.0; self.net.len()];
-        for _ in 0..cfg.epochs {
-            order.shuffle(rng);
-            for idx in order.chunks(cfg.minibatch) {
-                xb.clear();
-                for &i in idx {
-                    xb.extend_from_slice(&x[i * d..(i + 1) * d]);
-                }
-                mlp.forward(&self.net, &xb, &mut cache);
-                let m = idx.len() as f64;
-                dout.clear();
-                dout.extend(
-                    idx.iter()
-                        .zip(cache.output())
-                        .map(|(&i, v)| -2.0 * (v - targets[i] / self.scale) / m),
-                );
-                // Descent on the loss is ascent on its negative gradient.
-                for (g, w) in grad.iter_mut().zip(&self.net) {
-                    *g = -2.0 * cfg.l2 * w;
-                }
-                mlp.backward(&self.net, &cache, &dout, &mut grad);
-                self.adam.ascend(&mut self.net, &grad, cfg.learning_rate);
-            }
-        }
+        let y: Vec<f64> = targets.iter().map(|t| t / self.scale).collect();
+        let fit = super::mlp::MseFit {
+            epochs: cfg.epochs,
+            minibatch: cfg.minibatch,
+            learning_rate: cfg.learning_rate,
+            l2: cfg.l2,
+        };
+        fit.run(
+            &Mlp::new(&self.sizes),
+            &mut self.net,
+            &mut self.adam,
+            &x,
+            &y,
+            rng,
+        );
     }
 }
 

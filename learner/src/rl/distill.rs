@@ -1,0 +1,739 @@
+//! `learner policy distill`: DAgger (Ross, Gordon & Bagnell, AISTATS 2011)
+//! from a teacher policy that observes one thing (the privileged ground
+//! truth) to a student that observes another (the frozen representation's z
+//! means).
+//!
+//! Not the paper's training, which is TRPO on z alone: this measures what a
+//! policy on z can do when it is shown the right action in every state it
+//! reaches, and gives TRPO a starting point (`init_from`). Each round runs
+//! the environments for `steps_per_round` steps acting with the teacher's
+//! mean with probability β = `teacher_share_decay`ʳ (round r from 0, drawn
+//! per step and environment) and the student's mean otherwise, records the
+//! student's observation with the teacher's mean action (clipped to the
+//! action range, where the environment clips it), and refits the student to
+//! every round's samples so far. The observation normalisation is refitted
+//! to the same samples. After every round the student's mean runs the
+//! validation episodes; the checkpoint is `learner policy train`'s, so
+//! `policy eval`, `rl_probe` and `init_from` take it as they are.
+
+use super::gaussian::GaussianPolicy;
+use super::mlp::MseFit;
+use super::obs_norm::ObsNorm;
+use super::observe::{ObsView, Observer};
+use super::ppo::Adam;
+use super::run::{
+    Checkpoint, RunError, TrainConfig, ValidatedPolicy, ValidationPoint, checkpoint_path, evaluate,
+    read_checkpoint,
+};
+use super::train::TrainerState;
+use super::value::Baseline;
+use super::vec::{BatchEnv, VecEnv};
+use super::{RlEnvConfig, RlEnvError};
+use crate::plot::{Chart, Series};
+use crate::progress::Progress;
+use hw_sim::FieldError;
+use hw_sim::rng;
+use serde::{Deserialize, Serialize};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A distillation's configuration (TOML).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DistillConfig {
+    /// The teacher: a `learner policy train` checkpoint, whose chosen policy
+    /// (the best validated, else the best logged) acts.
+    pub teacher: PathBuf,
+    /// The student's run: its observation, policy layers, environments,
+    /// threads, seed and validation. Its environment is the teacher's (the
+    /// teacher's actions mean nothing elsewhere): an `[student.env]` that
+    /// differs from it is refused.
+    pub student: TrainConfig,
+    /// DAgger's settings.
+    #[serde(default)]
+    pub dagger: DaggerConfig,
+}
+
+/// DAgger's settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DaggerConfig {
+    /// Rounds of collection and refit.
+    pub rounds: u64,
+    /// Environment steps collected per round (over all environments).
+    pub steps_per_round: usize,
+    /// β of round r is this to the power r: round 0 acts with the teacher
+    /// alone.
+    pub teacher_share_decay: f64,
+    /// The refit after each round.
+    pub epochs: usize,
+    /// Samples per Adam step.
+    pub minibatch: usize,
+    /// Adam's step size.
+    pub learning_rate: f64,
+    /// Seed of the first collected episode (the run's episode seeds go up
+    /// from it; apart from evaluation's, from 1 000 000, and validation's).
+    pub episode_seed: u64,
+}
+
+impl Default for DaggerConfig {
+    fn default() -> Self {
+        Self {
+            rounds: 10,
+            steps_per_round: 8000,
+            teacher_share_decay: 0.5,
+            epochs: 10,
+            minibatch: 256,
+            learning_rate: 1e-3,
+            episode_seed: 5_000_000,
+        }
+    }
+}
+
+impl DaggerConfig {
+    fn validate(&self) -> Result<(), FieldError> {
+        if self.rounds == 0 {
+            return Err(FieldError::new("dagger.rounds", 0, "must be at least 1"));
+        }
+        if self.steps_per_round == 0 {
+            return Err(FieldError::new(
+                "dagger.steps_per_round",
+                0,
+                "must be at least 1",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.teacher_share_decay) {
+            return Err(FieldError::new(
+                "dagger.teacher_share_decay",
+                self.teacher_share_decay,
+                "must lie in [0, 1]",
+            ));
+        }
+        if self.epochs == 0 || self.minibatch == 0 {
+            return Err(FieldError::new(
+                "dagger.epochs / dagger.minibatch",
+                0,
+                "must be at least 1",
+            ));
+        }
+        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+            return Err(FieldError::new(
+                "dagger.learning_rate",
+                self.learning_rate,
+                "must be positive",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Reads a distillation configuration.
+pub fn read_config(path: &Path) -> Result<DistillConfig, RunError> {
+    let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
+        path: path.into(),
+        source,
+    })?;
+    toml::from_str(&text).map_err(|e| RunError::Parse {
+        path: path.into(),
+        detail: e.to_string(),
+    })
+}
+
+/// Two observers side by side: each observation is the first's values,
+/// then the second's.
+pub struct Pair {
+    first: Arc<dyn Observer>,
+    second: Arc<dyn Observer>,
+}
+
+impl Pair {
+    /// `first`'s observation followed by `second`'s.
+    pub fn new(first: Arc<dyn Observer>, second: Arc<dyn Observer>) -> Self {
+        Self { first, second }
+    }
+}
+
+impl Observer for Pair {
+    fn dim(&self) -> usize {
+        self.first.dim() + self.second.dim()
+    }
+
+    fn needs_camera(&self) -> bool {
+        self.first.needs_camera() || self.second.needs_camera()
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        let (a, b) = (self.first.dim(), self.second.dim());
+        let mut fa = vec![0.0; views.len() * a];
+        let mut fb = vec![0.0; views.len() * b];
+        self.first.observe(views, &mut fa);
+        self.second.observe(views, &mut fb);
+        for (i, o) in out.chunks_exact_mut(a + b).enumerate() {
+            o[..a].copy_from_slice(&fa[i * a..(i + 1) * a]);
+            o[a..].copy_from_slice(&fb[i * b..(i + 1) * b]);
+        }
+    }
+
+    fn rejected(&self) -> u64 {
+        self.first.rejected() + self.second.rejected()
+    }
+}
+
+/// One round's samples: the student's observations (as observed, not
+/// normalised) and the teacher's clipped mean actions.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Samples {
+    /// Observation size.
+    pub obs_dim: usize,
+    /// Action size.
+    pub act_dim: usize,
+    /// Observations, samples × `obs_dim`.
+    pub obs: Vec<f32>,
+    /// Target actions, samples × `act_dim`.
+    pub actions: Vec<f32>,
+}
+
+const MAGIC: &[u8; 8] = b"DAGGER01";
+
+impl Samples {
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.actions.len() / self.act_dim.max(1)
+    }
+
+    /// True when none are held.
+    pub fn is_empty(&self) -> bool {
+        self.actions.is_empty()
+    }
+
+    /// Writes the samples (a header, then little-endian f32s), atomically.
+    pub fn write(&self, path: &Path) -> Result<(), RunError> {
+        let mut b = Vec::with_capacity(32 + 4 * (self.obs.len() + self.actions.len()));
+        b.extend_from_slice(MAGIC);
+        for v in [self.obs_dim, self.act_dim, self.len()] {
+            b.extend_from_slice(&(v as u64).to_le_bytes());
+        }
+        for v in self.obs.iter().chain(&self.actions) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        crate::write_atomic(path, &b).map_err(|source| RunError::Io {
+            path: path.into(),
+            source,
+        })
+    }
+
+    /// Reads what [`Samples::write`] wrote; a file of another format or a
+    /// truncated one is an error naming it.
+    pub fn read(path: &Path) -> Result<Self, RunError> {
+        let bad = |detail: String| RunError::Parse {
+            path: path.into(),
+            detail,
+        };
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|mut f| f.read_to_end(&mut bytes))
+            .map_err(|source| RunError::Io {
+                path: path.into(),
+                source,
+            })?;
+        if bytes.len() < 32 || &bytes[..8] != MAGIC {
+            return Err(bad("not a DAgger samples file (no DAGGER01 header)".into()));
+        }
+        let u = |k: usize| u64::from_le_bytes(bytes[8 + 8 * k..16 + 8 * k].try_into().unwrap());
+        let (od, ad, n) = (u(0) as usize, u(1) as usize, u(2) as usize);
+        let values = n.checked_mul(od + ad).filter(|v| 32 + 4 * v == bytes.len());
+        let Some(values) = values else {
+            return Err(bad(format!(
+                "{} bytes, expected {} for {n} samples of {od} + {ad} values (truncated?)",
+                bytes.len(),
+                32 + 4 * n.saturating_mul(od + ad)
+            )));
+        };
+        let f: Vec<f32> = bytes[32..]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        debug_assert_eq!(f.len(), values);
+        Ok(Self {
+            obs_dim: od,
+            act_dim: ad,
+            actions: f[n * od..].to_vec(),
+            obs: f[..n * od].to_vec(),
+        })
+    }
+}
+
+/// One round's record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoundPoint {
+    /// Round (from 0).
+    pub round: u64,
+    /// Its teacher share β.
+    pub beta: f64,
+    /// Samples after it, all rounds.
+    pub samples: usize,
+    /// The previous student's mean squared error (summed over the action's
+    /// components) on this round's samples before the refit: its error on
+    /// the states it led to.
+    pub error_before: f64,
+    /// `error_before` per action component (Δx, Δy, Δz, Δroll).
+    pub error_before_parts: Vec<f64>,
+    /// The refitted student's error on every round's samples so far.
+    pub error_after: f64,
+    /// `error_after` per action component.
+    pub error_after_parts: Vec<f64>,
+    /// The refitted student's validation.
+    pub validation: ValidationPoint,
+}
+
+/// Why the student's configuration cannot be distilled into.
+fn refuse(detail: String, path: &Path) -> RunError {
+    RunError::Parse {
+        path: path.into(),
+        detail,
+    }
+}
+
+fn round_path(out: &Path, round: u64) -> PathBuf {
+    out.join("rounds").join(format!("round-{round:03}.bin"))
+}
+
+/// Runs (or, with `resume`, continues in `out`) a distillation, writing
+/// `checkpoint.json`, `rounds/round-NNN.bin` (each round's samples),
+/// `distill.csv` and `distill.png` into `out`. Ctrl-C (`stop`) drops the
+/// round in progress; the finished ones are kept.
+pub fn distill(
+    cfg: DistillConfig,
+    out: &Path,
+    resume: bool,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<Checkpoint, RunError> {
+    cfg.dagger.validate().map_err(RlEnvError::from)?;
+    let teacher_ckpt = read_checkpoint(&cfg.teacher)?;
+    let teacher = teacher_ckpt.chosen_policy(false);
+    eprintln!("learner: teacher: {} of {}", teacher, cfg.teacher.display());
+    let teacher = teacher.policy.clone();
+    let mut student_cfg = cfg.student.clone();
+    if student_cfg.env != RlEnvConfig::default() && student_cfg.env != teacher_ckpt.config.env {
+        return Err(refuse(
+            "[student.env] differs from the teacher's environment; the student acts in the \
+             teacher's (leave [student.env] out)"
+                .into(),
+            &cfg.teacher,
+        ));
+    }
+    student_cfg.env = teacher_ckpt.config.env.clone();
+    // The checkpoint's config says what the student observes; TRPO from
+    // it (`init_from`) needs normalisation on, as the student has it.
+    student_cfg.policy.normalise_observations = true;
+    student_cfg.init_from = None;
+    std::fs::create_dir_all(out.join("rounds")).map_err(|source| RunError::Io {
+        path: out.into(),
+        source,
+    })?;
+
+    let t_obs = teacher_ckpt
+        .config
+        .observation
+        .observer_on(student_cfg.threads)?;
+    let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
+    let (td, sd) = (t_obs.dim(), s_obs.dim());
+    if teacher.sizes[0] != td {
+        return Err(refuse(
+            format!(
+                "the teacher's policy takes {} values, its observer gives {td}",
+                teacher.sizes[0]
+            ),
+            &cfg.teacher,
+        ));
+    }
+    let mut env = VecEnv::new(
+        &student_cfg.env,
+        student_cfg.num_envs,
+        Arc::new(Pair::new(t_obs, s_obs)),
+        student_cfg.threads,
+    )?;
+    let ad = env.act_dim();
+
+    let ckpt_path = checkpoint_path(out);
+    let (mut state, mut rounds, mut best) = if resume && ckpt_path.exists() {
+        let c = read_checkpoint(&ckpt_path)?;
+        if c.config.observation != student_cfg.observation {
+            return Err(refuse(
+                format!(
+                    "resuming: it observes {:?}, the configuration {:?}",
+                    c.config.observation, student_cfg.observation
+                ),
+                &ckpt_path,
+            ));
+        }
+        let rounds = read_rounds(out)?;
+        (c.state, rounds, c.best_validated)
+    } else {
+        let mut r = rng::seeded(student_cfg.seed, 900);
+        let mut policy = GaussianPolicy::new(
+            sd,
+            &student_cfg.policy.hidden,
+            ad,
+            student_cfg.policy.init_log_std,
+            &mut r,
+        );
+        // TRPO from here explores as the teacher did at the end.
+        policy.log_std = teacher.log_std.clone();
+        policy.obs_norm = Some(ObsNorm::new(sd, student_cfg.policy.observation_clip));
+        let mut r = rng::seeded(student_cfg.seed, 901);
+        let baseline = Baseline::new(
+            student_cfg.policy.baseline,
+            sd,
+            &student_cfg.policy.value,
+            &mut r,
+        );
+        let state = TrainerState {
+            policy,
+            baseline,
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed: student_cfg.seed,
+            adam: Adam::default(),
+        };
+        (state, Vec::new(), None)
+    };
+    let mut data = Samples {
+        obs_dim: sd,
+        act_dim: ad,
+        ..Default::default()
+    };
+    for r in 0..state.iteration {
+        let s = Samples::read(&round_path(out, r))?;
+        if (s.obs_dim, s.act_dim) != (sd, ad) {
+            return Err(refuse(
+                format!(
+                    "samples of {} + {} values; this run's are {sd} + {ad}",
+                    s.obs_dim, s.act_dim
+                ),
+                &round_path(out, r),
+            ));
+        }
+        data.obs.extend_from_slice(&s.obs);
+        data.actions.extend_from_slice(&s.actions);
+    }
+    rounds.truncate(state.iteration as usize);
+
+    let d = &cfg.dagger;
+    let progress = Progress::new(d.rounds * d.steps_per_round as u64, "steps");
+    progress.resume_at(state.iteration * d.steps_per_round as u64);
+    while state.iteration < d.rounds {
+        let r = state.iteration;
+        // A stop drops the round: its counters go back to its start.
+        let before = state.clone();
+        let student = state.policy.clone();
+        let beta = d.teacher_share_decay.powi(r as i32);
+        let Some(new) = collect(
+            &mut env, &teacher, &student, td, beta, &cfg, &mut state, stop,
+        )?
+        else {
+            state = before;
+            eprintln!("learner: stopped in round {r}; --resume collects it again");
+            break;
+        };
+        new.write(&round_path(out, r))?;
+        let error_before_parts = action_error(&student, &new);
+        data.obs.extend_from_slice(&new.obs);
+        data.actions.extend_from_slice(&new.actions);
+
+        // Refit the normalisation and the network to everything so far.
+        let obs: Vec<f64> = data.obs.iter().map(|&v| v as f64).collect();
+        let targets: Vec<f64> = data.actions.iter().map(|&v| v as f64).collect();
+        let mut norm = ObsNorm::new(sd, student_cfg.policy.observation_clip);
+        norm.update(&obs);
+        state.policy.obs_norm = Some(norm);
+        let inputs = state.policy.inputs(&obs);
+        let fit = MseFit {
+            epochs: d.epochs,
+            minibatch: d.minibatch,
+            learning_rate: d.learning_rate,
+            l2: 0.0,
+        };
+        let mut frng = rng::seeded(student_cfg.seed, (4 << 32) + r);
+        let mlp = state.policy.mlp();
+        fit.run(
+            &mlp,
+            &mut state.policy.net,
+            &mut state.adam,
+            &inputs,
+            &targets,
+            &mut frng,
+        );
+        let error_after_parts = action_error(&state.policy, &data);
+        let (error_before, error_after) = (
+            error_before_parts.iter().sum::<f64>(),
+            error_after_parts.iter().sum::<f64>(),
+        );
+        state.iteration += 1;
+
+        let v = &student_cfg.validation;
+        let report = evaluate(&state.policy, &student_cfg, v.episodes.max(1), v.seed, stop);
+        let report = match report {
+            Ok(x) => x,
+            Err(RunError::Stopped) => {
+                state = before;
+                eprintln!("learner: stopped in round {r}'s validation; --resume collects it again");
+                break;
+            }
+            Err(e) => return Err(e),
+        };
+        let validation = ValidationPoint {
+            iteration: state.iteration,
+            env_steps: state.env_steps,
+            outcomes: report.outcomes,
+            mean_normalised: report.mean_normalised,
+        };
+        let point = RoundPoint {
+            round: r,
+            beta,
+            samples: data.len(),
+            error_before,
+            error_before_parts,
+            error_after,
+            error_after_parts,
+            validation: validation.clone(),
+        };
+        progress.update(
+            state.iteration * d.steps_per_round as u64,
+            format!(
+                "round {r} | β {beta:.3} | {} samples | error {error_before:.3} → {error_after:.3} | \
+                 validation {:.0} % completed, reward {:.3}",
+                data.len(),
+                100.0 * validation.outcomes[super::Outcome::CompletedInsertion.index()],
+                validation.mean_normalised
+            ),
+        );
+        if best
+            .as_ref()
+            .is_none_or(|b: &ValidatedPolicy| validation.beats(&b.validation))
+        {
+            best = Some(ValidatedPolicy {
+                validation: validation.clone(),
+                policy: state.policy.clone(),
+            });
+        }
+        rounds.push(point);
+        save(out, &student_cfg, &state, &rounds, &best)?;
+    }
+    progress.finish();
+    if rounds.is_empty() && state.iteration == 0 {
+        return Err(RunError::Stopped);
+    }
+    save(out, &student_cfg, &state, &rounds, &best)
+}
+
+/// The student's mean squared error against the teacher's actions of `s`,
+/// per action component (NaN for no samples).
+fn action_error(policy: &GaussianPolicy, s: &Samples) -> Vec<f64> {
+    let k = s.act_dim;
+    let mut e = vec![0.0; k];
+    // In chunks, so that the f64 copies stay small on a long run.
+    for (obs, act) in s
+        .obs
+        .chunks(4096 * s.obs_dim)
+        .zip(s.actions.chunks(4096 * k))
+    {
+        let obs: Vec<f64> = obs.iter().map(|&v| v as f64).collect();
+        for (i, (a, &t)) in policy.means(&obs).iter().zip(act).enumerate() {
+            e[i % k] += (a - t as f64).powi(2);
+        }
+    }
+    e.iter().map(|v| v / s.len() as f64).collect()
+}
+
+/// One round's collection: `steps` steps over all environments, each acting
+/// with the teacher's mean with probability `beta`, the student's
+/// otherwise. None when stopped.
+#[allow(clippy::too_many_arguments)]
+fn collect(
+    env: &mut VecEnv,
+    teacher: &GaussianPolicy,
+    student: &GaussianPolicy,
+    td: usize,
+    beta: f64,
+    cfg: &DistillConfig,
+    state: &mut TrainerState,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<Option<Samples>, RunError> {
+    let n = env.num_envs();
+    let (od, ad) = (env.obs_dim(), env.act_dim());
+    let sd = od - td;
+    let mut pick = rng::seeded(cfg.student.seed, (5 << 32) + state.iteration);
+    let mut s = Samples {
+        obs_dim: sd,
+        act_dim: ad,
+        ..Default::default()
+    };
+    let next_seed = |state: &mut TrainerState| {
+        let seed = cfg.dagger.episode_seed + state.episodes_started;
+        state.episodes_started += 1;
+        seed
+    };
+    // Every round starts fresh episodes: a resumed round collects what the
+    // uninterrupted one would have.
+    let which: Vec<(usize, u64)> = (0..n).map(|i| (i, next_seed(state))).collect();
+    env.reset(&which)?;
+    let (mut tobs, mut sobs) = (Vec::new(), Vec::new());
+    let mut collected = 0;
+    while collected < cfg.dagger.steps_per_round {
+        if stop() {
+            return Ok(None);
+        }
+        tobs.clear();
+        sobs.clear();
+        for o in env.observations().chunks_exact(od) {
+            tobs.extend_from_slice(&o[..td]);
+            sobs.extend_from_slice(&o[td..]);
+        }
+        let mut target = teacher.means(&tobs);
+        for a in target.iter_mut() {
+            *a = if a.is_nan() { 0.0 } else { a.clamp(-1.0, 1.0) };
+        }
+        let mine = student.means(&sobs);
+        let mut act = mine.clone();
+        for i in 0..n {
+            if rng::unit(&mut pick) < beta {
+                act[i * ad..(i + 1) * ad].copy_from_slice(&target[i * ad..(i + 1) * ad]);
+            }
+        }
+        s.obs.extend(sobs.iter().map(|&v| v as f32));
+        s.actions.extend(target.iter().map(|&v| v as f32));
+        let outcomes = env.step(&act)?.to_vec();
+        collected += n;
+        state.env_steps += n as u64;
+        let done: Vec<(usize, u64)> = outcomes
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| o.done())
+            .map(|(i, _)| (i, 0))
+            .collect();
+        if !done.is_empty() {
+            let which: Vec<(usize, u64)> = done
+                .into_iter()
+                .map(|(i, _)| (i, next_seed(state)))
+                .collect();
+            env.reset(&which)?;
+        }
+    }
+    Ok(Some(s))
+}
+
+/// The rounds recorded in `out`'s `distill.json` (none when it is absent).
+fn read_rounds(out: &Path) -> Result<Vec<RoundPoint>, RunError> {
+    let path = out.join("distill.json");
+    if !path.exists() {
+        return Ok(Vec::new());
+    }
+    let text = std::fs::read_to_string(&path).map_err(|source| RunError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| RunError::Parse {
+        path,
+        detail: e.to_string(),
+    })
+}
+
+fn save(
+    out: &Path,
+    cfg: &TrainConfig,
+    state: &TrainerState,
+    rounds: &[RoundPoint],
+    best: &Option<ValidatedPolicy>,
+) -> Result<Checkpoint, RunError> {
+    let c = Checkpoint {
+        config: cfg.clone(),
+        state: state.clone(),
+        history: Vec::new(),
+        best: None,
+        validations: rounds.iter().map(|r| r.validation.clone()).collect(),
+        best_validated: best.clone(),
+    };
+    let ckpt = checkpoint_path(out);
+    write_json(&ckpt, &c)?;
+    write_json(&out.join("distill.json"), &rounds)?;
+    let mut csv = String::from(
+        "round,beta,samples,error_before,error_after,error_after_dx,error_after_dy,\
+         error_after_dz,error_after_droll,env_steps,completed_insertion,inserted_into_hole,\
+         touched_the_box,failed,mean_normalised\n",
+    );
+    for p in rounds {
+        let o = p.validation.outcomes;
+        let part = |k: usize| p.error_after_parts.get(k).copied().unwrap_or(f64::NAN);
+        csv += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            p.round,
+            p.beta,
+            p.samples,
+            p.error_before,
+            p.error_after,
+            part(0),
+            part(1),
+            part(2),
+            part(3),
+            p.validation.env_steps,
+            o[3],
+            o[2],
+            o[1],
+            o[0],
+            p.validation.mean_normalised
+        );
+    }
+    let path = out.join("distill.csv");
+    crate::write_atomic(&path, csv.as_bytes()).map_err(|source| RunError::Io { path, source })?;
+    if !rounds.is_empty() {
+        let x = |f: &dyn Fn(&RoundPoint) -> f64| {
+            rounds
+                .iter()
+                .map(|p| (p.round as f64, f(p)))
+                .collect::<Vec<_>>()
+        };
+        Chart::new(
+            "DAgger: the student's validation after each round",
+            "round",
+            "share of validation episodes / normalised reward",
+        )
+        .with(Series::line(
+            "completed insertion",
+            x(&|p| p.validation.outcomes[super::Outcome::CompletedInsertion.index()]),
+        ))
+        .with(Series::line(
+            "mean normalised reward",
+            x(&|p| p.validation.mean_normalised),
+        ))
+        .write_png(out.join("distill.png"))?;
+        Chart::new(
+            "DAgger: the student's action error",
+            "round",
+            "mean squared action error (4 components summed)",
+        )
+        .with(Series::line(
+            "on the round's new states, before the refit",
+            x(&|p| p.error_before),
+        ))
+        .with(Series::line(
+            "on all samples so far, after the refit",
+            x(&|p| p.error_after),
+        ))
+        .write_png(out.join("distill-error.png"))?;
+    }
+    Ok(c)
+}
+
+fn write_json<T: Serialize + ?Sized>(path: &Path, v: &T) -> Result<(), RunError> {
+    let bytes = serde_json::to_vec(v).map_err(|e| RunError::Parse {
+        path: path.into(),
+        detail: e.to_string(),
+    })?;
+    crate::write_atomic(path, &bytes).map_err(|source| RunError::Io {
+        path: path.into(),
+        source,
+    })
+}

@@ -1,0 +1,217 @@
+//! `learner policy distill` end to end on a tiny run: a teacher whose
+//! actions vary with the state is imitated, rounds resume from their
+//! files, a stop loses no finished round, a foreign environment is refused.
+
+use learner::rl::distill::{DistillConfig, distill, read_config};
+use learner::rl::run::{self, RunError, read_checkpoint};
+use learner::rl::{GaussianPolicy, ObservationKind};
+use std::path::Path;
+use std::process::Command;
+
+const TEACHER: &str = r#"
+seed = 3
+num_envs = 2
+threads = 2
+env_steps = 40
+checkpoint_every = 1
+
+[env]
+max_steps = 20
+
+[policy]
+batch_steps = 40
+hidden = [16, 16]
+"#;
+
+/// The student observes the ground truth as the teacher does (no
+/// representation model exists in a test), through its own network.
+fn student_config(teacher: &Path, rounds: u64) -> String {
+    format!(
+        r#"
+teacher = "{}"
+
+[student]
+seed = 4
+num_envs = 2
+threads = 2
+
+[student.policy]
+hidden = [32, 32]
+
+[student.validation]
+episodes = 1
+
+[dagger]
+rounds = {rounds}
+steps_per_round = 80
+epochs = 300
+minibatch = 16
+learning_rate = 3e-3
+"#,
+        teacher.display()
+    )
+}
+
+/// A trained teacher checkpoint whose policy is replaced by one whose mean
+/// action varies strongly with the state (a fresh policy's is near 0).
+fn teacher(dir: &Path) -> std::path::PathBuf {
+    let cfg = dir.join("teacher.toml");
+    std::fs::write(&cfg, TEACHER).unwrap();
+    let out = dir.join("teacher");
+    let o = Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["policy", "train", "--config"])
+        .arg(&cfg)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let path = out.join("checkpoint.json");
+    let mut c = read_checkpoint(&path).unwrap();
+    let mut rng = hw_sim::rng::seeded(7, 0);
+    let mut p = GaussianPolicy::new(18, &[16, 16], 4, -1.0, &mut rng);
+    p.net = p.mlp().init(&mut rng, 4.0);
+    c.state.policy = p;
+    c.best = None;
+    c.best_validated = None;
+    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn the_student_learns_the_teachers_actions_and_resumes() {
+    let dir = test_support::scratch_dir("rl-distill");
+    let teacher = teacher(dir.path());
+    let cfg_path = dir.path().join("distill.toml");
+    std::fs::write(&cfg_path, student_config(&teacher, 2)).unwrap();
+    let out = dir.path().join("student");
+    let o = Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["policy", "distill", "--config"])
+        .arg(&cfg_path)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "checkpoint.json",
+        "distill.csv",
+        "distill.json",
+        "distill.png",
+        "distill-error.png",
+        "rounds/round-000.bin",
+        "rounds/round-001.bin",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let c = read_checkpoint(&out.join("checkpoint.json")).unwrap();
+    assert_eq!((c.state.iteration, c.state.env_steps), (2, 160));
+    assert_eq!(c.validations.len(), 2);
+    assert!(c.best_validated.is_some());
+    // The student's checkpoint is a policy run's: observation, environment
+    // and normalisation as `init_from` and `policy eval` need them.
+    let teacher_cfg = read_checkpoint(&teacher).unwrap().config;
+    assert_eq!(c.config.env, teacher_cfg.env);
+    assert_eq!(c.config.observation, ObservationKind::GroundTruth);
+    assert!(c.state.policy.obs_norm.is_some());
+    assert_eq!(c.state.policy.sizes, vec![18, 32, 32, 4]);
+    let rounds: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("distill.json")).unwrap()).unwrap();
+    let err = |r: usize, k: &str| rounds[r][k].as_f64().unwrap();
+    // Round 0 acts with the teacher alone; the fresh student's error is
+    // the teacher's action spread. The refit brings it far down, and the
+    // refitted student is close on the states of round 1 too.
+    assert_eq!(rounds[0]["beta"].as_f64(), Some(1.0));
+    assert_eq!(rounds[1]["beta"].as_f64(), Some(0.5));
+    assert!(err(0, "error_before") > 0.05, "{rounds:?}");
+    assert!(
+        err(0, "error_after") < 0.1 * err(0, "error_before"),
+        "{rounds:?}"
+    );
+    assert!(
+        err(1, "error_before") < 0.7 * err(0, "error_before"),
+        "{rounds:?}"
+    );
+
+    // One more round: the first two rounds' samples are read back and the
+    // counters go on.
+    let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 3)).unwrap();
+    let c = distill(cfg.clone(), &out, true, &|| false).unwrap();
+    assert_eq!((c.state.iteration, c.state.env_steps), (3, 240));
+    let rounds: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(out.join("distill.json")).unwrap()).unwrap();
+    assert_eq!(rounds.len(), 3);
+    assert_eq!(rounds[2]["samples"].as_u64(), Some(240));
+
+    // A stop during the next round loses nothing finished.
+    let mut more = cfg.clone();
+    more.dagger.rounds = 4;
+    let c = distill(more, &out, true, &|| true).unwrap();
+    assert_eq!(c.state.iteration, 3);
+    assert_eq!(
+        read_checkpoint(&out.join("checkpoint.json"))
+            .unwrap()
+            .state
+            .iteration,
+        3
+    );
+
+    // The evaluation takes the student's checkpoint.
+    let r = run::evaluate(
+        &c.chosen_policy(false).policy.clone(),
+        &c.config,
+        1,
+        1_000_000,
+        &|| false,
+    )
+    .unwrap();
+    assert_eq!(r.episodes, 1);
+}
+
+#[test]
+fn bad_input_is_named() {
+    let dir = test_support::scratch_dir("rl-distill-bad");
+    let teacher = teacher(dir.path());
+    // Another environment than the teacher's.
+    let text = student_config(&teacher, 1) + "\n[student.env]\nmax_steps = 30\n";
+    let cfg: DistillConfig = toml::from_str(&text).unwrap();
+    match distill(cfg, &dir.path().join("a"), false, &|| false) {
+        Err(RunError::Parse { detail, .. }) => assert!(detail.contains("student.env"), "{detail}"),
+        other => panic!("{:?}", other.map(|c| c.state.iteration)),
+    }
+    // A stop before the first round: nothing to keep, said so.
+    let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 1)).unwrap();
+    assert!(matches!(
+        distill(cfg, &dir.path().join("b"), false, &|| true),
+        Err(RunError::Stopped)
+    ));
+    // A missing teacher and a bad setting name themselves.
+    let path = dir.path().join("bad.toml");
+    std::fs::write(
+        &path,
+        student_config(&dir.path().join("nowhere.json"), 1).replace("rounds = 1", "rounds = 0"),
+    )
+    .unwrap();
+    let cfg = read_config(&path).unwrap();
+    let e = distill(cfg.clone(), &dir.path().join("c"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("dagger.rounds"), "{e}");
+    let mut cfg = cfg;
+    cfg.dagger.rounds = 1;
+    let e = distill(cfg, &dir.path().join("c"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("nowhere.json"), "{e}");
+    // A truncated samples file on resume.
+    let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 1)).unwrap();
+    let out = dir.path().join("d");
+    distill(cfg.clone(), &out, false, &|| false).unwrap();
+    let f = out.join("rounds/round-000.bin");
+    let bytes = std::fs::read(&f).unwrap();
+    std::fs::write(&f, &bytes[..bytes.len() - 5]).unwrap();
+    let mut more = cfg;
+    more.dagger.rounds = 2;
+    let e = distill(more, &out, true, &|| false).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("round-000.bin") && msg.contains("truncated"),
+        "{msg}"
+    );
+}
