@@ -337,56 +337,121 @@ fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a
     m.subcols(oy.start * g.wo, oy.len() * g.wo)
 }
 
-/// A stride-1 convolution without im2col. With the input zero-padded into
-/// planes of `Hp × Wp` and the output computed over `Ho × Wp` positions (the
-/// last `k − 1` of each row are discarded), tap `(ky, kx)` reads the padded
-/// input as one matrix `[Cin, Ho·Wp]` starting at `ky·Wp + kx`: each layer
-/// is `k²` products of `[Cout, Cin]` weights with views of the padded input,
-/// and nothing is copied per tap. The depth encoder's twelve stride-1 3×3
-/// layers are most of its work.
+/// A convolution without im2col. With the input zero-padded into planes of
+/// `Hp × Wp` and the output computed over `Ho × Wp` positions (the last
+/// `k − 1` of each row are discarded), tap `(ky, kx)` of a stride-1 layer
+/// reads the padded input as one matrix `[Cin, Ho·Wp]` starting at
+/// `ky·Wp + kx`: each layer is `k²` products of `[Cout, Cin]` weights with
+/// views of the padded input, and nothing is copied per tap. The depth
+/// encoder's twelve stride-1 3×3 layers are most of its work.
+///
+/// A layer of stride s reads the same way from its input split into s²
+/// phases (phase `(ry, rx)` holds the padded positions `(s·i + ry, s·j +
+/// rx)`, planes of `⌈Hp/s⌉ × ⌈Wp/s⌉`): tap `(ky, kx)` reads phase `(ky mod
+/// s, kx mod s)` from `(ky div s, kx div s)` on, as a stride-1 tap. The
+/// split copies the input once, where im2col (and col2im, backwards) wrote
+/// `k²/s²` times the input per pass.
 #[derive(Clone, Copy, Debug)]
 struct Shifted {
-    /// Padded row length.
-    wp: usize,
-    /// Values per padded channel plane, with `k − 1` zeros after it so
-    /// that the last tap's view stays inside.
+    /// Stride.
+    s: usize,
+    /// Row length of a phase plane (the padded row length for stride 1).
+    wq: usize,
+    /// Values per phase plane of a channel, with `⌈k/s⌉ − 1` zeros after it
+    /// so that the last tap's view stays inside.
     plane: usize,
-    /// Output positions computed per channel (`Ho·Wp`).
+    /// Output positions computed per channel (`Ho·wq`).
     n: usize,
 }
 
+/// Strided layers with fewer input channels keep im2col: a tap's product
+/// would have an inner dimension of `Cin` (the RGB encoder's first layer: 3),
+/// where im2col's has `Cin·k²`.
+const PHASED_MIN_CIN: usize = 8;
+
 impl Shifted {
     fn of(g: &Geometry) -> Option<Self> {
-        (g.stride == 1 && g.k > 1).then(|| {
+        let s = g.stride;
+        let usable = if s == 1 {
+            g.k > 1
+        } else {
+            g.k >= s && g.cin >= PHASED_MIN_CIN
+        };
+        usable.then(|| {
             let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
+            let wq = wp.div_ceil(s);
             Self {
-                wp,
-                plane: hp * wp + g.k - 1,
-                n: g.ho * wp,
+                s,
+                wq,
+                plane: hp.div_ceil(s) * wq + g.k.div_ceil(s) - 1,
+                n: g.ho * wq,
             }
         })
     }
 
-    /// Where tap `t` (`ky·k + kx`) starts in a padded plane.
-    fn offset(&self, g: &Geometry, t: usize) -> usize {
-        (t / g.k) * self.wp + t % g.k
+    /// Values of one sample's split input: s² phases of `Cin` planes.
+    fn len(&self, g: &Geometry) -> usize {
+        self.s * self.s * g.cin * self.plane
     }
 
-    /// One sample's `x [Cin, H, W]` into its padded planes.
+    /// Where tap `t` (`ky·k + kx`) starts in the split input.
+    fn offset(&self, g: &Geometry, t: usize) -> usize {
+        let (ky, kx, s) = (t / g.k, t % g.k, self.s);
+        ((ky % s) * s + kx % s) * g.cin * self.plane + (ky / s) * self.wq + kx / s
+    }
+
+    /// Where input position `(c, iy, ix)` lies in the split input.
+    fn at(&self, g: &Geometry, c: usize, iy: usize, ix: usize) -> usize {
+        let (py, px, s) = (iy + g.pad, ix + g.pad, self.s);
+        ((py % s) * s + px % s) * g.cin * self.plane + c * self.plane + (py / s) * self.wq + px / s
+    }
+
+    /// One sample's `x [Cin, H, W]` into its zero-padded phases.
     fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
         xp.fill(0.0);
         for c in 0..g.cin {
             for iy in 0..g.h {
-                let at = c * self.plane + (iy + g.pad) * self.wp + g.pad;
-                xp[at..at + g.w].copy_from_slice(&x[(c * g.h + iy) * g.w..][..g.w]);
+                let src = &x[(c * g.h + iy) * g.w..][..g.w];
+                if self.s == 1 {
+                    let at = self.at(g, c, iy, 0);
+                    xp[at..at + g.w].copy_from_slice(src);
+                } else {
+                    for (ix, &v) in src.iter().enumerate() {
+                        xp[self.at(g, c, iy, ix)] = v;
+                    }
+                }
             }
         }
     }
 
-    /// The padded input seen from tap `t`: `[Cin, Ho·Wp]`.
+    /// The adjoint of [`Shifted::pad`]: the image positions of `xp` into
+    /// `dx [Cin, H, W]` (the padding's dropped).
+    fn unpad(&self, g: &Geometry, xp: &[f32], dx: &mut [f32]) {
+        for c in 0..g.cin {
+            for iy in 0..g.h {
+                let dst = &mut dx[(c * g.h + iy) * g.w..][..g.w];
+                for (ix, d) in dst.iter_mut().enumerate() {
+                    *d = xp[self.at(g, c, iy, ix)];
+                }
+            }
+        }
+    }
+
+    /// The split input seen from tap `t`: `[Cin, Ho·wq]`.
     fn view<'a>(&self, g: &Geometry, xp: &'a [f32], t: usize) -> MatRef<'a, f32> {
         let off = self.offset(g, t);
         MatRef::from_row_major_slice_with_stride(&xp[off..], g.cin, self.n, self.plane)
+    }
+
+    /// The same view, writable. Built column-major and transposed: faer
+    /// 0.24.4's `from_row_major_slice_with_stride_mut` gives its view the
+    /// two strides swapped (row stride 1, column stride the row stride), so
+    /// a product into it writes outside the view (a heap corruption,
+    /// measured here); its column-major constructor is right.
+    fn view_mut<'a>(&self, g: &Geometry, xp: &'a mut [f32], t: usize) -> MatMut<'a, f32> {
+        let off = self.offset(g, t);
+        MatMut::from_column_major_slice_with_stride_mut(&mut xp[off..], self.n, g.cin, self.plane)
+            .transpose_mut()
     }
 }
 
@@ -414,7 +479,7 @@ fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
         .zip(x.par_chunks(g.cin * g.h * g.w))
         .with_min_len(per_task(g.batch))
         .for_each_init(
-            || (vec![0.0f32; g.cin * sh.plane], vec![0.0f32; g.cout * sh.n]),
+            || (vec![0.0f32; sh.len(g)], vec![0.0f32; g.cout * sh.n]),
             |(xp, yp), (ys, xs)| {
                 sh.pad(g, xs, xp);
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
@@ -425,7 +490,7 @@ fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
                     ys.chunks_exact_mut(outs).zip(yp.chunks_exact(sh.n)).zip(b)
                 {
                     for oy in 0..g.ho {
-                        let (d, s) = (&mut row[oy * g.wo..][..g.wo], &src[oy * sh.wp..][..g.wo]);
+                        let (d, s) = (&mut row[oy * g.wo..][..g.wo], &src[oy * sh.wq..][..g.wo]);
                         for (d, s) in d.iter_mut().zip(s) {
                             *d = s + bias;
                         }
@@ -441,7 +506,7 @@ fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
     dyp.fill(0.0);
     for (co, row) in dy.chunks_exact(g.outs()).enumerate() {
         for oy in 0..g.ho {
-            dyp[co * sh.n + oy * sh.wp..][..g.wo].copy_from_slice(&row[oy * g.wo..][..g.wo]);
+            dyp[co * sh.n + oy * sh.wq..][..g.wo].copy_from_slice(&row[oy * g.wo..][..g.wo]);
         }
     }
 }
@@ -478,12 +543,36 @@ fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     forward_shifted(&gt, sh, dy, &flipped, &vec![0.0; g.cin], dx);
 }
 
+/// [`x_backward`] for a strided [`Shifted`] convolution: tap by tap, the
+/// transposed product `W_tᵀ·dy` added into the tap's view of the split
+/// input's gradient, which is then gathered back without its padding. (The
+/// discarded output positions of `dy` are zeros and add nothing.)
+fn x_backward_phased(g: &Geometry, sh: Shifted, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+    let wt = taps_major(g, w);
+    let outs = g.outs();
+    dx.par_chunks_mut(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            || (vec![0.0f32; sh.len(g)], vec![0.0f32; g.cout * sh.n]),
+            |(xp, dyp), (dxs, dys)| {
+                spread(g, sh, dys, dyp);
+                xp.fill(0.0);
+                let dym = MatRef::from_row_major_slice(dyp, g.cout, sh.n);
+                for t in 0..g.k * g.k {
+                    gemm(sh.view_mut(g, xp, t), tap(g, &wt, t).transpose(), dym, true);
+                }
+                sh.unpad(g, xp, dxs);
+            },
+        );
+}
+
 /// [`wb_backward`] for a [`Shifted`] convolution.
 fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let (kk, outs) = (g.k * g.k, g.outs());
     let zero = || {
         (
-            vec![0.0f32; g.cin * sh.plane],
+            vec![0.0f32; sh.len(g)],
             vec![0.0f32; g.cout * sh.n],
             vec![0.0f32; g.cout * g.cin * kk],
             vec![0.0f32; g.cout],
@@ -566,7 +655,8 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) 
 /// The input gradient on contiguous f32 arrays.
 fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     match Shifted::of(g) {
-        Some(_) if g.pad < g.k => x_backward_shifted(g, w, dy, dx),
+        Some(_) if g.stride == 1 && g.pad < g.k => x_backward_shifted(g, w, dy, dx),
+        Some(sh) if g.stride > 1 => x_backward_phased(g, sh, w, dy, dx),
         _ => x_backward_banded(g, w, dy, dx),
     }
 }
@@ -889,15 +979,24 @@ mod tests {
         close(conv2d(&c, x.clone()), c.forward(x), "y");
     }
 
-    /// The stride-1 path without im2col against the im2col path, on raw
-    /// arrays, one pass at a time.
+    /// The paths without im2col (stride 1; strided, on the split input)
+    /// against the im2col path, on raw arrays, one pass at a time.
     #[test]
-    fn shifted_stride_one_path_matches_im2col() {
-        for (b, cin, cout, side, k, p) in
-            [(2, 4, 3, 7, 3, 1), (1, 2, 3, 5, 3, 0), (2, 3, 5, 9, 5, 2)]
-        {
-            let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], 1, p);
-            let sh = Shifted::of(&g).expect("stride 1");
+    fn shifted_paths_match_im2col() {
+        for (b, cin, cout, side, k, s, p) in [
+            (2, 4, 3, 7, 3, 1, 1),
+            (1, 2, 3, 5, 3, 1, 0),
+            (2, 3, 5, 9, 5, 1, 2),
+            // Strided: even and odd sides, kernels 3, 5, 7, stride 3.
+            (2, 8, 3, 9, 3, 2, 1),
+            (2, 16, 3, 10, 3, 2, 1),
+            (1, 8, 4, 12, 5, 2, 2),
+            (1, 9, 2, 11, 7, 2, 3),
+            (1, 8, 2, 13, 5, 3, 2),
+            (2, 8, 3, 2, 3, 2, 1),
+        ] {
+            let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
+            let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
             let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
             let (x, w, bias) = (
@@ -906,7 +1005,7 @@ mod tests {
                 vals(cout),
             );
             let dy = vals(b * cout * g.outs());
-            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} pad {p}");
+            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
             let near = |a: &[f32], b: &[f32], pass: &str| {
                 assert_eq!(a.len(), b.len());
                 for (i, (u, v)) in a.iter().zip(b).enumerate() {
@@ -918,7 +1017,11 @@ mod tests {
             forward_banded(&g, &x, &w, &bias, &mut y2);
             near(&y1, &y2, "y");
             let (mut dx1, mut dx2) = (vec![0.0; x.len()], vec![0.0; x.len()]);
-            x_backward_shifted(&g, &w, &dy, &mut dx1);
+            if s == 1 {
+                x_backward_shifted(&g, &w, &dy, &mut dx1);
+            } else {
+                x_backward_phased(&g, sh, &w, &dy, &mut dx1);
+            }
             x_backward_banded(&g, &w, &dy, &mut dx2);
             near(&dx1, &dx2, "dx");
             let ((dw1, db1), (dw2, db2)) = (
@@ -928,6 +1031,9 @@ mod tests {
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
         }
+        // The RGB encoder's first layer (3 channels) keeps im2col.
+        let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
+        assert!(Shifted::of(&g).is_none());
     }
 
     /// The columns kept inside the image, against a direct count.
