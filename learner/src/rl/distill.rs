@@ -20,7 +20,6 @@ use super::gaussian::GaussianPolicy;
 use super::mlp::MseFit;
 use super::obs_norm::ObsNorm;
 use super::observe::{ObsView, Observer};
-use super::ppo::Adam;
 use super::run::{
     Checkpoint, RunError, TrainConfig, ValidatedPolicy, ValidationPoint, checkpoint_path, evaluate,
     read_checkpoint,
@@ -389,15 +388,7 @@ pub fn distill(
             &student_cfg.policy.value,
             &mut r,
         );
-        let state = TrainerState {
-            policy,
-            baseline,
-            iteration: 0,
-            env_steps: 0,
-            episodes_started: 0,
-            seed: student_cfg.seed,
-            adam: Adam::default(),
-        };
+        let state = TrainerState::fresh(policy, baseline, student_cfg.seed);
         (state, Vec::new(), None)
     };
     let mut data = Samples {

@@ -492,15 +492,7 @@ pub fn train(
                     &mut rng,
                 );
             }
-            Some(TrainerState {
-                policy: c.state.policy,
-                baseline,
-                iteration: 0,
-                env_steps: 0,
-                episodes_started: 0,
-                seed: cfg.seed,
-                adam: Default::default(),
-            })
+            Some(TrainerState::fresh(c.state.policy, baseline, cfg.seed))
         }
         (None, None) => None,
     };

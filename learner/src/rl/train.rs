@@ -277,10 +277,26 @@ pub struct TrainerState {
     pub episodes_started: u64,
     /// Seed of the run.
     pub seed: u64,
-    /// PPO's optimiser (empty for TRPO, which keeps no state between
-    /// updates).
+    /// PPO's optimiser, or the refit's in a distillation (`policy
+    /// distill`); empty for TRPO, which keeps no state between updates.
+    /// PPO resizes it when its parameters are not the refit's.
     #[serde(default)]
     pub adam: Adam,
+}
+
+impl TrainerState {
+    /// A run's state before its first update.
+    pub fn fresh(policy: GaussianPolicy, baseline: Baseline, seed: u64) -> Self {
+        Self {
+            policy,
+            baseline,
+            iteration: 0,
+            env_steps: 0,
+            episodes_started: 0,
+            seed,
+            adam: Adam::default(),
+        }
+    }
 }
 
 /// The training loop over a batch of environments.
@@ -315,15 +331,7 @@ impl<E: BatchEnv> Trainer<E> {
         }
         let mut rng = hw_sim::rng::seeded(seed, 901);
         let baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
-        let state = TrainerState {
-            policy,
-            baseline,
-            iteration: 0,
-            env_steps: 0,
-            episodes_started: 0,
-            seed,
-            adam: Adam::default(),
-        };
+        let state = TrainerState::fresh(policy, baseline, seed);
         Self::resume(env, cfg, state)
     }
 
