@@ -1,0 +1,141 @@
+//! How well a policy network can fit a distillation's samples offline, and
+//! where it misses: `learner policy distill` refits for a few epochs per
+//! round; this fits the saved rounds for as long as asked and scores the
+//! fit on rounds held out (other episodes), per action component, on all
+//! samples and on those where the teacher's lateral action is large (the
+//! reach towards the hole, |Δx| or |Δy| ≥ 0.5).
+//!
+//! Usage: `distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]` (HIDDEN like
+//! `64,64`, or `linear`; the last TEST_ROUNDS rounds, default 2, are the test split).
+
+use learner::rl::GaussianPolicy;
+use learner::rl::distill::Samples;
+use learner::rl::mlp::MseFit;
+use learner::rl::obs_norm::ObsNorm;
+use learner::rl::ppo::Adam;
+
+fn merge(parts: &[Samples]) -> Samples {
+    let mut all = Samples {
+        obs_dim: parts[0].obs_dim,
+        act_dim: parts[0].act_dim,
+        ..Default::default()
+    };
+    for p in parts {
+        all.obs.extend_from_slice(&p.obs);
+        all.actions.extend_from_slice(&p.actions);
+    }
+    all
+}
+
+/// Mean squared error per component over all samples and over the reach
+/// samples, with their counts.
+fn score(policy: &GaussianPolicy, s: &Samples) -> (Vec<f64>, Vec<f64>, usize) {
+    let k = s.act_dim;
+    let obs: Vec<f64> = s.obs.iter().map(|&v| v as f64).collect();
+    let m = policy.means(&obs);
+    let (mut all, mut reach, mut n_reach) = (vec![0.0; k], vec![0.0; k], 0);
+    for (p, t) in m.chunks_exact(k).zip(s.actions.chunks_exact(k)) {
+        let far = t[0].abs() >= 0.5 || t[1].abs() >= 0.5;
+        n_reach += far as usize;
+        for c in 0..k {
+            let e = (p[c] - t[c] as f64).powi(2);
+            all[c] += e;
+            if far {
+                reach[c] += e;
+            }
+        }
+    }
+    let n = s.len().max(1) as f64;
+    (
+        all.iter().map(|v| v / n).collect(),
+        reach.iter().map(|v| v / n_reach.max(1) as f64).collect(),
+        n_reach,
+    )
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]";
+    let dir = std::path::PathBuf::from(args.get(1).ok_or(usage)?);
+    let epochs: usize = args.get(2).ok_or(usage)?.parse()?;
+    // `linear`: no hidden layer.
+    let hidden: Vec<usize> = match args.get(3).ok_or(usage)?.as_str() {
+        "linear" => Vec::new(),
+        h => h.split(',').map(|v| v.parse()).collect::<Result<_, _>>()?,
+    };
+    let test_rounds: usize = args.get(4).map_or(Ok(2), |v| v.parse())?;
+    let mut rounds = Vec::new();
+    for r in 0.. {
+        let path = dir.join("rounds").join(format!("round-{r:03}.bin"));
+        if !path.exists() {
+            break;
+        }
+        rounds.push(Samples::read(&path)?);
+    }
+    if rounds.len() <= test_rounds {
+        return Err(format!("{} rounds in {}: too few", rounds.len(), dir.display()).into());
+    }
+    let split = rounds.len() - test_rounds;
+    let (train, test) = (merge(&rounds[..split]), merge(&rounds[split..]));
+    let (d, k) = (train.obs_dim, train.act_dim);
+    let mut rng = hw_sim::rng::seeded(1, 0);
+    let mut policy = GaussianPolicy::new(d, &hidden, k, 0.0, &mut rng);
+    let obs: Vec<f64> = train.obs.iter().map(|&v| v as f64).collect();
+    let targets: Vec<f64> = train.actions.iter().map(|&v| v as f64).collect();
+    let mut norm = ObsNorm::new(d, 5.0);
+    norm.update(&obs);
+    policy.obs_norm = Some(norm);
+    let inputs = policy.inputs(&obs);
+    let mut adam = Adam::default();
+    let fit = MseFit {
+        epochs: 1,
+        minibatch: 256,
+        learning_rate: 1e-3,
+        l2: 0.0,
+    };
+    let mlp = policy.mlp();
+    println!(
+        "{} train samples (rounds 0–{}), {} test (rounds {}–{}), hidden {hidden:?}",
+        train.len(),
+        split - 1,
+        test.len(),
+        split,
+        rounds.len() - 1
+    );
+    println!("epoch | train: Δx Δy Δz Δroll | test: Δx Δy Δz Δroll | test, reach samples: Δx Δy");
+    let f = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.3}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    for e in 1..=epochs {
+        fit.run(
+            &mlp,
+            &mut policy.net,
+            &mut adam,
+            &inputs,
+            &targets,
+            &mut rng,
+        );
+        if e == 1 || e % 10 == 0 || e == epochs {
+            let (tr, _, _) = score(&policy, &train);
+            let (te, reach, n) = score(&policy, &test);
+            println!(
+                "{e} | {} | {} | {} ({n} samples)",
+                f(&tr),
+                f(&te),
+                f(&reach[..2])
+            );
+        }
+    }
+    let (_, reach0, n) = score(
+        &GaussianPolicy::new(d, &hidden, k, 0.0, &mut hw_sim::rng::seeded(2, 0)),
+        &test,
+    );
+    println!(
+        "for scale, a fresh policy (mean near 0): test reach Δx Δy {} ({n} samples)",
+        f(&reach0[..2])
+    );
+    Ok(())
+}
