@@ -276,11 +276,15 @@ pub struct RoundPoint {
     /// components) on this round's samples before the refit: its error on
     /// the states it led to.
     pub error_before: f64,
-    /// `error_before` per action component (Δx, Δy, Δz, Δroll).
+    /// `error_before` per action component (Δx, Δy, Δz, Δroll; empty in
+    /// runs recorded before it was).
+    #[serde(default)]
     pub error_before_parts: Vec<f64>,
     /// The refitted student's error on every round's samples so far.
     pub error_after: f64,
-    /// `error_after` per action component.
+    /// `error_after` per action component (empty in runs recorded before
+    /// it was).
+    #[serde(default)]
     pub error_after_parts: Vec<f64>,
     /// The refitted student's validation.
     pub validation: ValidationPoint,
