@@ -206,8 +206,16 @@ fn the_shipped_policy_configurations_load() {
     let mut n = 0;
     for e in std::fs::read_dir(&dir).unwrap() {
         let path = e.unwrap().path();
-        let cfg = learner::rl::run::read_config(&path)
-            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let distill = path
+            .file_name()
+            .is_some_and(|f| f.to_string_lossy().starts_with("distill"));
+        // A distillation's file: its student is a training run's configuration.
+        let cfg = if distill {
+            learner::rl::distill::read_config(&path).map(|d| d.student)
+        } else {
+            learner::rl::run::read_config(&path)
+        }
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         cfg.env.validate().unwrap();
         cfg.policy.validate().unwrap();
         assert!(cfg.validation.every > 0, "{}", path.display());
