@@ -64,12 +64,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         h => h.split(',').map(|v| v.parse()).collect::<Result<_, _>>()?,
     };
     let test_rounds: usize = args.get(4).map_or(Ok(2), |v| v.parse())?;
+    // The rounds the checkpoint counts: a file beyond them is a round that
+    // was stopped before its record.
+    let done = learner::rl::run::read_checkpoint(&dir.join("checkpoint.json"))?
+        .state
+        .iteration;
     let mut rounds = Vec::new();
-    for r in 0.. {
+    for r in 0..done {
         let path = dir.join("rounds").join(format!("round-{r:03}.bin"));
-        if !path.exists() {
-            break;
-        }
         rounds.push(Samples::read(&path)?);
     }
     if rounds.len() <= test_rounds {

@@ -134,7 +134,7 @@ fn the_student_learns_the_teachers_actions_and_resumes() {
     );
 
     // One more round: the first two rounds' samples are read back and the
-    // counters go on.
+    // counters go on, exactly as in a run of three rounds uninterrupted.
     let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 3)).unwrap();
     let c = distill(cfg.clone(), &out, true, &|| false).unwrap();
     assert_eq!((c.state.iteration, c.state.env_steps), (3, 240));
@@ -142,19 +142,31 @@ fn the_student_learns_the_teachers_actions_and_resumes() {
         serde_json::from_slice(&std::fs::read(out.join("distill.json")).unwrap()).unwrap();
     assert_eq!(rounds.len(), 3);
     assert_eq!(rounds[2]["samples"].as_u64(), Some(240));
+    let whole = dir.path().join("whole");
+    let w = distill(cfg.clone(), &whole, false, &|| false).unwrap();
+    assert_eq!(w.state.policy, c.state.policy);
+    assert_eq!(w.state.episodes_started, c.state.episodes_started);
+    let bytes = |d: &Path| std::fs::read(d.join("rounds/round-002.bin")).unwrap();
+    assert_eq!(bytes(&whole), bytes(&out));
 
-    // A stop during the next round loses nothing finished.
+    // A stop during the next round loses nothing finished and counts
+    // nothing of the dropped round.
     let mut more = cfg.clone();
     more.dagger.rounds = 4;
-    let c = distill(more, &out, true, &|| true).unwrap();
-    assert_eq!(c.state.iteration, 3);
-    assert_eq!(
-        read_checkpoint(&out.join("checkpoint.json"))
-            .unwrap()
-            .state
-            .iteration,
-        3
-    );
+    let stopped = distill(more.clone(), &out, true, &|| true).unwrap();
+    let on_disk = read_checkpoint(&out.join("checkpoint.json")).unwrap();
+    for s in [&stopped.state, &on_disk.state] {
+        assert_eq!(
+            (s.iteration, s.env_steps, s.episodes_started),
+            (3, 240, c.state.episodes_started)
+        );
+    }
+    // A resume under other settings than the run's is refused.
+    let mut other = more;
+    other.dagger.learning_rate *= 2.0;
+    let e = distill(other, &out, true, &|| false).unwrap_err();
+    assert!(e.to_string().contains("distill-config.json"), "{e}");
+    let c = stopped;
 
     // The evaluation takes the student's checkpoint.
     let r = run::evaluate(
@@ -175,10 +187,8 @@ fn bad_input_is_named() {
     // Another environment than the teacher's.
     let text = student_config(&teacher, 1) + "\n[student.env]\nmax_steps = 30\n";
     let cfg: DistillConfig = toml::from_str(&text).unwrap();
-    match distill(cfg, &dir.path().join("a"), false, &|| false) {
-        Err(RunError::Parse { detail, .. }) => assert!(detail.contains("student.env"), "{detail}"),
-        other => panic!("{:?}", other.map(|c| c.state.iteration)),
-    }
+    let e = distill(cfg, &dir.path().join("a"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("student.env"), "{e}");
     // A stop before the first round: nothing to keep, said so.
     let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 1)).unwrap();
     assert!(matches!(

@@ -339,7 +339,7 @@ fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a
 
 /// A convolution without im2col. With the input zero-padded into planes of
 /// `Hp × Wp` and the output computed over `Ho × Wp` positions (the last
-/// `k − 1` of each row are discarded), tap `(ky, kx)` of a stride-1 layer
+/// `Wp − Wo` of each row are discarded), tap `(ky, kx)` of a stride-1 layer
 /// reads the padded input as one matrix `[Cin, Ho·Wp]` starting at
 /// `ky·Wp + kx`: each layer is `k²` products of `[Cout, Cin]` weights with
 /// views of the padded input, and nothing is copied per tap. The depth
@@ -348,7 +348,9 @@ fn columns<'a>(m: MatRef<'a, f32>, g: &Geometry, oy: &Range<usize>) -> MatRef<'a
 /// A layer of stride s reads the same way from its input split into s²
 /// phases (phase `(ry, rx)` holds the padded positions `(s·i + ry, s·j +
 /// rx)`, planes of `⌈Hp/s⌉ × ⌈Wp/s⌉`): tap `(ky, kx)` reads phase `(ky mod
-/// s, kx mod s)` from `(ky div s, kx div s)` on, as a stride-1 tap. The
+/// s, kx mod s)` from `(ky div s, kx div s)` on, as a stride-1 tap (the
+/// output computed over `Ho × wq` positions, the last `wq − Wo` of each row
+/// discarded). The
 /// split copies the input once, where im2col (and col2im, backwards) wrote
 /// `k²/s²` times the input per pass.
 #[derive(Clone, Copy, Debug)]
@@ -500,7 +502,7 @@ fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
         );
 }
 
-/// One sample's `dy [Cout, Ho·Wo]` spread into `[Cout, Ho·Wp]` with zeros
+/// One sample's `dy [Cout, Ho·Wo]` spread into `[Cout, Ho·wq]` with zeros
 /// at the discarded positions, so that they add nothing.
 fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
     dyp.fill(0.0);
@@ -514,12 +516,9 @@ fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
 /// [`x_backward`] for a stride-1 convolution: the input gradient is itself
 /// a stride-1 convolution of `dy`, padded by `k − 1 − pad`, with the kernel
 /// flipped and its channels swapped, so it takes [`forward_shifted`], whose
-/// products only read strided views. (Accumulating `Wᵀ·dy` tap by tap into
-/// strided views of a padded gradient would need faer 0.24.4's
-/// `from_row_major_slice_with_stride_mut`, which builds its view with the
-/// two strides swapped, row stride 1 and column stride the row stride, so a
-/// product into it writes outside the view: measured here, a heap
-/// corruption. The read-only constructor is right.)
+/// products only read strided views. (Strided layers accumulate `Wᵀ·dy`
+/// tap by tap into writable views instead, [`x_backward_phased`]; this
+/// path predates [`Shifted::view_mut`] and is kept, tested, for stride 1.)
 fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     let k = g.k;
     let gt = Geometry::new(
@@ -920,7 +919,10 @@ mod tests {
             // A stride-1 layer of the depth encoder's size (the shifted path).
             (2, 16, 3, 40, 3, 1, 1),
             // Strided layers in several row bands (`band_rows`), the last
-            // one short.
+            // one short: im2col's (3 and 1 input channels, the encoders'
+            // first layers) and the split input's.
+            (1, 3, 2, 128, 5, 2, 2),
+            (1, 1, 2, 256, 3, 2, 1),
             (1, 8, 2, 50, 5, 2, 2),
             (1, 16, 2, 64, 3, 2, 1),
         ];
@@ -928,7 +930,9 @@ mod tests {
             let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
             let rows = band_rows(&g);
             assert!(
-                side < 40 || s == 1 || (rows < g.ho && !g.ho.is_multiple_of(rows)),
+                side < 40
+                    || Shifted::of(&g).is_some()
+                    || (rows < g.ho && !g.ho.is_multiple_of(rows)),
                 "side {side}: meant to have several bands, the last one short"
             );
             let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
@@ -983,7 +987,7 @@ mod tests {
     /// against the im2col path, on raw arrays, one pass at a time.
     #[test]
     fn shifted_paths_match_im2col() {
-        for (b, cin, cout, side, k, s, p) in [
+        for (i, &(b, cin, cout, side, k, s, p)) in [
             (2, 4, 3, 7, 3, 1, 1),
             (1, 2, 3, 5, 3, 1, 0),
             (2, 3, 5, 9, 5, 1, 2),
@@ -994,18 +998,25 @@ mod tests {
             (1, 9, 2, 11, 7, 2, 3),
             (1, 8, 2, 13, 5, 3, 2),
             (2, 8, 3, 2, 3, 2, 1),
-        ] {
-            let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
+            (1, 8, 3, 10, 3, 3, 1),
+        ]
+        .iter()
+        .enumerate()
+        {
+            // Every other case 3 columns wider than high.
+            let width = if i % 2 == 1 { side + 3 } else { side };
+            let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
             let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
             let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
             let (x, w, bias) = (
-                vals(b * cin * side * side),
+                vals(b * cin * side * width),
                 vals(cout * cin * k * k),
                 vals(cout),
             );
             let dy = vals(b * cout * g.outs());
-            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
+            let what =
+                format!("b {b} cin {cin} cout {cout} {side}×{width} k {k} stride {s} pad {p}");
             let near = |a: &[f32], b: &[f32], pass: &str| {
                 assert_eq!(a.len(), b.len());
                 for (i, (u, v)) in a.iter().zip(b).enumerate() {

@@ -60,7 +60,9 @@ pub struct DistillConfig {
 pub struct DaggerConfig {
     /// Rounds of collection and refit.
     pub rounds: u64,
-    /// Environment steps collected per round (over all environments).
+    /// Environment steps collected per round (over all environments; a
+    /// round steps every environment alike, so it rounds this up to a
+    /// multiple of `student.num_envs`).
     pub steps_per_round: usize,
     /// β of round r is this to the power r: round 0 acts with the teacher
     /// alone.
@@ -241,14 +243,23 @@ impl Samples {
         }
         let u = |k: usize| u64::from_le_bytes(bytes[8 + 8 * k..16 + 8 * k].try_into().unwrap());
         let (od, ad, n) = (u(0) as usize, u(1) as usize, u(2) as usize);
-        let values = n.checked_mul(od + ad).filter(|v| 32 + 4 * v == bytes.len());
-        let Some(values) = values else {
+        let expected = od
+            .checked_add(ad)
+            .and_then(|per| n.checked_mul(per))
+            .and_then(|v| v.checked_mul(4))
+            .and_then(|b| b.checked_add(32));
+        let Some(expected) = expected else {
             return Err(bad(format!(
-                "{} bytes, expected {} for {n} samples of {od} + {ad} values (truncated?)",
-                bytes.len(),
-                32 + 4 * n.saturating_mul(od + ad)
+                "a header of {n} samples of {od} + {ad} values (corrupt)"
             )));
         };
+        if expected != bytes.len() {
+            return Err(bad(format!(
+                "{} bytes, expected {expected} for {n} samples of {od} + {ad} values (truncated?)",
+                bytes.len()
+            )));
+        }
+        let values = (expected - 32) / 4;
         let f: Vec<f32> = bytes[32..]
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
@@ -318,23 +329,71 @@ pub fn distill(
     eprintln!("learner: teacher: {} of {}", teacher, cfg.teacher.display());
     let teacher = teacher.policy.clone();
     let mut student_cfg = cfg.student.clone();
+    let field = |name: &str, value: &dyn std::fmt::Display, why: &str| -> RunError {
+        RlEnvError::from(FieldError::new(name, value, why)).into()
+    };
     if student_cfg.env != RlEnvConfig::default() && student_cfg.env != teacher_ckpt.config.env {
-        return Err(refuse(
-            "[student.env] differs from the teacher's environment; the student acts in the \
-             teacher's (leave [student.env] out)"
-                .into(),
-            &cfg.teacher,
+        return Err(field(
+            "student.env",
+            &"(set)",
+            "the student acts in the teacher's environment (its checkpoint's); leave \
+             [student.env] out",
+        ));
+    }
+    if let Some(p) = &student_cfg.init_from {
+        return Err(field(
+            "student.init_from",
+            &p.display(),
+            "a distilled student starts from fresh weights",
+        ));
+    }
+    if student_cfg.validation.episodes == 0 {
+        return Err(field(
+            "student.validation.episodes",
+            &0,
+            "must be at least 1 (every round is validated)",
         ));
     }
     student_cfg.env = teacher_ckpt.config.env.clone();
     // The checkpoint's config says what the student observes; TRPO from
     // it (`init_from`) needs normalisation on, as the student has it.
     student_cfg.policy.normalise_observations = true;
-    student_cfg.init_from = None;
+    student_cfg.policy.validate().map_err(RlEnvError::from)?;
+    let ckpt_path = checkpoint_path(out);
+    let fresh = !(resume && ckpt_path.exists());
+    if fresh {
+        // A fresh run's rounds are its own: older files would be read by
+        // `distill_fit` and by a later resume.
+        let _ = std::fs::remove_dir_all(out.join("rounds"));
+    }
     std::fs::create_dir_all(out.join("rounds")).map_err(|source| RunError::Io {
         path: out.into(),
         source,
     })?;
+    // Everything but the number of rounds must stay as the run started, or
+    // a resumed run would not be the one its files describe.
+    let cfg_path = out.join("distill-config.json");
+    let mut recorded = cfg.clone();
+    recorded.dagger.rounds = 0;
+    if !fresh && cfg_path.exists() {
+        let text = std::fs::read_to_string(&cfg_path).map_err(|source| RunError::Io {
+            path: cfg_path.clone(),
+            source,
+        })?;
+        let was: DistillConfig = serde_json::from_str(&text).map_err(|e| RunError::Parse {
+            path: cfg_path.clone(),
+            detail: e.to_string(),
+        })?;
+        if was != recorded {
+            return Err(refuse(
+                "resuming: the configuration differs from the one the run started with in \
+                 more than dagger.rounds"
+                    .into(),
+                &cfg_path,
+            ));
+        }
+    }
+    write_json(&cfg_path, &recorded)?;
 
     let t_obs = teacher_ckpt
         .config
@@ -359,8 +418,7 @@ pub fn distill(
     )?;
     let ad = env.act_dim();
 
-    let ckpt_path = checkpoint_path(out);
-    let (mut state, mut rounds, mut best) = if resume && ckpt_path.exists() {
+    let (mut state, mut rounds, mut best) = if !fresh {
         let c = read_checkpoint(&ckpt_path)?;
         if c.config.observation != student_cfg.observation {
             return Err(refuse(
@@ -413,6 +471,16 @@ pub fn distill(
         }
         data.obs.extend_from_slice(&s.obs);
         data.actions.extend_from_slice(&s.actions);
+    }
+    if rounds.len() < state.iteration as usize {
+        return Err(refuse(
+            format!(
+                "{} rounds recorded, the checkpoint has {}",
+                rounds.len(),
+                state.iteration
+            ),
+            &out.join("distill.json"),
+        ));
     }
     rounds.truncate(state.iteration as usize);
 
@@ -651,9 +719,9 @@ fn save(
         validations: rounds.iter().map(|r| r.validation.clone()).collect(),
         best_validated: best.clone(),
     };
-    let ckpt = checkpoint_path(out);
-    write_json(&ckpt, &c)?;
+    // The record first: a checkpoint never counts a round it lacks.
     write_json(&out.join("distill.json"), &rounds)?;
+    write_json(&checkpoint_path(out), &c)?;
     let mut csv = String::from(
         "round,beta,samples,error_before,error_after,error_after_dx,error_after_dy,\
          error_after_dz,error_after_droll,env_steps,completed_insertion,inserted_into_hole,\

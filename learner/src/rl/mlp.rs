@@ -244,8 +244,9 @@ impl MseFit {
     /// Fits `params` to the rows of `y` (batch × output) from the rows of
     /// `x` (batch × input): per minibatch one Adam step on the squared error
     /// summed over outputs and averaged over samples, plus the L2 penalty.
-    /// Returns the mean of that error over the last epoch's minibatches
-    /// (before each step; NaN when there is nothing to fit).
+    /// Returns the mean of the squared error (without the L2 term) over the
+    /// last epoch's minibatches, each before its step; NaN when there is
+    /// nothing to fit.
     pub fn run(
         &self,
         mlp: &Mlp,
