@@ -800,3 +800,42 @@ fn write_json<T: Serialize + ?Sized>(path: &Path, v: &T) -> Result<(), RunError>
         source,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Writes `value` `dim` times per view.
+    struct Constant {
+        dim: usize,
+        value: f64,
+    }
+
+    impl Observer for Constant {
+        fn dim(&self) -> usize {
+            self.dim
+        }
+        fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+            assert_eq!(out.len(), views.len() * self.dim);
+            out.fill(self.value);
+        }
+    }
+
+    /// The teacher's values first, then the student's, per environment:
+    /// what `collect` splits at the teacher's size.
+    #[test]
+    fn a_pair_puts_the_first_observers_values_first() {
+        let mut env = super::super::RlEnv::new(&RlEnvConfig::default()).unwrap();
+        env.reset(1, false).unwrap();
+        let pair = Pair::new(
+            Arc::new(Constant { dim: 2, value: 1.0 }),
+            Arc::new(Constant { dim: 3, value: 2.0 }),
+        );
+        assert_eq!(pair.dim(), 5);
+        assert!(!pair.needs_camera());
+        let view = env.view().unwrap();
+        let mut out = vec![0.0; 10];
+        pair.observe(&[env.view().unwrap(), view], &mut out);
+        assert_eq!(out, [1.0, 1.0, 2.0, 2.0, 2.0, 1.0, 1.0, 2.0, 2.0, 2.0]);
+    }
+}
