@@ -123,6 +123,11 @@ fn the_student_learns_the_teachers_actions_and_resumes() {
     // refitted student is close on the states of round 1 too.
     assert_eq!(rounds[0]["beta"].as_f64(), Some(1.0));
     assert_eq!(rounds[1]["beta"].as_f64(), Some(0.5));
+    // Round 0 is the teacher's alone; in round 1 the student acts in about
+    // half of the 80 steps (β drawn per step and environment, seeded).
+    let by_student = |r: usize| rounds[r]["student_steps"].as_u64().unwrap();
+    assert_eq!(by_student(0), 0);
+    assert!((24..=56).contains(&by_student(1)), "{rounds:?}");
     assert!(err(0, "error_before") > 0.05, "{rounds:?}");
     assert!(
         err(0, "error_after") < 0.1 * err(0, "error_before"),

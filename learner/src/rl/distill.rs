@@ -283,6 +283,10 @@ pub struct RoundPoint {
     pub beta: f64,
     /// Samples after it, all rounds.
     pub samples: usize,
+    /// Environment steps of the round that took the student's action (the
+    /// others took the teacher's; absent in runs recorded before it was).
+    #[serde(default)]
+    pub student_steps: usize,
     /// The previous student's mean squared error (summed over the action's
     /// components) on this round's samples before the refit: its error on
     /// the states it led to.
@@ -493,7 +497,7 @@ pub fn distill(
         let before = state.clone();
         let student = state.policy.clone();
         let beta = d.teacher_share_decay.powi(r as i32);
-        let Some(new) = collect(
+        let Some((new, student_steps)) = collect(
             &mut env, &teacher, &student, td, beta, &cfg, &mut state, stop,
         )?
         else {
@@ -557,6 +561,7 @@ pub fn distill(
             round: r,
             beta,
             samples: data.len(),
+            student_steps,
             error_before,
             error_before_parts,
             error_after,
@@ -613,7 +618,8 @@ fn action_error(policy: &GaussianPolicy, s: &Samples) -> Vec<f64> {
 
 /// One round's collection: `steps` steps over all environments, each acting
 /// with the teacher's mean with probability `beta`, the student's
-/// otherwise. None when stopped.
+/// otherwise; with the number of steps the student acted. None when
+/// stopped.
 #[allow(clippy::too_many_arguments)]
 fn collect(
     env: &mut VecEnv,
@@ -624,7 +630,7 @@ fn collect(
     cfg: &DistillConfig,
     state: &mut TrainerState,
     stop: &(dyn Fn() -> bool + Sync),
-) -> Result<Option<Samples>, RunError> {
+) -> Result<Option<(Samples, usize)>, RunError> {
     let n = env.num_envs();
     let (od, ad) = (env.obs_dim(), env.act_dim());
     let sd = od - td;
@@ -644,7 +650,7 @@ fn collect(
     let which: Vec<(usize, u64)> = (0..n).map(|i| (i, next_seed(state))).collect();
     env.reset(&which)?;
     let (mut tobs, mut sobs) = (Vec::new(), Vec::new());
-    let mut collected = 0;
+    let (mut collected, mut by_student) = (0, 0);
     while collected < cfg.dagger.steps_per_round {
         if stop() {
             return Ok(None);
@@ -664,6 +670,8 @@ fn collect(
         for i in 0..n {
             if rng::unit(&mut pick) < beta {
                 act[i * ad..(i + 1) * ad].copy_from_slice(&target[i * ad..(i + 1) * ad]);
+            } else {
+                by_student += 1;
             }
         }
         s.obs.extend(sobs.iter().map(|&v| v as f32));
@@ -685,7 +693,7 @@ fn collect(
             env.reset(&which)?;
         }
     }
-    Ok(Some(s))
+    Ok(Some((s, by_student)))
 }
 
 /// The rounds recorded in `out`'s `distill.json` (none when it is absent).
@@ -723,7 +731,7 @@ fn save(
     write_json(&out.join("distill.json"), &rounds)?;
     write_json(&checkpoint_path(out), &c)?;
     let mut csv = String::from(
-        "round,beta,samples,error_before,error_after,error_after_dx,error_after_dy,\
+        "round,beta,samples,student_steps,error_before,error_after,error_after_dx,error_after_dy,\
          error_after_dz,error_after_droll,env_steps,completed_insertion,inserted_into_hole,\
          touched_the_box,failed,mean_normalised\n",
     );
@@ -731,10 +739,11 @@ fn save(
         let o = p.validation.outcomes;
         let part = |k: usize| p.error_after_parts.get(k).copied().unwrap_or(f64::NAN);
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             p.round,
             p.beta,
             p.samples,
+            p.student_steps,
             p.error_before,
             p.error_after,
             part(0),
