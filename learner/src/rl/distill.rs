@@ -22,7 +22,7 @@ use super::obs_norm::ObsNorm;
 use super::observe::{ObsView, Observer};
 use super::run::{
     Checkpoint, RunError, TrainConfig, ValidatedPolicy, ValidationPoint, checkpoint_path, evaluate,
-    read_checkpoint,
+    read_checkpoint, read_json, read_toml, write_json,
 };
 use super::train::TrainerState;
 use super::value::Baseline;
@@ -33,7 +33,6 @@ use crate::progress::Progress;
 use hw_sim::FieldError;
 use hw_sim::rng;
 use serde::{Deserialize, Serialize};
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -131,14 +130,7 @@ impl DaggerConfig {
 
 /// Reads a distillation configuration.
 pub fn read_config(path: &Path) -> Result<DistillConfig, RunError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
-        path: path.into(),
-        source,
-    })?;
-    toml::from_str(&text).map_err(|e| RunError::Parse {
-        path: path.into(),
-        detail: e.to_string(),
-    })
+    read_toml(path)
 }
 
 /// Two observers side by side: each observation is the first's values,
@@ -231,13 +223,10 @@ impl Samples {
             path: path.into(),
             detail,
         };
-        let mut bytes = Vec::new();
-        std::fs::File::open(path)
-            .and_then(|mut f| f.read_to_end(&mut bytes))
-            .map_err(|source| RunError::Io {
-                path: path.into(),
-                source,
-            })?;
+        let bytes = std::fs::read(path).map_err(|source| RunError::Io {
+            path: path.into(),
+            source,
+        })?;
         if bytes.len() < 32 || &bytes[..8] != MAGIC {
             return Err(bad("not a DAgger samples file (no DAGGER01 header)".into()));
         }
@@ -380,14 +369,7 @@ pub fn distill(
     let mut recorded = cfg.clone();
     recorded.dagger.rounds = 0;
     if !fresh && cfg_path.exists() {
-        let text = std::fs::read_to_string(&cfg_path).map_err(|source| RunError::Io {
-            path: cfg_path.clone(),
-            source,
-        })?;
-        let was: DistillConfig = serde_json::from_str(&text).map_err(|e| RunError::Parse {
-            path: cfg_path.clone(),
-            detail: e.to_string(),
-        })?;
+        let was: DistillConfig = read_json(&cfg_path)?;
         if was != recorded {
             return Err(refuse(
                 "resuming: the configuration differs from the one the run started with in \
@@ -533,7 +515,7 @@ pub fn distill(
             &targets,
             &mut frng,
         );
-        let error_after_parts = action_error(&state.policy, &data);
+        let error_after_parts = input_error(&state.policy, &inputs, &targets);
         let (error_before, error_after) = (
             error_before_parts.iter().sum::<f64>(),
             error_after_parts.iter().sum::<f64>(),
@@ -541,7 +523,7 @@ pub fn distill(
         state.iteration += 1;
 
         let v = &student_cfg.validation;
-        let report = evaluate(&state.policy, &student_cfg, v.episodes.max(1), v.seed, stop);
+        let report = evaluate(&state.policy, &student_cfg, v.episodes, v.seed, stop);
         let report = match report {
             Ok(x) => x,
             Err(RunError::Stopped) => {
@@ -600,20 +582,24 @@ pub fn distill(
 /// The student's mean squared error against the teacher's actions of `s`,
 /// per action component (NaN for no samples).
 fn action_error(policy: &GaussianPolicy, s: &Samples) -> Vec<f64> {
-    let k = s.act_dim;
+    let obs: Vec<f64> = s.obs.iter().map(|&v| v as f64).collect();
+    let targets: Vec<f64> = s.actions.iter().map(|&v| v as f64).collect();
+    input_error(policy, &policy.inputs(&obs), &targets)
+}
+
+/// The same from the network's inputs ([`GaussianPolicy::inputs`]) and the
+/// targets, in chunks: the activations of a whole run's samples at once
+/// would take hundreds of MB.
+fn input_error(policy: &GaussianPolicy, inputs: &[f64], targets: &[f64]) -> Vec<f64> {
+    let (d, k) = (policy.sizes[0], policy.act_dim());
     let mut e = vec![0.0; k];
-    // In chunks, so that the f64 copies stay small on a long run.
-    for (obs, act) in s
-        .obs
-        .chunks(4096 * s.obs_dim)
-        .zip(s.actions.chunks(4096 * k))
-    {
-        let obs: Vec<f64> = obs.iter().map(|&v| v as f64).collect();
-        for (i, (a, &t)) in policy.means(&obs).iter().zip(act).enumerate() {
-            e[i % k] += (a - t as f64).powi(2);
+    for (x, t) in inputs.chunks(4096 * d).zip(targets.chunks(4096 * k)) {
+        for (i, (a, t)) in policy.net_means(x).iter().zip(t).enumerate() {
+            e[i % k] += (a - t).powi(2);
         }
     }
-    e.iter().map(|v| v / s.len() as f64).collect()
+    let n = (targets.len() / k.max(1)) as f64;
+    e.iter().map(|v| v / n).collect()
 }
 
 /// One round's collection: `steps` steps over all environments, each acting
@@ -665,8 +651,7 @@ fn collect(
         for a in target.iter_mut() {
             *a = if a.is_nan() { 0.0 } else { a.clamp(-1.0, 1.0) };
         }
-        let mine = student.means(&sobs);
-        let mut act = mine.clone();
+        let mut act = student.means(&sobs);
         for i in 0..n {
             if rng::unit(&mut pick) < beta {
                 act[i * ad..(i + 1) * ad].copy_from_slice(&target[i * ad..(i + 1) * ad]);
@@ -679,17 +664,13 @@ fn collect(
         let outcomes = env.step(&act)?.to_vec();
         collected += n;
         state.env_steps += n as u64;
-        let done: Vec<(usize, u64)> = outcomes
+        let which: Vec<(usize, u64)> = outcomes
             .iter()
             .enumerate()
             .filter(|(_, o)| o.done())
-            .map(|(i, _)| (i, 0))
+            .map(|(i, _)| (i, next_seed(state)))
             .collect();
-        if !done.is_empty() {
-            let which: Vec<(usize, u64)> = done
-                .into_iter()
-                .map(|(i, _)| (i, next_seed(state)))
-                .collect();
+        if !which.is_empty() {
             env.reset(&which)?;
         }
     }
@@ -699,17 +680,11 @@ fn collect(
 /// The rounds recorded in `out`'s `distill.json` (none when it is absent).
 fn read_rounds(out: &Path) -> Result<Vec<RoundPoint>, RunError> {
     let path = out.join("distill.json");
-    if !path.exists() {
-        return Ok(Vec::new());
+    if path.exists() {
+        read_json(&path)
+    } else {
+        Ok(Vec::new())
     }
-    let text = std::fs::read_to_string(&path).map_err(|source| RunError::Io {
-        path: path.clone(),
-        source,
-    })?;
-    serde_json::from_str(&text).map_err(|e| RunError::Parse {
-        path,
-        detail: e.to_string(),
-    })
 }
 
 fn save(
@@ -797,17 +772,6 @@ fn save(
         .write_png(out.join("distill-error.png"))?;
     }
     Ok(c)
-}
-
-fn write_json<T: Serialize + ?Sized>(path: &Path, v: &T) -> Result<(), RunError> {
-    let bytes = serde_json::to_vec(v).map_err(|e| RunError::Parse {
-        path: path.into(),
-        detail: e.to_string(),
-    })?;
-    crate::write_atomic(path, &bytes).map_err(|source| RunError::Io {
-        path: path.into(),
-        source,
-    })
 }
 
 #[cfg(test)]

@@ -244,9 +244,6 @@ impl MseFit {
     /// Fits `params` to the rows of `y` (batch × output) from the rows of
     /// `x` (batch × input): per minibatch one Adam step on the squared error
     /// summed over outputs and averaged over samples, plus the L2 penalty.
-    /// Returns the mean of the squared error (without the L2 term) over the
-    /// last epoch's minibatches, each before its step; NaN when there is
-    /// nothing to fit.
     pub fn run(
         &self,
         mlp: &Mlp,
@@ -255,21 +252,16 @@ impl MseFit {
         x: &[f64],
         y: &[f64],
         rng: &mut SimRng,
-    ) -> f64 {
+    ) {
         let (d, k) = (mlp.input(), mlp.output());
         let n = x.len() / d;
         assert_eq!(y.len(), n * k, "one target row per input row");
-        if n == 0 || self.epochs == 0 {
-            return f64::NAN;
-        }
         let mut order: Vec<usize> = (0..n).collect();
         let mut cache = Cache::default();
         let (mut xb, mut dout) = (Vec::new(), Vec::new());
         let mut grad = vec![0.0; params.len()];
-        let mut last = (0.0, 0usize);
         for _ in 0..self.epochs {
             order.shuffle(rng);
-            last = (0.0, 0);
             for idx in order.chunks(self.minibatch.max(1)) {
                 xb.clear();
                 for &i in idx {
@@ -278,15 +270,11 @@ impl MseFit {
                 mlp.forward(params, &xb, &mut cache);
                 let m = idx.len() as f64;
                 dout.clear();
-                let mut loss = 0.0;
                 for (r, &i) in idx.iter().enumerate() {
                     for c in 0..k {
-                        let e = cache.output()[r * k + c] - y[i * k + c];
-                        loss += e * e / m;
-                        dout.push(-2.0 * e / m);
+                        dout.push(-2.0 * (cache.output()[r * k + c] - y[i * k + c]) / m);
                     }
                 }
-                last = (last.0 + loss, last.1 + 1);
                 // Descent on the loss is ascent on its negative gradient.
                 for (g, w) in grad.iter_mut().zip(params.iter()) {
                     *g = -2.0 * self.l2 * w;
@@ -295,7 +283,6 @@ impl MseFit {
                 adam.ascend(params, &grad, self.learning_rate);
             }
         }
-        last.0 / last.1.max(1) as f64
     }
 }
 

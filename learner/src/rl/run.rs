@@ -334,6 +334,16 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
 
 /// Reads a training configuration (TOML).
 pub fn read_config(path: &Path) -> Result<TrainConfig, RunError> {
+    read_toml(path)
+}
+
+/// Reads a checkpoint.
+pub fn read_checkpoint(path: &Path) -> Result<Checkpoint, RunError> {
+    read_json(path)
+}
+
+/// A TOML file's value; the error names the file.
+pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, RunError> {
     let text = std::fs::read_to_string(path).map_err(io(path))?;
     toml::from_str(&text).map_err(|e| RunError::Parse {
         path: path.into(),
@@ -341,13 +351,22 @@ pub fn read_config(path: &Path) -> Result<TrainConfig, RunError> {
     })
 }
 
-/// Reads a checkpoint.
-pub fn read_checkpoint(path: &Path) -> Result<Checkpoint, RunError> {
+/// A JSON file's value; the error names the file.
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, RunError> {
     let text = std::fs::read_to_string(path).map_err(io(path))?;
     serde_json::from_str(&text).map_err(|e| RunError::Parse {
         path: path.into(),
         detail: e.to_string(),
     })
+}
+
+/// Writes `v` as JSON, atomically.
+pub(crate) fn write_json<T: Serialize + ?Sized>(path: &Path, v: &T) -> Result<(), RunError> {
+    let bytes = serde_json::to_vec(v).map_err(|e| RunError::Parse {
+        path: path.into(),
+        detail: e.to_string(),
+    })?;
+    write_atomic(path, &bytes)
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RunError> {
@@ -530,11 +549,7 @@ pub fn train(
             validations: validations.to_vec(),
             best_validated: best_validated.clone(),
         };
-        let json = serde_json::to_vec(&c).map_err(|e| RunError::Parse {
-            path: ckpt_path.clone(),
-            detail: e.to_string(),
-        })?;
-        write_atomic(&ckpt_path, &json)?;
+        write_json(&ckpt_path, &c)?;
         write_curves(out, history, cfg.policy.algorithm)?;
         Ok(c)
     };
