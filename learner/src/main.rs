@@ -1023,6 +1023,7 @@ fn run(cli: Cli) -> Result<()> {
                     "--policy and --mix-heuristic-fraction exclude each other"
                 );
                 let (p, which) = learner::rl::TrainedPolicy::load(path, false)?;
+                p.check_world(&cfg.world)?;
                 eprintln!("learner: acting with {which} of {}", path.display());
                 if p.trained_peg() != a.peg {
                     eprintln!(
@@ -1070,7 +1071,7 @@ fn run(cli: Cli) -> Result<()> {
                 "--hole-pos and --franky-sim-address are for --robot franky-sim (hw-sim reports \
                  the hole itself)"
             );
-            world_config(&a)?; // fail early on a bad peg or file
+            let world = world_config(&a)?; // fail early on a bad peg or file
             let mut run_args = vec![
                 "--episodes".to_string(),
                 a.episodes.to_string(),
@@ -1088,7 +1089,9 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(p) = &a.policy {
                 // Fail here, before any process starts, on a bad file or a
                 // representation model that does not load.
-                learner::rl::TrainedPolicy::load(p, false)?;
+                learner::rl::TrainedPolicy::load(p, false)?
+                    .0
+                    .check_world(&world)?;
                 run_args.push("--policy".into());
                 run_args.push(p.display().to_string());
             }

@@ -86,6 +86,16 @@ fn collect_with(
     actions: u32,
     end_after_completion: Option<u32>,
 ) -> learner::collect::CollectSummary {
+    collect_in(dir, world(), fraction, actions, end_after_completion)
+}
+
+fn collect_in(
+    dir: &std::path::Path,
+    world: hw_sim::WorldConfig,
+    fraction: f64,
+    actions: u32,
+    end_after_completion: Option<u32>,
+) -> learner::collect::CollectSummary {
     let cfg = CollectConfig {
         out_dir: dir.to_path_buf(),
         states: u64::MAX,
@@ -94,7 +104,7 @@ fn collect_with(
         pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Hexagon],
         seed: 11,
         workers: 2,
-        world: world(),
+        world,
         controller: rt_controller::ControllerConfig::default(),
         mix: Mix {
             heuristic_fraction: fraction,
@@ -175,6 +185,11 @@ fn a_short_collection_builds_the_expected_dataset() {
         );
     }
     assert_eq!(meta.episodes.len(), 2);
+    // The camera is kept: a model trained on these images is valid for it.
+    let camera = world().camera.calibration();
+    let kept = meta.camera.expect("the dataset keeps its camera");
+    assert!(kept.same_camera(&camera), "{kept} against {camera}");
+    assert_eq!(kept.width, 128);
     assert_eq!(
         meta.shards.len() as u64,
         meta.samples.div_ceil(64),
@@ -312,6 +327,53 @@ fn a_short_collection_builds_the_expected_dataset() {
     assert!(
         e.contains("format version 1") && e.contains("learner dataset build"),
         "{e}"
+    );
+}
+
+#[test]
+fn logs_of_two_cameras_do_not_make_one_dataset() {
+    let a = test_support::scratch_dir("cam-a");
+    let b = test_support::scratch_dir("cam-b");
+    collect_in(&a, world(), 1.0, 4, None);
+    let mut moved = world();
+    moved.camera.eye_m[2] += 0.05;
+    collect_in(&b, moved.clone(), 1.0, 4, None);
+    let files = dataset::find_logs(&[a.to_path_buf(), b.to_path_buf()]).unwrap();
+    assert_eq!(files.len(), 4);
+    let out = test_support::scratch_dir("cam-ds");
+    let mut skipped = Vec::new();
+    let meta = dataset::build(&files, &out, &BuildConfig::default(), 2, |p, r| {
+        if let Err(e) = r {
+            skipped.push((p.to_path_buf(), e));
+        }
+    })
+    .unwrap();
+    // The logs of the second camera (read after the first's) are skipped,
+    // each named with the remedy; the first camera's make the dataset.
+    assert_eq!(skipped.len(), 2, "{skipped:?}");
+    for (p, e) in &skipped {
+        assert!(p.starts_with(&*b), "{}", p.display());
+        assert!(e.contains("one dataset per camera"), "{e}");
+    }
+    assert_eq!(meta.episodes.len(), 2);
+    assert!(
+        meta.camera
+            .unwrap()
+            .same_camera(&world().camera.calibration())
+    );
+    // The second camera's logs alone build, and keep their camera.
+    let files = dataset::find_logs(&[b.to_path_buf()]).unwrap();
+    let meta = dataset::build(&files, &out, &BuildConfig::default(), 2, |_, _| {}).unwrap();
+    assert!(
+        meta.camera
+            .unwrap()
+            .same_camera(&moved.camera.calibration())
+    );
+    assert!(
+        !meta
+            .camera
+            .unwrap()
+            .same_camera(&world().camera.calibration())
     );
 }
 

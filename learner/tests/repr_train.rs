@@ -306,7 +306,7 @@ fn a_dataset_of_another_image_size_is_refused() {
 
 #[test]
 fn the_frozen_representation_observes_the_rl_environment() {
-    use learner::rl::{BatchEnv, ObservationKind, RlEnvConfig, VecEnv};
+    use learner::rl::{BatchEnv, ObservationKind, Observer, RlEnvConfig, VecEnv};
     let out = test_support::scratch_dir("repr-observer");
     let mut cfg = small(ModelKind::Full, 1);
     cfg.train.max_batches_per_epoch = 2;
@@ -344,16 +344,48 @@ fn the_frozen_representation_observes_the_rl_environment() {
         .unwrap()
         .to_string();
     assert!(e.contains("nowhere"), "{e}");
-    // A camera of another size than the model's: zeros, counted.
-    let rep = learner::rl::Representation::load(&s.model_dir).unwrap();
+    // The export keeps the dataset's camera; a world with another camera
+    // (another size, or the same moved by 5 cm) is refused before any step.
+    let rep = std::sync::Arc::new(learner::rl::Representation::load(&s.model_dir).unwrap());
+    let trained = rep.camera().expect("the export keeps the camera");
+    assert!(trained.same_camera(&env.world.camera.calibration()));
     let mut wide = env.clone();
     wide.world.camera.width = 128;
     wide.world.camera.height = 128;
-    let rep = std::sync::Arc::new(rep);
-    let mut v = VecEnv::new(&wide, 1, rep.clone(), 1).unwrap();
-    v.reset(&[(0, 5)]).unwrap();
-    assert!(v.observations().iter().all(|&x| x == 0.0));
-    assert!(rep.rejected() >= 1);
+    let mut moved = env.clone();
+    moved.world.camera.eye_m[0] += 0.05;
+    for other in [&wide, &moved] {
+        let e = VecEnv::new(other, 1, rep.clone(), 1)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("env.world.camera") && e.contains("trained with"),
+            "{e}"
+        );
+    }
+    // Past that check (an observer that does not say its camera), frames
+    // of another camera are still not encoded: zeros, counted.
+    struct Unchecked(std::sync::Arc<learner::rl::Representation>);
+    impl learner::rl::observe::Observer for Unchecked {
+        fn dim(&self) -> usize {
+            self.0.dim()
+        }
+        fn needs_camera(&self) -> bool {
+            true
+        }
+        fn observe(&self, views: &[learner::rl::observe::ObsView<'_>], out: &mut [f64]) {
+            self.0.observe(views, out)
+        }
+    }
+    for other in [&wide, &moved] {
+        let before = rep.rejected();
+        let unchecked = std::sync::Arc::new(Unchecked(rep.clone()));
+        let mut v = VecEnv::new(other, 1, unchecked, 1).unwrap();
+        v.reset(&[(0, 5)]).unwrap();
+        assert!(v.observations().iter().all(|&x| x == 0.0));
+        assert!(rep.rejected() > before);
+    }
 }
 
 #[test]

@@ -214,10 +214,21 @@ fn bad_input_is_named() {
     cfg.dagger.rounds = 1;
     let e = distill(cfg, &dir.path().join("c"), false, &|| false).unwrap_err();
     assert!(e.to_string().contains("nowhere.json"), "{e}");
-    // A truncated samples file on resume.
-    let cfg: DistillConfig = toml::from_str(&student_config(&teacher, 1)).unwrap();
+    // The student may see through another camera than the teacher's world
+    // has (a ground-truth teacher does not look): its checkpoint's
+    // environment is the teacher's with that camera.
+    let text = student_config(&teacher, 1)
+        + "\n[camera]\nvertical_fov_deg = 40.0\neye_m = [0.9, -0.24, 0.77]\n\
+           target_m = [0.58, 0.0, 0.2]\n";
+    let cfg: DistillConfig = toml::from_str(&text).unwrap();
     let out = dir.path().join("d");
-    distill(cfg.clone(), &out, false, &|| false).unwrap();
+    let c = distill(cfg.clone(), &out, false, &|| false).unwrap();
+    let teacher_env = read_checkpoint(&teacher).unwrap().config.env;
+    let mut expected = teacher_env.clone();
+    expected.world.camera = cfg.camera.clone().unwrap();
+    assert_ne!(expected, teacher_env);
+    assert_eq!(c.config.env, expected);
+    // A truncated samples file on resume.
     let f = out.join("rounds/round-000.bin");
     let bytes = std::fs::read(&f).unwrap();
     std::fs::write(&f, &bytes[..bytes.len() - 5]).unwrap();

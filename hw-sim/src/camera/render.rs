@@ -195,6 +195,14 @@ impl Layer {
 }
 const LIGHT: [f64; 3] = [0.35, -0.45, 0.82];
 
+impl CameraConfig {
+    /// The calibration a camera of this configuration reports in its
+    /// frames.
+    pub fn calibration(&self) -> CameraCalibration {
+        Camera::new(self, Vec::new(), 0).calibration()
+    }
+}
+
 impl Camera {
     /// A camera over `prims`; `seed` drives its noise.
     pub fn new(config: &CameraConfig, prims: Vec<Primitive>, seed: u64) -> Self {

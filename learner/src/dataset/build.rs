@@ -48,6 +48,17 @@ impl Builder {
                 dataset: (self.meta.width, self.meta.height),
             });
         }
+        match (&self.meta.camera, ep.camera) {
+            (None, c) => self.meta.camera = c,
+            (Some(d), Some(c)) if !d.same_camera(&c) => {
+                return Err(DatasetError::Camera {
+                    log: source.to_path_buf(),
+                    log_camera: Box::new(c),
+                    dataset: Box::new(*d),
+                });
+            }
+            _ => {}
+        }
         let episode = self.meta.episodes.len() as u32;
         self.meta.episodes.push(EpisodeInfo {
             episode,
@@ -245,6 +256,7 @@ pub fn build(
             episodes: Vec::new(),
             skipped: Vec::new(),
             build: cfg.clone(),
+            camera: None,
         },
         stats: stats_new(),
         wrench_table: std::io::BufWriter::new(wrench_table),

@@ -152,9 +152,25 @@ pub enum DatasetError {
         /// The dataset's.
         dataset: (usize, usize),
     },
-    /// A log's image size changes within the episode.
-    #[error("{}: the image size changes within the episode", .0.display())]
-    ImageSizeChanges(PathBuf),
+    /// A log's camera (image size, intrinsics or pose) changes within the
+    /// episode.
+    #[error("{}: the camera's calibration changes within the episode", .0.display())]
+    CameraChanges(PathBuf),
+    /// A log's camera is not the one of the dataset's other logs: a model
+    /// trained on both would learn two scenes as one.
+    #[error(
+        "{}: its camera differs from the dataset's (log {log_camera:?}, dataset {dataset:?}); \
+         build one dataset per camera",
+        log.display()
+    )]
+    Camera {
+        /// The log.
+        log: PathBuf,
+        /// Its camera.
+        log_camera: Box<shared_mem_schema::CameraCalibration>,
+        /// The dataset's (its first episode's).
+        dataset: Box<shared_mem_schema::CameraCalibration>,
+    },
     /// A log has no `/config` record.
     #[error("{}: no configuration message on /config", .0.display())]
     NoConfig(PathBuf),

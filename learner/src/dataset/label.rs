@@ -10,7 +10,7 @@ use crate::proprio::{Proprio, roll_reference};
 use hw_sim::PegShape;
 use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};
-use shared_mem_schema::{PolicyAction, SensorFrame, Stage};
+use shared_mem_schema::{CameraCalibration, PolicyAction, SensorFrame, Stage};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -66,6 +66,9 @@ pub struct EpisodeSamples {
     pub tags: Vec<SampleTags>,
     /// Image size.
     pub size: (usize, usize),
+    /// The camera's calibration (the same for every frame of the episode);
+    /// `None` when the log gave no sample.
+    pub camera: Option<CameraCalibration>,
 }
 
 /// Models by robot name, loaded once, from the robots a catalog allows
@@ -187,6 +190,7 @@ pub fn episode_samples(
     let mut out = Vec::new();
     let nq = frames[0].n_joints as usize;
     let mut size = (0, 0);
+    let mut camera: Option<CameraCalibration> = None;
     for pair in cams.windows(2) {
         let (c0, c1) = (&pair[0], &pair[1]);
         let (Some(&i0), Some(&i1)) = (
@@ -216,13 +220,11 @@ pub fn episode_samples(
                 },
             )?);
             size = (cal.width as usize, cal.height as usize);
+            camera = Some(cal);
         }
-        let cal_size = (
-            c0.calibration.width as usize,
-            c0.calibration.height as usize,
-        );
-        if cal_size != size {
-            return Err(DatasetError::ImageSizeChanges(path.to_path_buf()));
+        // The labeler projects with the first frame's calibration.
+        if camera.is_some_and(|c| !c.same_camera(&c0.calibration)) {
+            return Err(DatasetError::CameraChanges(path.to_path_buf()));
         }
         let l = labeler.as_mut().expect("made");
         l.mask_min_px = cfg.flow_mask_min_px as f32;
@@ -272,5 +274,6 @@ pub fn episode_samples(
         samples: out,
         tags,
         size,
+        camera,
     })
 }

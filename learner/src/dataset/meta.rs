@@ -61,6 +61,11 @@ pub struct Meta {
     pub skipped: Vec<(String, String)>,
     /// How the labels were made.
     pub build: BuildConfig,
+    /// The camera every episode was recorded with (absent from datasets
+    /// built before it was kept). A model trained on these images is only
+    /// valid for this camera.
+    #[serde(default)]
+    pub camera: Option<shared_mem_schema::CameraCalibration>,
 }
 
 /// Running mean and variance (Welford), per component.

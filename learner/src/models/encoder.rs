@@ -8,6 +8,7 @@ use super::fast::FastEncoder;
 use super::inputs::{InputError, Normaliser, ObservationRef};
 use super::net::{InputTensors, ReprNet};
 use burn::prelude::*;
+use shared_mem_schema::CameraCalibration;
 use std::path::Path;
 
 /// A trained representation, ready to encode.
@@ -19,6 +20,8 @@ pub struct Encoder {
     active: Modalities,
     /// The CPU path (on the `flex` device only).
     fast: Option<FastEncoder>,
+    /// The camera of its training images, when the export kept it.
+    camera: Option<CameraCalibration>,
 }
 
 impl Encoder {
@@ -26,7 +29,9 @@ impl Encoder {
     /// directory) onto `device` (a plain device: no gradients are kept).
     pub fn load(dir: &Path, device: &Device) -> crate::train::Result<Self> {
         let (net, meta) = crate::train::checkpoint::import(dir, device)?;
-        Ok(Self::new(net.valid(), meta.model, meta.normaliser, device))
+        let mut e = Self::new(net.valid(), meta.model, meta.normaliser, device);
+        e.camera = meta.camera;
+        Ok(e)
     }
 
     /// From parts in memory.
@@ -38,7 +43,21 @@ impl Encoder {
             config,
             normaliser,
             device: device.clone(),
+            camera: None,
         }
+    }
+
+    /// The camera its training images came from (`None`: not known, as in
+    /// a model exported before it was kept); set by [`Encoder::load`].
+    pub fn camera(&self) -> Option<&CameraCalibration> {
+        self.camera.as_ref()
+    }
+
+    /// Records the camera it was trained for (as [`Encoder::load`] does from
+    /// the export).
+    pub fn with_camera(mut self, camera: Option<CameraCalibration>) -> Self {
+        self.camera = camera;
+        self
     }
 
     /// With the sensors `m` only (a lost sensor's expert is left out of the

@@ -93,6 +93,13 @@ impl TrainedPolicy {
         })
     }
 
+    /// Refuses a world whose camera is not the one the policy's
+    /// representation was trained with (its z would describe another
+    /// scene).
+    pub fn check_world(&self, world: &hw_sim::WorldConfig) -> Result<(), super::env::RlEnvError> {
+        super::observe::check_camera(&world.camera, self.observer.as_ref())
+    }
+
     /// Whether the observer reads the camera.
     pub fn needs_camera(&self) -> bool {
         self.observer.needs_camera()

@@ -51,6 +51,14 @@ pub struct DistillConfig {
     /// DAgger's settings.
     #[serde(default)]
     pub dagger: DaggerConfig,
+    /// The camera the student sees through, in place of the teacher
+    /// environment's (`[camera]`, hw-sim's camera fields): a student on a
+    /// representation trained with another camera than the teacher's world
+    /// has. The camera changes what is seen, not what happens, so a
+    /// ground-truth teacher's actions still hold; a teacher that observes
+    /// the camera itself keeps its own, and this is refused.
+    #[serde(default)]
+    pub camera: Option<hw_sim::config::CameraConfig>,
 }
 
 /// DAgger's settings.
@@ -170,6 +178,13 @@ impl Observer for Pair {
 
     fn rejected(&self) -> u64 {
         self.first.rejected() + self.second.rejected()
+    }
+
+    /// The second's (the student's) camera, else the first's: a teacher
+    /// and a student trained with different cameras cannot share a world,
+    /// and the environment's check then refuses one of them.
+    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
+        self.second.camera().or_else(|| self.first.camera())
     }
 }
 
@@ -348,6 +363,20 @@ pub fn distill(
         ));
     }
     student_cfg.env = teacher_ckpt.config.env.clone();
+    let t_obs = teacher_ckpt
+        .config
+        .observation
+        .observer_on(student_cfg.threads)?;
+    if let Some(camera) = &cfg.camera {
+        if t_obs.needs_camera() {
+            return Err(field(
+                "camera",
+                &"(set)",
+                "the teacher observes through its environment's camera; leave [camera] out",
+            ));
+        }
+        student_cfg.env.world.camera = camera.clone();
+    }
     // The checkpoint's config says what the student observes; TRPO from
     // it (`init_from`) needs normalisation on, as the student has it.
     student_cfg.policy.normalise_observations = true;
@@ -381,10 +410,6 @@ pub fn distill(
     }
     write_json(&cfg_path, &recorded)?;
 
-    let t_obs = teacher_ckpt
-        .config
-        .observation
-        .observer_on(student_cfg.threads)?;
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     let (td, sd) = (t_obs.dim(), s_obs.dim());
     if teacher.sizes[0] != td {

@@ -39,6 +39,18 @@ pub enum RlEnvError {
     /// The representation model the observation names could not be loaded.
     #[error("the observation's representation: {0}")]
     Representation(String),
+    /// The world's camera is not the one the observer's representation
+    /// was trained with: its z would describe another scene.
+    #[error(
+        "env.world.camera ({world}) is not the camera the representation was trained with \
+         ({model}); set [env.world.camera] to the training data's camera"
+    )]
+    Camera {
+        /// The world's.
+        world: Box<shared_mem_schema::CameraCalibration>,
+        /// The representation's.
+        model: Box<shared_mem_schema::CameraCalibration>,
+    },
     /// The world has no task (`task.enabled = false`).
     #[error("the RL environment needs the peg-in-hole task (task.enabled = true)")]
     NoTask,

@@ -51,6 +51,31 @@ pub trait Observer: Send + Sync {
     fn rejected(&self) -> u64 {
         0
     }
+    /// The camera it must see through (a learned encoder's training
+    /// camera); `None`: any camera, or none.
+    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
+        None
+    }
+}
+
+/// Refuses a world camera (`camera`, the world's `[camera]`) that is not
+/// the one `observer` was trained for.
+pub fn check_camera(
+    camera: &hw_sim::config::CameraConfig,
+    observer: &dyn Observer,
+) -> Result<(), super::env::RlEnvError> {
+    let Some(model) = observer.camera() else {
+        return Ok(());
+    };
+    let world = camera.calibration();
+    if world.same_camera(&model) {
+        Ok(())
+    } else {
+        Err(super::env::RlEnvError::Camera {
+            world: Box::new(world),
+            model: Box::new(model),
+        })
+    }
 }
 
 /// Which observer a configuration asks for: `observation = "ground_truth"`

@@ -76,15 +76,28 @@ impl Observer for Representation {
         true
     }
 
+    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
+        let enc = self.encoder.lock().unwrap_or_else(|e| e.into_inner());
+        enc.camera().copied()
+    }
+
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
         let windows: Vec<Vec<f32>> = views.iter().map(window).collect();
         let proprios: Vec<[f32; PROPRIO]> =
             views.iter().map(|v| v.obs.proprio.to_array()).collect();
         let mut obs = Vec::with_capacity(views.len());
+        let model_camera = self.camera();
         for (i, v) in views.iter().enumerate() {
             let Some(cam) = v.camera else {
                 break;
             };
+            // Another camera's frame is refused like a frame of another
+            // size (the environment and the live node check the world's
+            // camera before the first step; this catches a frame that
+            // still differs).
+            if model_camera.is_some_and(|c| !c.same_camera(&cam.calibration)) {
+                break;
+            }
             let (w, h) = (
                 cam.calibration.width as usize,
                 cam.calibration.height as usize,

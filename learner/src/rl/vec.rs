@@ -86,6 +86,7 @@ impl VecEnv {
         if n == 0 {
             return Err(hw_sim::FieldError::new("num_envs", 0, "must be at least 1").into());
         }
+        super::observe::check_camera(&cfg.world.camera, observer.as_ref())?;
         let envs = (0..n)
             .map(|_| RlEnv::new(cfg))
             .collect::<Result<Vec<_>, _>>()?;

@@ -114,6 +114,11 @@ pub struct ExportMeta {
     pub dataset: String,
     /// Epochs trained.
     pub epochs: u32,
+    /// The camera of its training images (the dataset's; absent from models
+    /// exported before it was kept, or trained on a dataset without it).
+    /// The RL environment and the live node refuse another camera.
+    #[serde(default)]
+    pub camera: Option<shared_mem_schema::CameraCalibration>,
 }
 
 const EXPORT_META: &str = "model.json";

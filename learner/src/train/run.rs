@@ -374,6 +374,7 @@ pub fn train(
             normaliser: norm,
             dataset: data.display().to_string(),
             epochs: state.epoch,
+            camera: ds.meta.camera,
         },
     )?;
     Ok(TrainSummary {
