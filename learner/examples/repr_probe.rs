@@ -13,8 +13,10 @@
 //! also probed from the tip's base-frame position and roll alone (what
 //! proprioception gives), so that the camera's share shows.
 //!
-//! Usage: `repr_probe MODEL_DIR EPISODES STEPS [THREADS]` (episode seeds
-//! from 3 000 000; the last quarter of the episodes is the test split).
+//! Usage: `repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML]]`
+//! (episode seeds from 3 000 000; the last quarter of the episodes is the
+//! test split; WORLD_TOML: hw-sim's world, for a model trained with another
+//! camera than the default one, which the model's own camera must match).
 
 use faer::Mat;
 use faer::prelude::*;
@@ -117,7 +119,7 @@ fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) ->
 }
 
 fn main() {
-    let usage = "usage: repr_probe MODEL_DIR EPISODES STEPS [THREADS]";
+    let usage = "usage: repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML]]";
     let args: Vec<String> = std::env::args().collect();
     let model = args.get(1).expect(usage);
     let episodes: u64 = args.get(2).expect(usage).parse().expect(usage);
@@ -126,7 +128,14 @@ fn main() {
     let observer = ObservationKind::Representation(model.into())
         .observer_on(threads)
         .expect("model");
-    let cfg = RlEnvConfig::default();
+    let mut cfg = RlEnvConfig::default();
+    if let Some(w) = args.get(5) {
+        cfg.world =
+            hw_sim::WorldConfig::from_file(std::path::Path::new(w)).expect("the world file");
+        cfg.world.task.enabled = true;
+    }
+    learner::rl::observe::check_camera(&cfg.world.camera, observer.as_ref())
+        .unwrap_or_else(|e| panic!("{e}"));
     let mut env = RlEnv::new(&cfg).expect("env");
     let mut rng = hw_sim::rng::seeded(11, 0);
     let (mut z, mut own, mut targets, mut episode) = (vec![], vec![], vec![], vec![]);

@@ -15,6 +15,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub struct Representation {
     encoder: Mutex<Encoder>,
     dim: usize,
+    camera: Option<shared_mem_schema::CameraCalibration>,
     rejected: AtomicU64,
 }
 
@@ -37,6 +38,7 @@ impl Representation {
     pub fn new(encoder: Encoder) -> Self {
         Self {
             dim: encoder.dim(),
+            camera: encoder.camera().copied(),
             encoder: Mutex::new(encoder),
             rejected: AtomicU64::new(0),
         }
@@ -77,8 +79,7 @@ impl Observer for Representation {
     }
 
     fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
-        let enc = self.encoder.lock().unwrap_or_else(|e| e.into_inner());
-        enc.camera().copied()
+        self.camera
     }
 
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
@@ -86,7 +87,6 @@ impl Observer for Representation {
         let proprios: Vec<[f32; PROPRIO]> =
             views.iter().map(|v| v.obs.proprio.to_array()).collect();
         let mut obs = Vec::with_capacity(views.len());
-        let model_camera = self.camera();
         for (i, v) in views.iter().enumerate() {
             let Some(cam) = v.camera else {
                 break;
@@ -95,7 +95,10 @@ impl Observer for Representation {
             // size (the environment and the live node check the world's
             // camera before the first step; this catches a frame that
             // still differs).
-            if model_camera.is_some_and(|c| !c.same_camera(&cam.calibration)) {
+            if self
+                .camera
+                .is_some_and(|c| !c.same_camera(&cam.calibration))
+            {
                 break;
             }
             let (w, h) = (
