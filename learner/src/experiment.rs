@@ -21,7 +21,7 @@ use crate::rl::reward::Outcome;
 use crate::rl::run::{self as policy_run, EvalReport};
 use crate::train::{self, DeviceKind, TrainOptions};
 use anyhow::{Context, Result, bail, ensure};
-use hw_sim::{PegShape, WorldConfig};
+use hw_sim::PegShape;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -52,8 +52,9 @@ pub struct DataStage {
     /// The built dataset (used as it is when it opens).
     pub dataset: PathBuf,
     /// When it is absent: collect this many 20 Hz states on the fast path
-    /// (all pegs, the default heuristic/random mix) and build it. 0: a
-    /// missing dataset is an error.
+    /// (all pegs, the default heuristic/random mix, in the policy
+    /// configuration's world and controller) and build it. 0: a missing
+    /// dataset is an error.
     #[serde(default)]
     pub collect_states: u64,
     /// Seed of the collection's first episode.
@@ -222,7 +223,11 @@ pub fn run(
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut log = StageLog::open(out);
-    let data = ensure_dataset(&cfg.data, out, &mut log, stop)?;
+    let base_policy = match &cfg.policy.config {
+        Some(p) => policy_run::read_config(p)?,
+        None => policy_run::TrainConfig::default(),
+    };
+    let data = ensure_dataset(&cfg.data, &base_policy.env, out, &mut log, stop)?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
         if !opts.only.is_empty() && !opts.only.contains(&v.name) {
@@ -240,10 +245,7 @@ pub fn run(
             bail!("stopped; run the same command again to resume");
         }
         let policy_dir = dir.join("policy");
-        let mut pcfg = match &cfg.policy.config {
-            Some(p) => policy_run::read_config(p)?,
-            None => policy_run::TrainConfig::default(),
-        };
+        let mut pcfg = base_policy.clone();
         // The ground truth's channels are scaled by hand, and normalised
         // its free-space wrench noise is as loud as the position (docs/rl.md,
         // "Observation normalisation"): the reference runs without it.
@@ -344,9 +346,13 @@ pub fn run(
     Ok(rows)
 }
 
-/// The dataset: opened where it is, or collected and built there.
+/// The dataset: opened where it is, or collected and built there in the
+/// policy's environment `env` (its world, camera included, and its
+/// controller), so that the representation learns the scene the policy
+/// will see.
 fn ensure_dataset(
     d: &DataStage,
+    env: &crate::rl::RlEnvConfig,
     out: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
@@ -372,8 +378,8 @@ fn ensure_dataset(
         pegs: PegShape::ALL.to_vec(),
         seed: d.collect_seed,
         workers,
-        world: WorldConfig::default(),
-        controller: rt_controller::ControllerConfig::default(),
+        world: env.world.clone(),
+        controller: env.controller.clone(),
         mix: Mix::default(),
         log: LogOptions {
             foxglove: false,

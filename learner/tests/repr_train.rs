@@ -445,6 +445,51 @@ fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
     assert!(out.join("model").join("model.json").exists());
 }
 
+/// An experiment without its dataset collects it in the policy
+/// configuration's world: the representation learns the camera the policy
+/// will see through.
+#[test]
+fn an_experiment_collects_through_the_policys_camera() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    let dir = test_support::scratch_dir("experiment-camera");
+    let policy = dir.join("policy.toml");
+    std::fs::write(
+        &policy,
+        format!(
+            "num_envs = 2\nenv_steps = 400\n\n[env.world.camera]\nwidth = {SIDE}\n\
+             height = {SIDE}\neye_m = [0.9, -0.24, 0.77]\ntarget_m = [0.58, 0.0, 0.2]\n"
+        ),
+    )
+    .unwrap();
+    let repr = dir.join("repr.toml");
+    std::fs::write(
+        &repr,
+        format!("[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n"),
+    )
+    .unwrap();
+    let data = dir.join("data");
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {data:?}\ncollect_states = 30\n\n\
+             [policy]\nconfig = {policy:?}\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n"
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    // Stopped once the dataset is built: only the collection is tested.
+    let built = || data.join("meta.json").exists();
+    let e = run(&cfg, &dir.join("out"), &RunOptions::default(), &built).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let ds = Dataset::open(&data).unwrap();
+    let pcfg = learner::rl::run::read_config(&policy).unwrap();
+    let camera = ds.meta.camera.expect("kept");
+    assert!(camera.same_camera(&pcfg.env.world.camera.calibration()));
+    assert!(!camera.same_camera(&hw_sim::config::CameraConfig::default().calibration()));
+}
+
 /// `learner experiment` end to end at a tiny scale: a representation
 /// variant and the ground-truth reference, each trained and evaluated on
 /// two pegs (one of them a transfer); a second invocation finds every stage
