@@ -13,10 +13,17 @@
 //! also probed from the tip's base-frame position and roll alone (what
 //! proprioception gives), so that the camera's share shows.
 //!
-//! Usage: `repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML]]`
+//! Usage: `repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML [at-box]]]`
 //! (episode seeds from 3 000 000; the last quarter of the episodes is the
 //! test split; WORLD_TOML: hw-sim's world, for a model trained with another
-//! camera than the default one, which the model's own camera must match).
+//! camera than the default one, which the model's own camera must match,
+//! `-` for the default). `at-box`: instead of uniform random actions, each
+//! episode steers the tip (from the ground truth) to a random point within
+//! ±15 mm of the hole (base-frame x, y) and 2–20 mm above its frame's
+//! origin, with noise, and probes the
+//! states with the tip less than 30 mm above the box: where a policy must
+//! act on the opening. STEPS counts the descent too.
+//! Beside R², the test error's root mean square (mm for positions).
 
 use faer::Mat;
 use faer::prelude::*;
@@ -129,7 +136,8 @@ fn main() {
         .observer_on(threads)
         .expect("model");
     let mut cfg = RlEnvConfig::default();
-    if let Some(w) = args.get(5) {
+    let at_box = args.get(6).map(String::as_str) == Some("at-box");
+    if let Some(w) = args.get(5).filter(|w| *w != "-") {
         cfg.world =
             hw_sim::WorldConfig::from_file(std::path::Path::new(w)).expect("the world file");
         cfg.world.task.enabled = true;
@@ -142,19 +150,52 @@ fn main() {
     for ep in 0..episodes {
         env.reset(3_000_000 + ep, true).expect("reset");
         let hole = env.task_geometry().hole_pose.translation.vector;
+        // at-box: the point this episode steers to, hole frame, m.
+        let mut goal = [0.0; 3];
+        if at_box {
+            goal = [
+                hw_sim::rng::uniform(&mut rng, -0.015, 0.015),
+                hw_sim::rng::uniform(&mut rng, -0.015, 0.015),
+                hw_sim::rng::uniform(&mut rng, 0.002, 0.020),
+            ];
+        }
         for _ in 0..steps {
+            let s = env.task().s_m;
+            let a: Vec<f64> = if at_box {
+                // Actions move the tip in the base frame.
+                let tip = env.observation().expect("observation").ee_pos;
+                let top = env.task_geometry().hole_pose * nalgebra::Point3::origin();
+                let to = [
+                    top.x + goal[0] - tip.x,
+                    top.y + goal[1] - tip.y,
+                    top.z + goal[2] - tip.z,
+                ];
+                (0..4)
+                    .map(|k| {
+                        let aim = if k < 3 { to[k] / 0.01 } else { 0.0 };
+                        (aim + 0.3 * hw_sim::rng::normal(&mut rng)).clamp(-1.0, 1.0)
+                    })
+                    .collect()
+            } else {
+                (0..4)
+                    .map(|_| hw_sim::rng::uniform(&mut rng, -1.0, 1.0))
+                    .collect()
+            };
+            // Probed only once the tip is within 3 cm of the box top.
+            if at_box && s.z > 0.03 {
+                if env.step(&a, true).expect("step").done() {
+                    break;
+                }
+                continue;
+            }
             let view = env.view().expect("view");
             let mut out = vec![0.0; observer.dim()];
             observer.observe(std::slice::from_ref(&view), &mut out);
             let o = env.observation().expect("observation");
-            let s = env.task().s_m;
             z.push(out);
             own.push(vec![o.ee_pos.x, o.ee_pos.y, o.ee_pos.z, o.proprio.roll_rad]);
             targets.push(vec![s.x, s.y, s.z, hole.x, hole.y, o.ee_pos.x, o.ee_pos.y]);
             episode.push(ep);
-            let a: Vec<f64> = (0..4)
-                .map(|_| hw_sim::rng::uniform(&mut rng, -1.0, 1.0))
-                .collect();
             if env.step(&a, true).expect("step").done() {
                 break;
             }
@@ -181,11 +222,31 @@ fn main() {
     let from_z = probe(&z, &targets, &train, &test);
     let from_own = probe(&own, &targets, &train, &test);
     let from_z_mlp = mlp_probe(&z, &targets, &train, &test);
-    println!("test R²      from z    from tip pose   from z (MLP)");
+    // RMS of a test error from R²: sqrt((1 − R²) · variance of the test
+    // targets), mm.
+    let rms = |r2: f64, i: usize| {
+        let n = test.len() as f64;
+        let m = test.iter().map(|&t| targets[t][i]).sum::<f64>() / n;
+        let var = test
+            .iter()
+            .map(|&t| (targets[t][i] - m).powi(2))
+            .sum::<f64>()
+            / n;
+        1e3 * ((1.0 - r2).max(0.0) * var).sqrt()
+    };
+    println!(
+        "test         R² from z   from tip pose   from z (MLP)   | RMS error, mm: z   tip pose   z (MLP)   target's sd"
+    );
     for (i, n) in names.iter().enumerate() {
         println!(
-            "{n:<12} {:>7.3} {:>10.3} {:>14.3}",
-            from_z[i], from_own[i], from_z_mlp[i]
+            "{n:<12} {:>9.3} {:>14.3} {:>14.3}   | {:>16.1} {:>10.1} {:>9.1} {:>13.1}",
+            from_z[i],
+            from_own[i],
+            from_z_mlp[i],
+            rms(from_z[i], i),
+            rms(from_own[i], i),
+            rms(from_z_mlp[i], i),
+            rms(0.0, i)
         );
     }
 }

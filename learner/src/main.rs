@@ -251,6 +251,12 @@ enum PolicyCmd {
         /// RGB noise, 8-bit levels (standard deviation per channel).
         #[arg(long)]
         rgb_noise: Option<f64>,
+        /// A ground-truth policy told the hole's position with a
+        /// per-episode error of this standard deviation per horizontal
+        /// axis, mm (the observation `ground_truth_hole_error`): how
+        /// precisely the policy needs to know where the opening is.
+        #[arg(long)]
+        hole_error_mm: Option<f64>,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -459,6 +465,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             force_noise_n,
             depth_noise_m,
             rgb_noise,
+            hole_error_mm,
             json,
             last,
         } => {
@@ -466,6 +473,15 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             let c = run::read_checkpoint(&checkpoint)?;
             let trained_on = c.config.env.world.task.peg;
             let mut cfg = c.config.clone();
+            if let Some(mm) = hole_error_mm {
+                use learner::rl::ObservationKind as O;
+                anyhow::ensure!(
+                    matches!(cfg.observation, O::GroundTruth | O::GroundTruthHoleError(_)),
+                    "--hole-error-mm is for a ground-truth policy; this one observes {:?}",
+                    cfg.observation
+                );
+                cfg.observation = O::GroundTruthHoleError(mm * 1e-3);
+            }
             let world = &mut cfg.env.world;
             if let Some(p) = peg {
                 world.task.peg = p;

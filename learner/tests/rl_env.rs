@@ -171,3 +171,80 @@ fn the_vectorised_env_checks_its_arguments() {
         .to_string();
     assert!(e.contains("reward.eps2_m"), "{e}");
 }
+
+/// The ground truth told with a hole error: the tip's horizontal position
+/// relative to the hole (coarse and fine channels) is off by one error per
+/// episode, of about the asked deviation over many episodes; nothing else
+/// changes, and a zero deviation is the ground truth itself.
+#[test]
+fn the_hole_error_is_one_offset_per_episode() {
+    use learner::rl::ObservationKind;
+    use learner::rl::observe::{GROUND_TRUTH_DIM as D, HoleError};
+    let cfg = config(PegShape::Square, 30);
+    let n = 4;
+    let seeds: Vec<(usize, u64)> = (0..n).map(|i| (i, 40 + i as u64)).collect();
+    let observe = |kind: ObservationKind| {
+        let mut v = VecEnv::new(&cfg, n, kind.observer().unwrap(), 1).unwrap();
+        v.reset(&seeds).unwrap();
+        let mut trace = vec![v.observations().to_vec()];
+        for _ in 0..5 {
+            v.step(&[0.3, -0.2, -1.0, 0.1].repeat(n)).unwrap();
+            trace.push(v.observations().to_vec());
+        }
+        trace
+    };
+    let exact = observe(ObservationKind::GroundTruth);
+    assert_eq!(observe(ObservationKind::GroundTruthHoleError(0.0)), exact);
+    let told = observe(ObservationKind::GroundTruthHoleError(0.003));
+    let mut offsets = Vec::new();
+    for (t, e) in told.iter().zip(&exact) {
+        for i in 0..n {
+            let (t, e) = (&t[i * D..(i + 1) * D], &e[i * D..(i + 1) * D]);
+            // Coarse x, y are s / 0.1 m: the offset in metres.
+            let off = [(t[0] - e[0]) * 0.1, (t[1] - e[1]) * 0.1];
+            offsets.push((i, off));
+            assert!(off[0] != 0.0 && off[1] != 0.0);
+            // Height, roll, velocities and wrench are untouched.
+            assert_eq!(t[2..14], e[2..14]);
+            assert_eq!(t[16..], e[16..]);
+            // The fine channels carry the same offset.
+            let fine = (e[14].atanh() * 0.005 + off[0]) / 0.005;
+            assert!((t[14] - fine.tanh()).abs() < 1e-9);
+        }
+    }
+    // One offset per episode, another in each.
+    for &(i, off) in &offsets {
+        let first = offsets.iter().find(|(j, _)| *j == i).unwrap().1;
+        assert!((off[0] - first[0]).abs() < 1e-12 && (off[1] - first[1]).abs() < 1e-12);
+    }
+    let firsts: Vec<[f64; 2]> = (0..n).map(|i| offsets[i].1).collect();
+    for a in 0..n {
+        for b in a + 1..n {
+            assert_ne!(firsts[a], firsts[b]);
+        }
+    }
+    // Its deviation over many hole poses is the one asked for.
+    let h = HoleError { std_m: 0.003 };
+    let draws: Vec<f64> = (0..4000)
+        .flat_map(|k| {
+            let pose = nalgebra::Isometry3::translation(0.5 + k as f64 * 1e-5, 0.01, 0.1);
+            h.error(&pose)
+        })
+        .collect();
+    let sd = (draws.iter().map(|x| x * x).sum::<f64>() / draws.len() as f64).sqrt();
+    assert!((sd - 0.003).abs() < 0.0002, "{sd}");
+    // A policy trained on one takes the other's inputs (init_from), not a
+    // representation's.
+    let (g, e) = (
+        ObservationKind::GroundTruth,
+        ObservationKind::GroundTruthHoleError(0.002),
+    );
+    assert!(g.same_inputs(&e) && e.same_inputs(&g) && e.same_inputs(&e));
+    assert!(!e.same_inputs(&ObservationKind::Representation("m".into())));
+    // A negative deviation is refused, naming the field.
+    let e = ObservationKind::GroundTruthHoleError(-1.0)
+        .observer()
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("ground_truth_hole_error"), "{e}");
+}

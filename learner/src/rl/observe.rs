@@ -80,7 +80,7 @@ pub fn check_camera(
 
 /// Which observer a configuration asks for: `observation = "ground_truth"`
 /// or `observation = { representation = "runs/full/model" }`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ObservationKind {
     /// [`GroundTruth`].
@@ -89,9 +89,22 @@ pub enum ObservationKind {
     /// The z means of the representation exported into this directory by
     /// `learner repr train` (its `model/`).
     Representation(std::path::PathBuf),
+    /// [`GroundTruth`] with the hole believed displaced by a per-episode
+    /// error of this standard deviation per horizontal axis, m
+    /// (`observation = { ground_truth_hole_error = 0.003 }`):
+    /// [`HoleError`].
+    GroundTruthHoleError(f64),
 }
 
 impl ObservationKind {
+    /// Whether a policy trained on `self` takes `other`'s observations as
+    /// the same inputs: equal kinds, or the ground truth with and without a
+    /// hole error (the same 18 values, one told less precisely).
+    pub fn same_inputs(&self, other: &Self) -> bool {
+        use ObservationKind::{GroundTruth as G, GroundTruthHoleError as E};
+        matches!((self, other), (G | E(_), G | E(_))) || self == other
+    }
+
     /// The observer (loading a representation's model from its file),
     /// encoding on every core.
     pub fn observer(&self) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
@@ -106,6 +119,17 @@ impl ObservationKind {
     ) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
         Ok(match self {
             ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
+            ObservationKind::GroundTruthHoleError(std_m) => {
+                if !(std_m.is_finite() && *std_m >= 0.0) {
+                    return Err(hw_sim::FieldError::new(
+                        "observation.ground_truth_hole_error",
+                        std_m,
+                        "must be a standard deviation in metres, 0 or more",
+                    )
+                    .into());
+                }
+                std::sync::Arc::new(HoleError { std_m: *std_m })
+            }
             ObservationKind::Representation(dir) => std::sync::Arc::new(
                 super::represent::Representation::load_on(dir, threads)
                     .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
@@ -189,6 +213,62 @@ impl Observer for GroundTruth {
     fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
         for (v, o) in views.iter().zip(out.chunks_exact_mut(GROUND_TRUTH_DIM)) {
             Self::one(v, o);
+        }
+    }
+}
+
+/// [`GroundTruth`] as a sensor that misplaces the hole: each episode the
+/// tip's position relative to the hole (coarse and fine channels) is off
+/// by an error drawn once, Gaussian with `std_m` per horizontal axis of the
+/// hole frame. Everything else (height, roll, velocities, wrench) is exact.
+///
+/// What it answers: how precisely must an observation say where the
+/// opening is for a policy to insert (a ground-truth policy evaluated
+/// under it), and can a policy learn to find the opening by touch when it
+/// is told only roughly (one trained under it). The error is drawn from a
+/// generator seeded by the hole's pose, which each episode's seed draws:
+/// fixed within an episode, the same on a rerun, no state kept.
+#[derive(Debug, Clone, Copy)]
+pub struct HoleError {
+    /// Standard deviation per horizontal axis, m.
+    pub std_m: f64,
+}
+
+impl HoleError {
+    /// The episode's error (hole-frame x, y), m.
+    pub fn error(&self, hole_pose: &Isometry3<f64>) -> [f64; 2] {
+        // Any change of the pose gives another seed; the bits of its
+        // coordinates are mixed by the generator's seeding.
+        let t = hole_pose.translation.vector;
+        let q = hole_pose.rotation.coords;
+        let seed =
+            [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
+                .iter()
+                .fold(0x9e37_79b9_7f4a_7c15u64, |h, v| {
+                    (h ^ v.to_bits())
+                        .rotate_left(23)
+                        .wrapping_mul(0xff51_afd7_ed55_8ccd)
+                });
+        let mut rng = hw_sim::rng::seeded(seed, 0x401e);
+        [
+            self.std_m * hw_sim::rng::normal(&mut rng),
+            self.std_m * hw_sim::rng::normal(&mut rng),
+        ]
+    }
+}
+
+impl Observer for HoleError {
+    fn dim(&self) -> usize {
+        GROUND_TRUTH_DIM
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(GROUND_TRUTH_DIM)) {
+            let [ex, ey] = self.error(v.hole_pose);
+            let mut task = *v.task;
+            task.s_m.x += ex;
+            task.s_m.y += ey;
+            GroundTruth::one(&ObsView { task: &task, ..*v }, o);
         }
     }
 }

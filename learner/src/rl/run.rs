@@ -449,7 +449,7 @@ pub fn train(
         (Some(s), _) => Some(s),
         (None, Some(from)) => {
             let c = read_checkpoint(from)?;
-            if c.config.observation != cfg.observation {
+            if !c.config.observation.same_inputs(&cfg.observation) {
                 return Err(RunError::Parse {
                     path: from.clone(),
                     detail: format!(
