@@ -50,9 +50,9 @@ fn standardiser(x: &[Vec<f64>], train: &[usize]) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// Ridge fit on rows `train` (features standardised by the training
-/// rows' mean and deviation, ridge 10⁻³ per row), R² per target on rows
-/// `test`.
-fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<f64> {
+/// rows' mean and deviation, ridge 10⁻³ per row); per target on rows
+/// `test`, R² and the root mean square of the error.
+fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<(f64, f64)> {
     let d = x[0].len() + 1;
     let k = y[0].len();
     let n = train.len() as f64;
@@ -82,14 +82,19 @@ fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec
                 ss_res += (y[i][t] - pred).powi(2);
                 ss_tot += (y[i][t] - mean).powi(2);
             }
-            1.0 - ss_res / ss_tot.max(1e-300)
+            (
+                1.0 - ss_res / ss_tot.max(1e-300),
+                (ss_res / test.len() as f64).sqrt(),
+            )
         })
         .collect()
 }
 
 /// An MLP probe (the value network's code: 64, 64 tanh, Adam with an L2
-/// penalty) per target, fitted on rows `train`, R² on rows `test`.
-fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<f64> {
+/// penalty) per target, fitted on rows `train`; on rows `test`, the
+/// explained variance (R² up to the error's mean) and the root mean square
+/// of the error (with its mean).
+fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<(f64, f64)> {
     let d = x[0].len();
     let n = train.len() as f64;
     let (mean, sd) = standardiser(x, train);
@@ -120,13 +125,19 @@ fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) ->
             let mut net = ValueNet::new(d, &cfg.hidden, &mut rng);
             net.fit(&xtr, &ttr, &ytr, &cfg, &mut rng);
             let pred: Vec<f64> = net.predict(&xte, &tte).iter().map(|v| v * s + m).collect();
-            explained_variance(&pred, &yte)
+            let mse = pred
+                .iter()
+                .zip(&yte)
+                .map(|(p, t)| (p - t).powi(2))
+                .sum::<f64>()
+                / yte.len() as f64;
+            (explained_variance(&pred, &yte), mse.sqrt())
         })
         .collect()
 }
 
 fn main() {
-    let usage = "usage: repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML]]";
+    let usage = "usage: repr_probe MODEL_DIR EPISODES STEPS [THREADS [WORLD_TOML|- [at-box]]]";
     let args: Vec<String> = std::env::args().collect();
     let model = args.get(1).expect(usage);
     let episodes: u64 = args.get(2).expect(usage).parse().expect(usage);
@@ -136,7 +147,12 @@ fn main() {
         .observer_on(threads)
         .expect("model");
     let mut cfg = RlEnvConfig::default();
-    let at_box = args.get(6).map(String::as_str) == Some("at-box");
+    assert!(args.len() <= 7, "{usage}");
+    let at_box = match args.get(6).map(String::as_str) {
+        None => false,
+        Some("at-box") => true,
+        Some(other) => panic!("{other}: the sixth argument can only be at-box; {usage}"),
+    };
     if let Some(w) = args.get(5).filter(|w| *w != "-") {
         cfg.world =
             hw_sim::WorldConfig::from_file(std::path::Path::new(w)).expect("the world file");
@@ -150,7 +166,8 @@ fn main() {
     for ep in 0..episodes {
         env.reset(3_000_000 + ep, true).expect("reset");
         let hole = env.task_geometry().hole_pose.translation.vector;
-        // at-box: the point this episode steers to, hole frame, m.
+        // at-box: the point this episode steers to, relative to the hole
+        // frame's origin along base-frame axes, m.
         let mut goal = [0.0; 3];
         if at_box {
             goal = [
@@ -222,17 +239,17 @@ fn main() {
     let from_z = probe(&z, &targets, &train, &test);
     let from_own = probe(&own, &targets, &train, &test);
     let from_z_mlp = mlp_probe(&z, &targets, &train, &test);
-    // RMS of a test error from R²: sqrt((1 − R²) · variance of the test
-    // targets), mm.
-    let rms = |r2: f64, i: usize| {
+    // The test targets' deviation, mm: the RMS error of predicting their
+    // mean.
+    let spread = |i: usize| {
         let n = test.len() as f64;
         let m = test.iter().map(|&t| targets[t][i]).sum::<f64>() / n;
-        let var = test
+        1e3 * (test
             .iter()
             .map(|&t| (targets[t][i] - m).powi(2))
             .sum::<f64>()
-            / n;
-        1e3 * ((1.0 - r2).max(0.0) * var).sqrt()
+            / n)
+            .sqrt()
     };
     println!(
         "test         R² from z   from tip pose   from z (MLP)   | RMS error, mm: z   tip pose   z (MLP)   target's sd"
@@ -240,13 +257,13 @@ fn main() {
     for (i, n) in names.iter().enumerate() {
         println!(
             "{n:<12} {:>9.3} {:>14.3} {:>14.3}   | {:>16.1} {:>10.1} {:>9.1} {:>13.1}",
-            from_z[i],
-            from_own[i],
-            from_z_mlp[i],
-            rms(from_z[i], i),
-            rms(from_own[i], i),
-            rms(from_z_mlp[i], i),
-            rms(0.0, i)
+            from_z[i].0,
+            from_own[i].0,
+            from_z_mlp[i].0,
+            1e3 * from_z[i].1,
+            1e3 * from_own[i].1,
+            1e3 * from_z_mlp[i].1,
+            spread(i)
         );
     }
 }

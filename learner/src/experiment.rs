@@ -358,8 +358,21 @@ fn ensure_dataset(
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<PathBuf> {
     if d.dataset.join("meta.json").exists() {
-        Dataset::open(&d.dataset)
+        let ds = Dataset::open(&d.dataset)
             .with_context(|| format!("opening the dataset {}", d.dataset.display()))?;
+        // Before hours of training: a representation of another camera's
+        // images would be refused by the policy's environment.
+        let world = env.world.camera.calibration();
+        if let Some(c) = ds.meta.camera
+            && !c.same_camera(&world)
+        {
+            bail!(
+                "data.dataset {}: its camera ({c}) is not the policy's world's ({world}); \
+                 give data.dataset a new path to collect one through the policy's camera, or \
+                 set the policy configuration's [env.world.camera] to the dataset's",
+                d.dataset.display()
+            );
+        }
         return Ok(d.dataset.clone());
     }
     ensure!(

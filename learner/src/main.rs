@@ -476,6 +476,10 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             if let Some(mm) = hole_error_mm {
                 use learner::rl::ObservationKind as O;
                 anyhow::ensure!(
+                    mm.is_finite() && mm >= 0.0,
+                    "--hole-error-mm {mm}: must be a standard deviation in mm, 0 or more"
+                );
+                anyhow::ensure!(
                     matches!(cfg.observation, O::GroundTruth | O::GroundTruthHoleError(_)),
                     "--hole-error-mm is for a ground-truth policy; this one observes {:?}",
                     cfg.observation

@@ -360,7 +360,7 @@ fn the_frozen_representation_observes_the_rl_environment() {
             .unwrap()
             .to_string();
         assert!(
-            e.contains("env.world.camera") && e.contains("trained with"),
+            e.contains("the world's camera") && e.contains("trained with"),
             "{e}"
         );
     }
@@ -488,6 +488,21 @@ fn an_experiment_collects_through_the_policys_camera() {
     let camera = ds.meta.camera.expect("kept");
     assert!(camera.same_camera(&pcfg.env.world.camera.calibration()));
     assert!(!camera.same_camera(&hw_sim::config::CameraConfig::default().calibration()));
+    // The dataset, now there, under a policy with another camera: refused
+    // before any training, naming the dataset.
+    std::fs::write(
+        &policy,
+        format!("num_envs = 2\n\n[env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n"),
+    )
+    .unwrap();
+    let e = run(&cfg, &dir.join("out2"), &RunOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("data.dataset") && e.contains("is not the policy's world's"),
+        "{e}"
+    );
+    assert!(!dir.join("out2/Full/repr").exists());
 }
 
 /// `learner experiment` end to end at a tiny scale: a representation

@@ -86,6 +86,30 @@ fn train_resume_and_evaluate() {
     ] {
         assert!(text.contains(name), "{text}");
     }
+    // Told the hole with an error: 0 mm is the ground truth itself, 20 mm
+    // changes what the policy does; a negative one is refused by name.
+    let eval = |extra: &[&str], json: &str| {
+        let o = learner()
+            .args(["policy", "eval", "--episodes", "2", "--checkpoint"])
+            .arg(out.join("checkpoint.json"))
+            .args(extra)
+            .arg("--json")
+            .arg(dir.path().join(json))
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    let read = |json: &str| std::fs::read_to_string(dir.path().join(json)).unwrap();
+    assert!(eval(&[], "exact.json").0);
+    assert!(eval(&["--hole-error-mm", "0"], "zero.json").0);
+    assert!(eval(&["--hole-error-mm", "20"], "off.json").0);
+    assert_eq!(read("exact.json"), read("zero.json"));
+    assert_ne!(read("exact.json"), read("off.json"));
+    let (ok, err) = eval(&["--hole-error-mm=-1"], "bad.json");
+    assert!(!ok && err.contains("--hole-error-mm -1"), "{err}");
 }
 
 #[test]

@@ -416,19 +416,19 @@ impl CameraCalibration {
     pub fn same_camera(&self, other: &Self) -> bool {
         let near =
             |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol);
-        let dot: f64 = self
-            .pose_quat_xyzw
-            .iter()
-            .zip(&other.pose_quat_xyzw)
-            .map(|(a, b)| a * b)
-            .sum();
-        // |dot| = cos(θ/2) for a rotation θ between them: θ ≤ 10⁻³ rad.
-        self.width == other.width
+        let dot = |a: &[f64; 4], b: &[f64; 4]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (qa, qb) = (&self.pose_quat_xyzw, &other.pose_quat_xyzw);
+        let norms = (dot(qa, qa) * dot(qb, qb)).sqrt();
+        // |q̂a·q̂b| = cos(θ/2) for a rotation θ between them: θ ≤ 10⁻³ rad.
+        // A zero (or non-finite) quaternion is no orientation: no match.
+        norms > 1e-12
+            && norms.is_finite()
+            && (dot(qa, qb) / norms).abs() >= (0.5e-3f64).cos()
+            && self.width == other.width
             && self.height == other.height
             && (self.focal_px - other.focal_px).abs() <= 1e-3
             && near(&self.principal_px, &other.principal_px, 1e-3)
             && near(&self.pose_pos_m, &other.pose_pos_m, 1e-4)
-            && dot.abs() >= (0.5e-3f64).cos()
     }
 }
 
@@ -890,9 +890,25 @@ mod tests {
         assert!(moved(&|c| c.focal_px += 0.5));
         assert!(moved(&|c| c.principal_px[1] += 0.5));
         assert!(moved(&|c| c.pose_pos_m[2] += 0.001));
-        // Turned by 0.01 rad about z.
-        let (s, k) = (0.005f64.sin(), 0.005f64.cos());
-        assert!(moved(&|c| c.pose_quat_xyzw = [h * k, h * s, h * s, h * k]));
+        // Turned about z by θ: the same within 10⁻³ rad, not beyond; a
+        // quaternion of another norm is the same rotation.
+        let turned = |theta: f64, scale: f64| {
+            let (s, k) = ((theta / 2.0).sin(), (theta / 2.0).cos());
+            let mut c = a;
+            c.pose_quat_xyzw = [h * k, h * s, h * s, h * k].map(|x| x * scale);
+            c
+        };
+        assert!(a.same_camera(&turned(0.8e-3, 1.0)));
+        assert!(a.same_camera(&turned(0.0, 2.0)));
+        assert!(!a.same_camera(&turned(1.5e-3, 1.0)));
+        assert!(!a.same_camera(&turned(0.01, 1.0)));
+        // Just inside and outside the other tolerances.
+        assert!(!moved(&|c| c.pose_pos_m[0] += 0.8e-4));
+        assert!(moved(&|c| c.pose_pos_m[0] += 2e-4));
+        assert!(!moved(&|c| c.focal_px += 0.8e-3));
+        assert!(moved(&|c| c.focal_px += 2e-3));
+        // No orientation matches nothing, itself included.
+        assert!(!CameraCalibration::default().same_camera(&CameraCalibration::default()));
     }
 
     #[test]

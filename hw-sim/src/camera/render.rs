@@ -197,24 +197,38 @@ const LIGHT: [f64; 3] = [0.35, -0.45, 0.82];
 
 impl CameraConfig {
     /// The calibration a camera of this configuration reports in its
-    /// frames.
+    /// frames (computed, no camera built).
     pub fn calibration(&self) -> CameraCalibration {
-        Camera::new(self, Vec::new(), 0).calibration()
+        let (pose, focal_px, principal_px) = self.pinhole();
+        CameraCalibration {
+            width: self.width,
+            height: self.height,
+            focal_px,
+            principal_px,
+            pose_pos_m: pose.translation.vector.into(),
+            pose_quat_xyzw: pose.rotation.coords.into(),
+        }
+    }
+
+    /// The look-at pose (x right, y down, z forward, in the base frame),
+    /// the focal length and the principal point, px.
+    fn pinhole(&self) -> (Isometry3<f64>, f64, [f64; 2]) {
+        let eye = Vector3::from(self.eye_m);
+        let forward = (Vector3::from(self.target_m) - eye).normalize();
+        let right = forward.cross(&Vector3::z()).normalize();
+        let down = forward.cross(&right);
+        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[right, down, forward]));
+        let pose = Isometry3::from_parts(eye.into(), rot.into());
+        let focal_px = 0.5 * self.height as f64 / (0.5 * self.vertical_fov_deg.to_radians()).tan();
+        let principal = [0.5 * self.width as f64, 0.5 * self.height as f64];
+        (pose, focal_px, principal)
     }
 }
 
 impl Camera {
     /// A camera over `prims`; `seed` drives its noise.
     pub fn new(config: &CameraConfig, prims: Vec<Primitive>, seed: u64) -> Self {
-        let eye = Vector3::from(config.eye_m);
-        let forward = (Vector3::from(config.target_m) - eye).normalize();
-        let right = forward.cross(&Vector3::z()).normalize();
-        let down = forward.cross(&right);
-        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[right, down, forward]));
-        let pose = Isometry3::from_parts(eye.into(), rot.into());
-        let focal_px =
-            0.5 * config.height as f64 / (0.5 * config.vertical_fov_deg.to_radians()).tan();
-        let principal = [0.5 * config.width as f64, 0.5 * config.height as f64];
+        let (pose, focal_px, principal) = config.pinhole();
         Self::with_intrinsics(config, pose, focal_px, principal, prims, seed)
     }
 
@@ -567,5 +581,26 @@ impl Camera {
     #[doc(hidden)]
     pub fn set_exhaustive(&mut self, on: bool) {
         self.exhaustive = on;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_configurations_calibration_is_its_cameras() {
+        let c = CameraConfig {
+            width: 96,
+            height: 64,
+            vertical_fov_deg: 40.0,
+            eye_m: [0.9, -0.24, 0.77],
+            target_m: [0.58, 0.0, 0.2],
+            ..CameraConfig::default()
+        };
+        let built = Camera::new(&c, Vec::new(), 0).calibration();
+        assert_eq!(c.calibration(), built);
+        assert_eq!(built.principal_px, [48.0, 32.0]);
+        assert_ne!(CameraConfig::default().calibration(), built);
     }
 }

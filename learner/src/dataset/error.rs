@@ -159,7 +159,7 @@ pub enum DatasetError {
     /// A log's camera is not the one of the dataset's other logs: a model
     /// trained on both would learn two scenes as one.
     #[error(
-        "{}: its camera differs from the dataset's (log {log_camera:?}, dataset {dataset:?}); \
+        "{}: its camera differs from the dataset's (log: {log_camera}; dataset: {dataset}); \
          build one dataset per camera",
         log.display()
     )]

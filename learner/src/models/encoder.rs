@@ -53,13 +53,6 @@ impl Encoder {
         self.camera.as_ref()
     }
 
-    /// Records the camera it was trained for (as [`Encoder::load`] does from
-    /// the export).
-    pub fn with_camera(mut self, camera: Option<CameraCalibration>) -> Self {
-        self.camera = camera;
-        self
-    }
-
     /// With the sensors `m` only (a lost sensor's expert is left out of the
     /// product).
     pub fn with_modalities(mut self, m: Modalities) -> Self {

@@ -56,7 +56,9 @@ pub struct DistillConfig {
     /// representation trained with another camera than the teacher's world
     /// has. The camera changes what is seen, not what happens, so a
     /// ground-truth teacher's actions still hold; a teacher that observes
-    /// the camera itself keeps its own, and this is refused.
+    /// the camera itself keeps its own, and this is refused. The section
+    /// replaces the whole camera: fields left out take hw-sim's defaults,
+    /// not the teacher's.
     #[serde(default)]
     pub camera: Option<hw_sim::config::CameraConfig>,
 }
@@ -180,9 +182,8 @@ impl Observer for Pair {
         self.first.rejected() + self.second.rejected()
     }
 
-    /// The second's (the student's) camera, else the first's: a teacher
-    /// and a student trained with different cameras cannot share a world,
-    /// and the environment's check then refuses one of them.
+    /// The second's (the student's) camera, else the first's. `distill`
+    /// checks each of the two against the world before it builds one.
     fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
         self.second.camera().or_else(|| self.first.camera())
     }
@@ -411,6 +412,23 @@ pub fn distill(
     write_json(&cfg_path, &recorded)?;
 
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
+    // Each against the world they share, named: the teacher keeps its
+    // environment's camera, the student's comes from `[camera]`.
+    for (who, obs, fix) in [
+        (
+            "the teacher",
+            &t_obs,
+            "a teacher that observes the camera keeps its own",
+        ),
+        (
+            "the student",
+            &s_obs,
+            "set [camera] to its representation's training camera",
+        ),
+    ] {
+        super::observe::check_camera(&student_cfg.env.world.camera, obs.as_ref())
+            .map_err(|e| refuse(format!("{who}: {e} ({fix})"), &cfg.teacher))?;
+    }
     let (td, sd) = (t_obs.dim(), s_obs.dim());
     if teacher.sizes[0] != td {
         return Err(refuse(

@@ -42,8 +42,8 @@ pub enum RlEnvError {
     /// The world's camera is not the one the observer's representation
     /// was trained with: its z would describe another scene.
     #[error(
-        "env.world.camera ({world}) is not the camera the representation was trained with \
-         ({model}); set [env.world.camera] to the training data's camera"
+        "the world's camera ({world}) is not the camera the representation was trained with \
+         ({model}); give the world (its [camera]) the training data's camera"
     )]
     Camera {
         /// The world's.

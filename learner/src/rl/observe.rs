@@ -227,7 +227,10 @@ impl Observer for GroundTruth {
 /// under it), and can a policy learn to find the opening by touch when it
 /// is told only roughly (one trained under it). The error is drawn from a
 /// generator seeded by the hole's pose, which each episode's seed draws:
-/// fixed within an episode, the same on a rerun, no state kept.
+/// fixed within an episode, the same on a rerun, no state kept. A world
+/// whose box is not randomised (`box_xy_range_m` and `box_yaw_range_rad`
+/// zero) has one hole pose, so every episode gets the same error there: a
+/// bias, not a spread.
 #[derive(Debug, Clone, Copy)]
 pub struct HoleError {
     /// Standard deviation per horizontal axis, m.
@@ -237,8 +240,8 @@ pub struct HoleError {
 impl HoleError {
     /// The episode's error (hole-frame x, y), m.
     pub fn error(&self, hole_pose: &Isometry3<f64>) -> [f64; 2] {
-        // Any change of the pose gives another seed; the bits of its
-        // coordinates are mixed by the generator's seeding.
+        // Any change of the pose gives another seed: the fold mixes the
+        // bits of every coordinate (a multiply-rotate hash).
         let t = hole_pose.translation.vector;
         let q = hole_pose.rotation.coords;
         let seed =

@@ -44,8 +44,9 @@ impl Representation {
         }
     }
 
-    /// Batches the encoder refused (a camera frame of another size, a value
-    /// that is not finite): their observations were written as zeros.
+    /// Batches it refused (a camera frame of another size or another
+    /// camera than the model's, a value that is not finite): their
+    /// observations were written as zeros.
     pub fn rejected(&self) -> u64 {
         self.rejected.load(Ordering::Relaxed)
     }

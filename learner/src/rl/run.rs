@@ -738,6 +738,7 @@ pub fn evaluate(
     let mut envs = (0..n)
         .map(|_| RlEnv::new(&cfg.env))
         .collect::<Result<Vec<_>, _>>()?;
+    super::observe::check_camera(&cfg.env.world.camera, observer.as_ref())?;
     let threads = if cfg.threads == 0 {
         all_cores()
     } else {

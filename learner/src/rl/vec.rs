@@ -86,10 +86,12 @@ impl VecEnv {
         if n == 0 {
             return Err(hw_sim::FieldError::new("num_envs", 0, "must be at least 1").into());
         }
-        super::observe::check_camera(&cfg.world.camera, observer.as_ref())?;
         let envs = (0..n)
             .map(|_| RlEnv::new(cfg))
             .collect::<Result<Vec<_>, _>>()?;
+        // After the world is built, so that an invalid camera is named by
+        // its field rather than reported as another camera.
+        super::observe::check_camera(&cfg.world.camera, observer.as_ref())?;
         let threads = if threads == 0 { all_cores() } else { threads };
         Ok(Self {
             obs: vec![0.0; n * observer.dim()],
