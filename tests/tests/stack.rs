@@ -858,17 +858,23 @@ fn a_representation_policy_drives_the_stack_live() {
     };
     let dev = burn::prelude::Device::flex();
     let net = init::seeded(ReprNet::new(&model, &dev), 5);
-    learner::train::checkpoint::export(
-        &model_dir,
-        &net,
-        &learner::train::checkpoint::ExportMeta {
-            model: model.clone(),
-            normaliser: Normaliser::identity(),
-            dataset: "none (untrained)".into(),
-            epochs: 0,
-        },
-    )
-    .unwrap();
+    // Trained, as it were, through the default world's camera, which the
+    // stack's hw-sim has.
+    let export = |dir: &std::path::Path, camera: hw_sim::config::CameraConfig| {
+        learner::train::checkpoint::export(
+            dir,
+            &net,
+            &learner::train::checkpoint::ExportMeta {
+                model: model.clone(),
+                normaliser: Normaliser::identity(),
+                dataset: "none (untrained)".into(),
+                epochs: 0,
+                camera: Some(camera.calibration()),
+            },
+        )
+        .unwrap()
+    };
+    export(&model_dir, hw_sim::config::CameraConfig::default());
     let mut rng = hw_sim::rng::seeded(9, 0);
     let mut policy = GaussianPolicy::new(16, &[8], 4, 0.0, &mut rng);
     // Larger output weights than a fresh policy's: actions that follow z.
@@ -880,6 +886,27 @@ fn a_representation_policy_drives_the_stack_live() {
         "policy.json",
         policy,
         ObservationKind::Representation(model_dir.clone()),
+    );
+    // The same model as if trained through another camera is refused
+    // before any process starts, the camera named.
+    let moved_dir = dir.join("moved-model");
+    let mut moved = hw_sim::config::CameraConfig::default();
+    moved.eye_m[2] += 0.1;
+    export(&moved_dir, moved);
+    let mut p = learner::rl::run::read_checkpoint(&ckpt).unwrap();
+    p.config.observation = ObservationKind::Representation(moved_dir);
+    let moved_ckpt = dir.join("moved-policy.json");
+    std::fs::write(&moved_ckpt, serde_json::to_vec(&p).unwrap()).unwrap();
+    let out = Command::new(tests::stack_bins().join("learner"))
+        .args(["stack", "--episodes", "1", "--policy"])
+        .arg(&moved_ckpt)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("is not the camera the representation was trained with"),
+        "{stderr}"
     );
     let reader = policy_episode(dir.path(), &ckpt, 2, 2);
     let actions = reader
