@@ -3,18 +3,14 @@
 # ours (learner/examples/repr_bench.rs, the training convolution) and PyTorch
 # (bench-anchors/torch-repr/bench.py, the same architecture), one Adam step
 # of the Full Model at batch 64, 128×128 px, alternately, ROUNDS rounds, in
-# one run. PyTorch comes from bench-anchors/repr.sh's .venv-torch (run that
-# once first). Results: docs/performance.md.
+# one run. PyTorch is installed as for repr.sh (bench-anchors/repr-setup.sh).
+# Results: docs/performance.md.
 # Usage: bench-anchors/repr-threads.sh [ROUNDS] [OUT.jsonl]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROUNDS=${1:-3}
 OUT=${2:-target/repr-threads.jsonl}
-VENV=.venv-torch
-"$VENV/bin/python" -c "import torch" || { echo "run bench-anchors/repr.sh first"; exit 1; }
-cargo build --release --quiet -p learner --example repr_bench
-BIN=target/release/examples/repr_bench
-PY="$VENV/bin/python bench-anchors/torch-repr/bench.py"
+source bench-anchors/repr-setup.sh
 : > "$OUT"
 for r in $(seq 1 "$ROUNDS"); do
     echo "== round $r of $ROUNDS"

@@ -14,16 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROUNDS=${1:-3}
 OUT=${2:-target/repr-bench.jsonl}
-TORCH_VERSION=2.15.0
-VENV=.venv-torch
-if ! "$VENV/bin/python" -c "import torch" >/dev/null 2>&1; then
-    echo "== installing torch $TORCH_VERSION into $VENV"
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install --quiet --disable-pip-version-check "torch==$TORCH_VERSION"
-fi
-cargo build --release --quiet -p learner --example repr_bench
-BIN=target/release/examples/repr_bench
-PY="$VENV/bin/python bench-anchors/torch-repr/bench.py"
+source bench-anchors/repr-setup.sh
 : > "$OUT"
 for r in $(seq 1 "$ROUNDS"); do
     echo "== round $r of $ROUNDS"
