@@ -409,7 +409,7 @@ impl TaskConfig {
 
 impl CameraConfig {
     /// Image size, field of view, a usable view direction, rate and range.
-    fn validate(&self) -> Result<(), FieldError> {
+    pub fn validate(&self) -> Result<(), FieldError> {
         within("camera.width", self.width, 1..=4096)?;
         within("camera.height", self.height, 1..=4096)?;
         let fov = self.vertical_fov_deg;

@@ -23,7 +23,9 @@
 //! origin, with noise, and probes the
 //! states with the tip less than 30 mm above the box: where a policy must
 //! act on the opening. STEPS counts the descent too.
-//! Beside R², the test error's root mean square (mm for positions).
+//! Beside R², the test error's root mean square (mm for positions, bias
+//! included). The MLP's first column is the explained variance (R² less
+//! the error's mean), as the earlier runs recorded it.
 
 use faer::Mat;
 use faer::prelude::*;
@@ -158,9 +160,9 @@ fn main() {
             hw_sim::WorldConfig::from_file(std::path::Path::new(w)).expect("the world file");
         cfg.world.task.enabled = true;
     }
+    let mut env = RlEnv::new(&cfg).expect("env");
     learner::rl::observe::check_camera(&cfg.world.camera, observer.as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
-    let mut env = RlEnv::new(&cfg).expect("env");
     let mut rng = hw_sim::rng::seeded(11, 0);
     let (mut z, mut own, mut targets, mut episode) = (vec![], vec![], vec![], vec![]);
     for ep in 0..episodes {
@@ -252,7 +254,7 @@ fn main() {
             .sqrt()
     };
     println!(
-        "test         R² from z   from tip pose   from z (MLP)   | RMS error, mm: z   tip pose   z (MLP)   target's sd"
+        "test         R² from z   from tip pose   EV, z (MLP)    | RMS error, mm: z   tip pose   z (MLP)   target's sd"
     );
     for (i, n) in names.iter().enumerate() {
         println!(

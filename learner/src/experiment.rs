@@ -227,7 +227,15 @@ pub fn run(
         Some(p) => policy_run::read_config(p)?,
         None => policy_run::TrainConfig::default(),
     };
-    let data = ensure_dataset(&cfg.data, &base_policy.env, out, &mut log, stop)?;
+    let uses_representation = cfg.variant.iter().any(|v| v.representation.is_some());
+    let data = ensure_dataset(
+        &cfg.data,
+        &base_policy.env,
+        uses_representation,
+        out,
+        &mut log,
+        stop,
+    )?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
         if !opts.only.is_empty() && !opts.only.contains(&v.name) {
@@ -353,6 +361,7 @@ pub fn run(
 fn ensure_dataset(
     d: &DataStage,
     env: &crate::rl::RlEnvConfig,
+    uses_representation: bool,
     out: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
@@ -361,9 +370,12 @@ fn ensure_dataset(
         let ds = Dataset::open(&d.dataset)
             .with_context(|| format!("opening the dataset {}", d.dataset.display()))?;
         // Before hours of training: a representation of another camera's
-        // images would be refused by the policy's environment.
+        // images would be refused by the policy's environment. (Only a
+        // variant with a representation uses the dataset.)
+        env.world.camera.validate()?;
         let world = env.world.camera.calibration();
         if let Some(c) = ds.meta.camera
+            && uses_representation
             && !c.same_camera(&world)
         {
             bail!(

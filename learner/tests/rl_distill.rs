@@ -228,6 +228,11 @@ fn bad_input_is_named() {
     expected.world.camera = cfg.camera.clone().unwrap();
     assert_ne!(expected, teacher_env);
     assert_eq!(c.config.env, expected);
+    // An invalid camera is named by its field.
+    let text = student_config(&teacher, 1) + "\n[camera]\nwidth = 0\n";
+    let bad: DistillConfig = toml::from_str(&text).unwrap();
+    let e = distill(bad, &dir.path().join("e"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("camera.width"), "{e}");
     // A truncated samples file on resume.
     let f = out.join("rounds/round-000.bin");
     let bytes = std::fs::read(&f).unwrap();

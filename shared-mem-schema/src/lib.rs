@@ -903,9 +903,14 @@ mod tests {
         assert!(!a.same_camera(&turned(1.5e-3, 1.0)));
         assert!(!a.same_camera(&turned(0.01, 1.0)));
         // Just inside and outside the other tolerances.
-        assert!(!moved(&|c| c.pose_pos_m[0] += 0.8e-4));
+        let same = |f: &dyn Fn(&mut CameraCalibration)| {
+            let mut c = a;
+            f(&mut c);
+            a.same_camera(&c) && c.same_camera(&a)
+        };
+        assert!(same(&|c| c.pose_pos_m[0] += 0.8e-4));
         assert!(moved(&|c| c.pose_pos_m[0] += 2e-4));
-        assert!(!moved(&|c| c.focal_px += 0.8e-3));
+        assert!(same(&|c| c.focal_px += 0.8e-3));
         assert!(moved(&|c| c.focal_px += 2e-3));
         // No orientation matches nothing, itself included.
         assert!(!CameraCalibration::default().same_camera(&CameraCalibration::default()));

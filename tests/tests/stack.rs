@@ -897,8 +897,22 @@ fn a_representation_policy_drives_the_stack_live() {
     p.config.observation = ObservationKind::Representation(moved_dir);
     let moved_ckpt = dir.join("moved-policy.json");
     std::fs::write(&moved_ckpt, serde_json::to_vec(&p).unwrap()).unwrap();
+    // The arguments of a real episode, so that a check that stopped
+    // refusing would run one short episode in its own namespace, not hang.
     let out = Command::new(tests::stack_bins().join("learner"))
-        .args(["stack", "--episodes", "1", "--policy"])
+        .args([
+            "stack",
+            "--lockstep",
+            "--episodes",
+            "1",
+            "--episode-timeout-s",
+            "1",
+        ])
+        .arg("--namespace")
+        .arg(tests::unique_namespace("policy-moved"))
+        .arg("--log-dir")
+        .arg(dir.join("moved-logs"))
+        .arg("--policy")
         .arg(&moved_ckpt)
         .output()
         .unwrap();

@@ -414,21 +414,20 @@ pub fn distill(
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     // Each against the world they share, named: the teacher keeps its
     // environment's camera, the student's comes from `[camera]`.
-    for (who, obs, fix) in [
-        (
-            "the teacher",
-            &t_obs,
-            "a teacher that observes the camera keeps its own",
-        ),
-        (
-            "the student",
-            &s_obs,
-            "set [camera] to its representation's training camera",
-        ),
-    ] {
-        super::observe::check_camera(&student_cfg.env.world.camera, obs.as_ref())
-            .map_err(|e| refuse(format!("{who}: {e} ({fix})"), &cfg.teacher))?;
-    }
+    let camera = &student_cfg.env.world.camera;
+    super::observe::check_camera(camera, t_obs.as_ref()).map_err(|e| {
+        refuse(
+            format!("the teacher: {e} (a teacher that observes the camera keeps its own)"),
+            &cfg.teacher,
+        )
+    })?;
+    super::observe::check_camera(camera, s_obs.as_ref()).map_err(|e| {
+        field(
+            "camera",
+            &"(the student's)",
+            &format!("{e}; set [camera] to the student's representation's training camera"),
+        )
+    })?;
     let (td, sd) = (t_obs.dim(), s_obs.dim());
     if teacher.sizes[0] != td {
         return Err(refuse(

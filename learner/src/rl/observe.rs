@@ -67,6 +67,8 @@ pub fn check_camera(
     let Some(model) = observer.camera() else {
         return Ok(());
     };
+    // An invalid camera is named by its field, not reported as another one.
+    camera.validate()?;
     let world = camera.calibration();
     if world.same_camera(&model) {
         Ok(())
