@@ -118,6 +118,20 @@ fn the_split_keeps_every_episode_on_one_side() {
         }
     }
     assert_eq!(n as u64, Split::samples(&ds.meta, &s.test));
+    // The split keeps the dataset's camera; read back against a dataset of
+    // another camera (a resume on a rebuilt dataset), it is refused.
+    assert!(s.camera.is_some() && s.camera == ds.meta.camera);
+    let dir = test_support::scratch_dir("split");
+    let path = dir.join("split.json");
+    std::fs::write(&path, serde_json::to_vec(&s).unwrap()).unwrap();
+    assert_eq!(Split::read(&path, &ds.meta).unwrap(), s);
+    let mut other = ds.meta.clone();
+    other.camera.as_mut().unwrap().pose_pos_m[2] += 0.05;
+    let e = Split::read(&path, &other).unwrap_err().to_string();
+    assert!(
+        e.contains("the run started on a dataset of the camera"),
+        "{e}"
+    );
 }
 
 #[test]

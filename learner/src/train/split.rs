@@ -13,6 +13,11 @@ pub struct Split {
     pub train: Vec<u32>,
     /// Episode numbers held out for testing, ascending.
     pub test: Vec<u32>,
+    /// The dataset's camera when the run started (absent from runs started
+    /// before it was kept): a resume on a dataset of another camera is
+    /// refused, so that the export's camera is the one the model saw.
+    #[serde(default)]
+    pub camera: Option<shared_mem_schema::CameraCalibration>,
 }
 
 impl Split {
@@ -39,7 +44,11 @@ impl Split {
         }
         train.sort_unstable();
         test.sort_unstable();
-        Self { train, test }
+        Self {
+            train,
+            test,
+            camera: meta.camera,
+        }
     }
 
     /// Reads a run's split.json, checking every episode it names is in
@@ -62,6 +71,18 @@ impl Split {
             return Err(bad(format!(
                 "episode {e} is not in the dataset: another dataset than the run's?"
             )));
+        }
+        if let Some(run) = split.camera {
+            match meta.camera {
+                Some(now) if now.same_camera(&run) => {}
+                now => {
+                    return Err(bad(format!(
+                        "the run started on a dataset of the camera {run}; this dataset's is {}: \
+                         another dataset than the run's?",
+                        now.map_or("not recorded".to_string(), |c| c.to_string())
+                    )));
+                }
+            }
         }
         Ok(split)
     }
