@@ -189,7 +189,6 @@ pub fn episode_samples(
     let mut labeler: Option<FlowLabeler> = None;
     let mut out = Vec::new();
     let nq = frames[0].n_joints as usize;
-    let mut size = (0, 0);
     let mut camera: Option<CameraCalibration> = None;
     for pair in cams.windows(2) {
         let (c0, c1) = (&pair[0], &pair[1]);
@@ -219,7 +218,6 @@ pub fn episode_samples(
                     source: Box::new(source),
                 },
             )?);
-            size = (cal.width as usize, cal.height as usize);
             camera = Some(cal);
         }
         // The labeler projects with the first frame's calibration.
@@ -273,7 +271,7 @@ pub fn episode_samples(
         policy: config.policy,
         samples: out,
         tags,
-        size,
+        size: camera.map_or((0, 0), |c| (c.width as usize, c.height as usize)),
         camera,
     })
 }
