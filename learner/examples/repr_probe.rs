@@ -1,5 +1,6 @@
 //! What a frozen representation tells a policy: linear probes (ridge least
-//! squares through faer) from its z means to the task's ground truth, fitted
+//! squares through faer, `learner::rl::probe::LinearProbe`, the bias not
+//! penalised) from its z means to the task's ground truth, fitted
 //! on some episodes and scored (R²) on others, over states of the RL
 //! environment under random actions (uniform in [−1, 1] per component, as an
 //! untrained policy's noise).
@@ -27,61 +28,24 @@
 //! included). The MLP's first column is the explained variance (R² less
 //! the error's mean), as the earlier runs recorded it.
 
-use faer::Mat;
-use faer::prelude::*;
 use learner::rl::observe::ObservationKind;
+use learner::rl::probe::{LinearProbe, standardiser};
 use learner::rl::value::explained_variance;
 use learner::rl::{RlEnv, RlEnvConfig, ValueConfig, ValueNet};
 
-/// Mean and standard deviation (at least 10⁻¹²) of each feature over the
-/// rows `train`.
-fn standardiser(x: &[Vec<f64>], train: &[usize]) -> (Vec<f64>, Vec<f64>) {
-    let n = train.len() as f64;
-    let mean: Vec<f64> = (0..x[0].len())
-        .map(|c| train.iter().map(|&i| x[i][c]).sum::<f64>() / n)
-        .collect();
-    let sd = mean
-        .iter()
-        .enumerate()
-        .map(|(c, m)| {
-            let v = train.iter().map(|&i| (x[i][c] - m).powi(2)).sum::<f64>() / n;
-            v.sqrt().max(1e-12)
-        })
-        .collect();
-    (mean, sd)
-}
-
-/// Ridge fit on rows `train` (features standardised by the training
-/// rows' mean and deviation, ridge 10⁻³ per row); per target on rows
-/// `test`, R² and the root mean square of the error.
+/// Ridge fit (`LinearProbe`: features standardised by the training rows'
+/// mean and deviation, ridge 10⁻³ per row) on rows `train`; per target on
+/// rows `test`, R² and the root mean square of the error.
 fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<(f64, f64)> {
-    let d = x[0].len() + 1;
-    let k = y[0].len();
-    let n = train.len() as f64;
-    let (mean, sd) = standardiser(x, train);
-    let row = |i: usize| {
-        (0..d - 1)
-            .map(|c| (x[i][c] - mean[c]) / sd[c])
-            .chain([1.0])
-            .collect::<Vec<f64>>()
-    };
-    let a = Mat::<f64>::from_fn(train.len(), d, |r, c| row(train[r])[c]);
-    let b = Mat::<f64>::from_fn(train.len(), k, |r, c| y[train[r]][c]);
-    let ata = a.transpose() * &a;
-    let m = Mat::<f64>::from_fn(d, d, |i, j| {
-        ata[(i, j)] + if i == j { 1e-3 * n } else { 0.0 }
-    });
-    let w = m
-        .llt(faer::Side::Lower)
-        .expect("regularised normal equations")
-        .solve(a.transpose() * &b);
-    (0..k)
+    let pick = |rows: &[Vec<f64>]| train.iter().map(|&i| rows[i].clone()).collect::<Vec<_>>();
+    let p = LinearProbe::fit(&pick(x), &pick(y), 1e-3).expect("probe");
+    let pred: Vec<Vec<f64>> = test.iter().map(|&i| p.predict(&x[i])).collect();
+    (0..y[0].len())
         .map(|t| {
             let mean = test.iter().map(|&i| y[i][t]).sum::<f64>() / test.len() as f64;
             let (mut ss_res, mut ss_tot) = (0.0, 0.0);
-            for &i in test {
-                let pred: f64 = row(i).iter().enumerate().map(|(c, v)| v * w[(c, t)]).sum();
-                ss_res += (y[i][t] - pred).powi(2);
+            for (j, &i) in test.iter().enumerate() {
+                ss_res += (y[i][t] - pred[j][t]).powi(2);
                 ss_tot += (y[i][t] - mean).powi(2);
             }
             (
@@ -99,7 +63,7 @@ fn probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec
 fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) -> Vec<(f64, f64)> {
     let d = x[0].len();
     let n = train.len() as f64;
-    let (mean, sd) = standardiser(x, train);
+    let (mean, sd) = standardiser(train.iter().map(|&i| x[i].as_slice()), d);
     let rows = |idx: &[usize]| -> Vec<f64> {
         let (mean, sd) = (&mean, &sd);
         idx.iter()

@@ -246,3 +246,60 @@ fn bad_input_is_named() {
         "{msg}"
     );
 }
+
+#[test]
+fn the_touch_search_teaches_in_the_students_environment() {
+    let dir = test_support::scratch_dir("rl-distill-search");
+    // The student observes the ground truth told the hole with the same
+    // per-episode error as the scripted teacher; both act in the student's
+    // environment (here with a stiff wrist).
+    let text = student_config(Path::new("unused"), 1)
+        .replace(
+            "teacher = \"unused\"",
+            "search_teacher = { hole_error_m = 0.003 }",
+        )
+        .replace(
+            "[student.policy]",
+            "observation = { ground_truth_hole_error = 0.003 }\n\n\
+             [student.env]\nmax_steps = 40\n\n\
+             [student.env.controller.impedance]\n\
+             kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0]\n\n[student.policy]",
+        );
+    let cfg: DistillConfig = toml::from_str(&text).unwrap();
+    assert!(cfg.teacher.is_none());
+    let out = dir.path().join("s");
+    let c = distill(cfg.clone(), &out, false, &|| false).unwrap();
+    assert_eq!(c.config.env, cfg.student.env);
+    assert_eq!(
+        c.config.observation,
+        ObservationKind::GroundTruthHoleError(0.003)
+    );
+    // The teacher's labels: in 40 steps from the start the search moves
+    // towards the believed hole at its 1 mm step (2/3 of the 1.5 mm scale)
+    // and does not roll much.
+    let s = learner::rl::distill::Samples::read(&out.join("rounds/round-000.bin")).unwrap();
+    assert_eq!(s.len(), 80);
+    let lateral = s
+        .actions
+        .chunks_exact(4)
+        .map(|a| (a[0] as f64).hypot(a[1] as f64))
+        .fold(0.0, f64::max);
+    assert!((lateral - 2.0 / 3.0).abs() < 1e-3, "{lateral}");
+    // Both teachers, or neither, are refused by name.
+    for text in [
+        text.clone().replace(
+            "search_teacher = ",
+            "teacher = \"x.json\"\nsearch_teacher = ",
+        ),
+        text.replace("search_teacher = { hole_error_m = 0.003 }", ""),
+    ] {
+        let cfg: DistillConfig = toml::from_str(&text).unwrap();
+        let e = distill(cfg, &dir.path().join("t"), false, &|| false).unwrap_err();
+        assert!(e.to_string().contains("teacher"), "{e}");
+    }
+    // A bad search setting is named.
+    let mut bad = cfg;
+    bad.search_teacher.as_mut().unwrap().slide_m = -1.0;
+    let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("search_teacher.slide_m"), "{e}");
+}

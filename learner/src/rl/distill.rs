@@ -20,9 +20,14 @@ use super::gaussian::GaussianPolicy;
 use super::mlp::MseFit;
 use super::obs_norm::ObsNorm;
 use super::observe::{ObsView, Observer};
+use super::probe::LinearProbe;
 use super::run::{
     Checkpoint, RunError, TrainConfig, ValidatedPolicy, ValidationPoint, checkpoint_path, evaluate,
     read_checkpoint, read_json, read_toml, write_json,
+};
+use super::search::{
+    BeliefProbeConfig, ProbedSearchView, SearchView, TouchSearch, TouchSearchConfig,
+    fit_belief_probe,
 };
 use super::train::TrainerState;
 use super::value::Baseline;
@@ -41,12 +46,20 @@ use std::sync::Arc;
 #[serde(deny_unknown_fields)]
 pub struct DistillConfig {
     /// The teacher: a `learner policy train` checkpoint, whose chosen policy
-    /// (the best validated, else the best logged) acts.
-    pub teacher: PathBuf,
+    /// (the best validated, else the best logged) acts. Either this or
+    /// `[search_teacher]`.
+    #[serde(default)]
+    pub teacher: Option<PathBuf>,
+    /// A scripted teacher in place of a checkpoint: the touch search
+    /// ([`super::search::TouchSearch`]), told the hole with a per-episode
+    /// error, which slides over the top face until the peg drops in. It
+    /// acts in `[student.env]`.
+    #[serde(default)]
+    pub search_teacher: Option<TouchSearchConfig>,
     /// The student's run: its observation, policy layers, environments,
-    /// threads, seed and validation. Its environment is the teacher's (the
-    /// teacher's actions mean nothing elsewhere): an `[student.env]` that
-    /// differs from it is refused.
+    /// threads, seed and validation. With a checkpoint teacher its
+    /// environment is the teacher's (the teacher's actions mean nothing
+    /// elsewhere): an `[student.env]` that differs from it is refused.
     pub student: TrainConfig,
     /// DAgger's settings.
     #[serde(default)]
@@ -333,22 +346,61 @@ pub fn distill(
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<Checkpoint, RunError> {
     cfg.dagger.validate().map_err(RlEnvError::from)?;
-    let teacher_ckpt = read_checkpoint(&cfg.teacher)?;
-    let teacher = teacher_ckpt.chosen_policy(false);
-    eprintln!("learner: teacher: {} of {}", teacher, cfg.teacher.display());
-    let teacher = teacher.policy.clone();
     let mut student_cfg = cfg.student.clone();
     let field = |name: &str, value: &dyn std::fmt::Display, why: &str| -> RunError {
         RlEnvError::from(FieldError::new(name, value, why)).into()
     };
-    if student_cfg.env != RlEnvConfig::default() && student_cfg.env != teacher_ckpt.config.env {
-        return Err(field(
-            "student.env",
-            &"(set)",
-            "the student acts in the teacher's environment (its checkpoint's); leave \
-             [student.env] out",
-        ));
-    }
+    // Where the teacher's actions and observations come from, and its
+    // exploration noise (the student's starting σ).
+    let (teacher, mut t_obs, teacher_path, log_std) = match (&cfg.teacher, &cfg.search_teacher) {
+        (Some(path), None) => {
+            let ckpt = read_checkpoint(path)?;
+            let chosen = ckpt.chosen_policy(false);
+            eprintln!("learner: teacher: {} of {}", chosen, path.display());
+            let policy = chosen.policy.clone();
+            if student_cfg.env != RlEnvConfig::default() && student_cfg.env != ckpt.config.env {
+                return Err(field(
+                    "student.env",
+                    &"(set)",
+                    "the student acts in the teacher's environment (its checkpoint's); leave \
+                     [student.env] out",
+                ));
+            }
+            student_cfg.env = ckpt.config.env.clone();
+            let t_obs = ckpt.config.observation.observer_on(student_cfg.threads)?;
+            if policy.sizes[0] != t_obs.dim() {
+                return Err(refuse(
+                    format!(
+                        "the teacher's policy takes {} values, its observer gives {}",
+                        policy.sizes[0],
+                        t_obs.dim()
+                    ),
+                    path,
+                ));
+            }
+            let log_std = policy.log_std.clone();
+            (Teacher::Policy(policy), t_obs, path.clone(), Some(log_std))
+        }
+        (None, Some(search)) => {
+            search.validate().map_err(RlEnvError::from)?;
+            eprintln!("learner: teacher: the touch search, {search:?}");
+            let t_obs: Arc<dyn Observer> = Arc::new(SearchView {
+                std_m: search.hole_error_m,
+            });
+            let teacher = Teacher::Search(TouchSearch {
+                cfg: search.clone(),
+                scale: student_cfg.env.action.clone(),
+            });
+            (teacher, t_obs, PathBuf::from("(search_teacher)"), None)
+        }
+        _ => {
+            return Err(field(
+                "teacher",
+                &"(teacher and search_teacher)",
+                "give exactly one: a checkpoint (teacher = \"…\") or [search_teacher]",
+            ));
+        }
+    };
     if let Some(p) = &student_cfg.init_from {
         return Err(field(
             "student.init_from",
@@ -363,13 +415,9 @@ pub fn distill(
             "must be at least 1 (every round is validated)",
         ));
     }
-    student_cfg.env = teacher_ckpt.config.env.clone();
-    let t_obs = teacher_ckpt
-        .config
-        .observation
-        .observer_on(student_cfg.threads)?;
+    let probe_cfg = cfg.search_teacher.as_ref().and_then(|s| s.probe.as_ref());
     if let Some(camera) = &cfg.camera {
-        if t_obs.needs_camera() {
+        if t_obs.needs_camera() || probe_cfg.is_some() {
             return Err(field(
                 "camera",
                 &"(set)",
@@ -410,6 +458,9 @@ pub fn distill(
         }
     }
     write_json(&cfg_path, &recorded)?;
+    if let Some(p) = probe_cfg {
+        t_obs = probed_view(p, &student_cfg, out, fresh)?;
+    }
 
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     // Each against the world they share, named: the teacher keeps its
@@ -418,7 +469,7 @@ pub fn distill(
     super::observe::check_camera(camera, t_obs.as_ref()).map_err(|e| {
         refuse(
             format!("the teacher: {e} (a teacher that observes the camera keeps its own)"),
-            &cfg.teacher,
+            &teacher_path,
         )
     })?;
     super::observe::check_camera(camera, s_obs.as_ref()).map_err(|e| {
@@ -429,15 +480,6 @@ pub fn distill(
         )
     })?;
     let (td, sd) = (t_obs.dim(), s_obs.dim());
-    if teacher.sizes[0] != td {
-        return Err(refuse(
-            format!(
-                "the teacher's policy takes {} values, its observer gives {td}",
-                teacher.sizes[0]
-            ),
-            &cfg.teacher,
-        ));
-    }
     let mut env = VecEnv::new(
         &student_cfg.env,
         student_cfg.num_envs,
@@ -468,8 +510,11 @@ pub fn distill(
             student_cfg.policy.init_log_std,
             &mut r,
         );
-        // TRPO from here explores as the teacher did at the end.
-        policy.log_std = teacher.log_std.clone();
+        // TRPO from here explores as the teacher did at the end (a
+        // scripted teacher has no σ: the configured one).
+        if let Some(l) = &log_std {
+            policy.log_std = l.clone();
+        }
         policy.obs_norm = Some(ObsNorm::new(sd, student_cfg.policy.observation_clip));
         let mut r = rng::seeded(student_cfg.seed, 901);
         let baseline = Baseline::new(
@@ -644,6 +689,82 @@ fn input_error(policy: &GaussianPolicy, inputs: &[f64], targets: &[f64]) -> Vec<
     e.iter().map(|v| v / n).collect()
 }
 
+/// Where the probe of a representation-told search teacher is kept.
+fn probe_path(out: &Path) -> PathBuf {
+    out.join("search-probe.json")
+}
+
+/// Seed of the first episode a search teacher's probe is fitted on (apart
+/// from DAgger's, validation's and evaluation's episodes).
+const PROBE_FIT_SEED: u64 = 5_000_000;
+
+/// The representation-told search teacher's view: its probe fitted in the
+/// student's environment (a fresh run) or read back (a resumed one).
+fn probed_view(
+    p: &BeliefProbeConfig,
+    student_cfg: &TrainConfig,
+    out: &Path,
+    fresh: bool,
+) -> Result<Arc<dyn Observer>, RunError> {
+    let repr = super::ObservationKind::Representation(p.representation.clone())
+        .observer_on(student_cfg.threads)?;
+    let path = probe_path(out);
+    let probe: LinearProbe = if !fresh && path.exists() {
+        read_json(&path)?
+    } else {
+        eprintln!(
+            "learner: fitting the search teacher's probe of {} on {} episodes",
+            p.representation.display(),
+            p.fit_episodes
+        );
+        let progress = Progress::new(p.fit_episodes, "episodes");
+        let probe = fit_belief_probe(
+            &student_cfg.env,
+            repr.as_ref(),
+            p,
+            PROBE_FIT_SEED,
+            &mut |ep, rows| progress.update(ep, format!("{rows} states")),
+        )?;
+        progress.finish();
+        write_json(&path, &probe)?;
+        probe
+    };
+    if probe.features() != repr.dim() || probe.targets != 3 {
+        return Err(refuse(
+            format!(
+                "a probe of {} features to {} targets; the representation gives {} and the \
+                 search needs 3",
+                probe.features(),
+                probe.targets,
+                repr.dim()
+            ),
+            &path,
+        ));
+    }
+    Ok(Arc::new(ProbedSearchView {
+        repr,
+        probe,
+        below_m: p.below_m,
+    }))
+}
+
+/// Who labels the student's states.
+enum Teacher {
+    /// A trained policy's mean.
+    Policy(GaussianPolicy),
+    /// The scripted touch search.
+    Search(TouchSearch),
+}
+
+impl Teacher {
+    fn means(&self, obs: &[f64]) -> Vec<f64> {
+        match self {
+            Teacher::Policy(p) => p.means(obs),
+            Teacher::Search(s) => s.means(obs),
+        }
+    }
+}
+
 /// One round's collection: `steps` steps over all environments, each acting
 /// with the teacher's mean with probability `beta`, the student's
 /// otherwise; with the number of steps the student acted. None when
@@ -651,7 +772,7 @@ fn input_error(policy: &GaussianPolicy, inputs: &[f64], targets: &[f64]) -> Vec<
 #[allow(clippy::too_many_arguments)]
 fn collect(
     env: &mut VecEnv,
-    teacher: &GaussianPolicy,
+    teacher: &Teacher,
     student: &GaussianPolicy,
     td: usize,
     beta: f64,

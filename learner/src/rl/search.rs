@@ -1,0 +1,401 @@
+//! A scripted policy that finds the opening by touch: told roughly where
+//! the hole is, it comes down there and, while the box carries the peg,
+//! slides along an Archimedean spiral about that point until the peg drops
+//! in, pressing lightly. It is memoryless (each action is a function of
+//! the current observation only, [`SearchView`]), so a student MLP can
+//! imitate it exactly (DAgger, `learner policy distill`'s
+//! `[search_teacher]`).
+//!
+//! Why a spiral and not the wrench's centre of pressure: with the peg over
+//! the rim the box carries it on an L-shaped strip, and the measured centre
+//! of pressure rocks between the strip's two ends with every lateral step
+//! (`touch_probe press`/`search`, docs/experiments.md "A policy that
+//! searches by touch"), so it does not point at the opening.
+//!
+//! Why the lead term: the trajectory target accumulates the steps while
+//! friction holds the tip back, so the target leads the tip along the
+//! spiral's tangent by about the friction over the stiffness; a target
+//! leading a tip on a circle of radius r drifts outward by lead/r per unit
+//! of step, and the spiral ran away to 5 cm without it. The lateral force
+//! measures that lag, and the radial part of the step takes it out.
+
+use super::env::ActionScale;
+use super::observe::{ObsView, Observer};
+use super::probe::LinearProbe;
+use hw_sim::FieldError;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// The search's settings (`[search_teacher]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TouchSearchConfig {
+    /// Standard deviation of the error of where the hole is believed to
+    /// be, per horizontal axis of the hole frame, m (the same per-episode
+    /// draw as `observation = { ground_truth_hole_error = … }`: a student
+    /// observing that sees the error the teacher acts on).
+    pub hole_error_m: f64,
+    /// Distance between the spiral's turns, m: below the 2 mm diametral
+    /// clearance, so that the opening is not stepped over.
+    pub pitch_m: f64,
+    /// Lateral step while sliding, m.
+    pub slide_m: f64,
+    /// Step of the approach and descent, m.
+    pub step_m: f64,
+    /// The force to press on the top face with, N: low, since friction
+    /// (0.3 of it) holds the sliding tip back.
+    pub press_n: f64,
+    /// The trajectory target's lead over the tip per newton of lateral
+    /// force, m/N (the friction's lag; see the module's doc).
+    pub lead_m_per_n: f64,
+    /// Tell the search where the hole is by a representation instead of
+    /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
+    /// `hole_error_m` must then be 0.
+    pub probe: Option<BeliefProbeConfig>,
+}
+
+/// Where a representation-told search's belief comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BeliefProbeConfig {
+    /// The representation (an exported model directory) whose z means the
+    /// probe reads.
+    pub representation: std::path::PathBuf,
+    /// Episodes of the truth-told search the probe is fitted on.
+    #[serde(default = "default_fit_episodes")]
+    pub fit_episodes: u64,
+    /// The hole error of those episodes' search, m: it spreads their states
+    /// over the top face around the opening.
+    #[serde(default = "default_fit_error")]
+    pub fit_hole_error_m: f64,
+    /// The probe is fitted on, and used at, states below this height above
+    /// the box, m; higher up the search is told the truth.
+    #[serde(default = "default_below")]
+    pub below_m: f64,
+}
+
+fn default_fit_episodes() -> u64 {
+    40
+}
+
+fn default_fit_error() -> f64 {
+    0.01
+}
+
+fn default_below() -> f64 {
+    0.03
+}
+
+impl Default for TouchSearchConfig {
+    fn default() -> Self {
+        // Chosen with `touch_probe search` over 20 episodes at a 2 mm
+        // error (docs/experiments.md "A policy that searches by touch").
+        Self {
+            hole_error_m: 0.0,
+            pitch_m: 0.0015,
+            slide_m: 0.001,
+            step_m: 0.001,
+            press_n: 2.0,
+            lead_m_per_n: 0.002,
+            probe: None,
+        }
+    }
+}
+
+impl TouchSearchConfig {
+    /// Refuses settings the search cannot run with, naming the field.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        let f = |name: &str| format!("search_teacher.{name}");
+        if !(self.hole_error_m.is_finite() && self.hole_error_m >= 0.0) {
+            return Err(FieldError::new(
+                f("hole_error_m"),
+                self.hole_error_m,
+                "must be finite and not negative",
+            ));
+        }
+        for (name, v) in [
+            ("pitch_m", self.pitch_m),
+            ("slide_m", self.slide_m),
+            ("step_m", self.step_m),
+            ("press_n", self.press_n),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(FieldError::new(f(name), v, "must be positive and finite"));
+            }
+        }
+        for (name, v) in [("lead_m_per_n", self.lead_m_per_n)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(FieldError::new(
+                    f(name),
+                    v,
+                    "must be finite and not negative",
+                ));
+            }
+        }
+        if let Some(p) = &self.probe {
+            if self.hole_error_m != 0.0 {
+                return Err(FieldError::new(
+                    f("hole_error_m"),
+                    self.hole_error_m,
+                    "must be 0 with [search_teacher.probe]: the probe says where the hole is",
+                ));
+            }
+            if p.fit_episodes == 0 {
+                return Err(FieldError::new(
+                    f("probe.fit_episodes"),
+                    0,
+                    "must be at least 1",
+                ));
+            }
+            for (name, v) in [
+                ("probe.fit_hole_error_m", p.fit_hole_error_m),
+                ("probe.below_m", p.below_m),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(FieldError::new(
+                        f(name),
+                        v,
+                        "must be finite and not negative",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What [`TouchSearch`] acts on, [`SEARCH_VIEW_DIM`] values, SI units:
+/// where the tip is believed to be relative to the hole (hole frame x, y,
+/// with [`super::observe::HoleError`]'s per-episode error), its true height
+/// above the opening, its roll relative to the hole (wrapped by the peg's
+/// symmetry), the mean wrench's force of the newest 8 readings less the
+/// free-space reading, in the hole frame (N, x, y, z; z positive when the
+/// box pushes the peg up), and the hole's yaw in the base frame (rad).
+#[derive(Debug, Clone, Copy)]
+pub struct SearchView {
+    /// The believed hole position's error, as [`super::observe::HoleError`].
+    pub std_m: f64,
+}
+
+/// Length of a [`SearchView`] observation.
+pub const SEARCH_VIEW_DIM: usize = 8;
+
+/// Readings averaged for the force (as the ground truth does).
+const FORCE_MEAN_READINGS: usize = 8;
+
+impl Observer for SearchView {
+    fn dim(&self) -> usize {
+        SEARCH_VIEW_DIM
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        let error = super::observe::HoleError { std_m: self.std_m };
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(SEARCH_VIEW_DIM)) {
+            let [ex, ey] = error.error(v.hole_pose);
+            let n = FORCE_MEAN_READINGS.min(v.wrench.len()).max(1);
+            let mut f = Vector3::zeros();
+            for r in v.wrench.ordered().skip(v.wrench.len().saturating_sub(n)) {
+                for i in 0..3 {
+                    f[i] += (r[i] - v.free_wrench[i]) / n as f64;
+                }
+            }
+            // The sensor frame is the end effector's; the wrench is what
+            // the peg exerts on the flange, which is what the box exerts on
+            // the peg (quasi-static).
+            let f = v.hole_pose.rotation.inverse() * (v.obs.ee_rot * f);
+            let x_axis = v.hole_pose.rotation * Vector3::x();
+            o.copy_from_slice(&[
+                v.task.s_m.x + ex,
+                v.task.s_m.y + ey,
+                v.task.s_m.z,
+                v.task.s_psi_rad,
+                f.x,
+                f.y,
+                f.z,
+                x_axis.y.atan2(x_axis.x),
+            ]);
+        }
+    }
+}
+
+/// The scripted search (see the module's doc): acts on [`SearchView`]
+/// observations, giving policy outputs for the environment's action scale.
+#[derive(Debug, Clone)]
+pub struct TouchSearch {
+    /// Its settings.
+    pub cfg: TouchSearchConfig,
+    /// The environment's action scale.
+    pub scale: ActionScale,
+}
+
+impl TouchSearch {
+    /// The step (hole frame x, y, z, m) for one observation.
+    pub fn step(&self, o: &[f64]) -> Vector3<f64> {
+        let c = &self.cfg;
+        let (bx, by, z) = (o[0], o[1], o[2]);
+        let f = Vector3::new(o[4], o[5], o[6]);
+        if z < -0.002 {
+            // In the opening: straight down.
+            return Vector3::new(0.0, 0.0, -c.step_m);
+        }
+        let carried = f.z > 0.5 * c.press_n;
+        if carried || z < 0.001 {
+            let r = (bx * bx + by * by).sqrt();
+            let (rx, ry) = if r > 1e-4 {
+                (bx / r, by / r)
+            } else {
+                (1.0, 0.0)
+            };
+            // Radial part per unit of tangential step: the pitch's growth
+            // p/(2π r), less what a chord of length L adds by itself, L/(2r),
+            // less the lead's drift.
+            let fxy = (f.x * f.x + f.y * f.y).sqrt();
+            let k = ((c.pitch_m / std::f64::consts::TAU - 0.5 * c.slide_m - c.lead_m_per_n * fxy)
+                / r.max(1e-4))
+            .clamp(-1.0, 1.0);
+            let dz = if f.z > 2.0 * c.press_n {
+                0.2 * c.step_m
+            } else if f.z > c.press_n {
+                0.0
+            } else if f.z > 0.5 * c.press_n {
+                -0.2 * c.step_m
+            } else {
+                -c.step_m
+            };
+            return Vector3::new((-ry + k * rx) * c.slide_m, (rx + k * ry) * c.slide_m, dz);
+        }
+        // Above the box: towards the believed opening and down at once.
+        // Not first centring and then descending: a student reading the
+        // belief from a representation cannot resolve the 1 mm such a gate
+        // needs far above the box, and hovered there waiting. From the start
+        // pose the box is 5-6 lateral centimetres and 25 vertical ones away,
+        // so the tip is over the opening long before it reaches the top.
+        let lateral = r2(bx, by);
+        let mut d = Vector3::new(-bx, -by, 0.0);
+        if lateral > c.step_m {
+            d *= c.step_m / lateral;
+        }
+        d.z = -c.step_m;
+        d
+    }
+
+    /// Policy outputs (x, y, z, roll, base frame, scaled) for a batch of
+    /// [`SearchView`] observations.
+    pub fn means(&self, obs: &[f64]) -> Vec<f64> {
+        let mut out = Vec::with_capacity(obs.len() / SEARCH_VIEW_DIM * 4);
+        for o in obs.chunks_exact(SEARCH_VIEW_DIM) {
+            let d = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), o[7]) * self.step(o);
+            out.extend_from_slice(&self.scale.from_delta(&[d.x, d.y, d.z, -o[3]]));
+        }
+        out
+    }
+}
+
+/// [`SearchView`] told where the hole is by a representation: below
+/// `below_m` above the box the believed offset (x, y) and the peg's roll
+/// relative to the hole are a linear probe's reading of the
+/// representation's z means, higher up the truth (the probe is fitted near
+/// the box; far above it the approach needs no precision). Height, force
+/// and the hole's yaw stay the truth's.
+///
+/// What it is for: a teacher whose belief is a function of what a student
+/// on z sees, so that DAgger's labels are ones the student can learn (a
+/// teacher told the truth with an independent error gives labels that
+/// differ from episode to episode for the same z).
+pub struct ProbedSearchView {
+    /// The representation's observer.
+    pub repr: std::sync::Arc<dyn Observer>,
+    /// z means → (x, y) of the tip relative to the hole (hole frame, m)
+    /// and the peg's roll relative to the hole (rad, wrapped by the
+    /// symmetry).
+    pub probe: LinearProbe,
+    /// Height above the box below which the probe is read, m.
+    pub below_m: f64,
+}
+
+impl Observer for ProbedSearchView {
+    fn dim(&self) -> usize {
+        SEARCH_VIEW_DIM
+    }
+
+    fn needs_camera(&self) -> bool {
+        self.repr.needs_camera()
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        let zd = self.repr.dim();
+        let mut z = vec![0.0; views.len() * zd];
+        self.repr.observe(views, &mut z);
+        SearchView { std_m: 0.0 }.observe(views, out);
+        for (o, z) in out
+            .chunks_exact_mut(SEARCH_VIEW_DIM)
+            .zip(z.chunks_exact(zd))
+        {
+            if o[2] < self.below_m {
+                let mut b = [0.0; 3];
+                self.probe.predict_into(z, &mut b);
+                (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+            }
+        }
+    }
+
+    fn rejected(&self) -> u64 {
+        self.repr.rejected()
+    }
+
+    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
+        self.repr.camera()
+    }
+}
+
+/// Fits a [`ProbedSearchView`]'s probe: `cfg.fit_episodes` episodes (seeds
+/// from `first_seed`) of the search told the truth with a
+/// `cfg.fit_hole_error_m` error, in `env_cfg`'s world, each state below
+/// `cfg.below_m` giving a row (the z means; the tip's true x, y relative to
+/// the hole and the peg's roll relative to it). `progress` is called after each episode with the rows so far.
+pub fn fit_belief_probe(
+    env_cfg: &super::RlEnvConfig,
+    repr: &dyn Observer,
+    cfg: &BeliefProbeConfig,
+    first_seed: u64,
+    progress: &mut dyn FnMut(u64, usize),
+) -> Result<LinearProbe, super::RlEnvError> {
+    let mut env = super::RlEnv::new(env_cfg)?;
+    super::observe::check_camera(&env_cfg.world.camera, repr)?;
+    let search = TouchSearch {
+        cfg: TouchSearchConfig {
+            hole_error_m: cfg.fit_hole_error_m,
+            ..Default::default()
+        },
+        scale: env_cfg.action.clone(),
+    };
+    let view = SearchView {
+        std_m: cfg.fit_hole_error_m,
+    };
+    let camera = repr.needs_camera();
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for ep in 0..cfg.fit_episodes {
+        env.reset(first_seed + ep, camera)?;
+        loop {
+            let v = env.view().expect("reset gives a view");
+            let s = v.task.s_m;
+            if s.z < cfg.below_m {
+                let mut z = vec![0.0; repr.dim()];
+                repr.observe(std::slice::from_ref(&v), &mut z);
+                xs.push(z);
+                ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
+            }
+            let mut o = [0.0; SEARCH_VIEW_DIM];
+            view.observe(&[v], &mut o);
+            if env.step(&search.means(&o), camera)?.done() {
+                break;
+            }
+        }
+        progress(ep + 1, xs.len());
+    }
+    LinearProbe::fit(&xs, &ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
+}
+
+fn r2(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
+}

@@ -1,0 +1,149 @@
+//! The scripted touch search (`learner::rl::search`): told the hole several
+//! millimetres off, it lands on the box's top face beside the opening, slides
+//! until the peg drops in, and completes the insertion; its step follows
+//! the spiral it is built on; bad settings are named.
+
+use learner::rl::observe::{HoleError, Observer};
+use learner::rl::search::{SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig};
+use learner::rl::{Outcome, RlEnv, RlEnvConfig};
+
+fn config() -> RlEnvConfig {
+    let mut cfg = RlEnvConfig::default();
+    // gt-trpo-stiff-ft's wrist (configs/rt-controller/stiff-tilts.toml).
+    cfg.controller.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
+    cfg
+}
+
+#[test]
+fn the_touch_search_finds_a_misplaced_hole() {
+    let cfg = config();
+    let mut env = RlEnv::new(&cfg).unwrap();
+    let std_m = 0.004;
+    let search = TouchSearch {
+        cfg: TouchSearchConfig {
+            hole_error_m: std_m,
+            ..Default::default()
+        },
+        scale: cfg.action.clone(),
+    };
+    let view = SearchView { std_m };
+    // Two evaluation seeds whose draws put the believed hole 4 and 10 mm
+    // off (`touch_probe search 4 10`, episodes 4 and 5).
+    for seed in [1_000_004, 1_000_005] {
+        env.reset(seed, false).unwrap();
+        let e = HoleError { std_m }.error(&env.task_geometry().hole_pose);
+        let off = e[0].hypot(e[1]);
+        assert!(off > 0.004, "seed {seed}: the error is {off} m");
+        // Steps the box carried the peg (pressed on its top face), where
+        // the first contact was, and the outcome.
+        let mut carried = 0;
+        let mut first_contact = None;
+        let last = loop {
+            let mut o = [0.0; SEARCH_VIEW_DIM];
+            view.observe(&[env.view().unwrap()], &mut o);
+            if o[6] > 1.0 && o[2].abs() < 0.001 {
+                carried += 1;
+                first_contact.get_or_insert(env.task().s_m);
+            }
+            let out = env.step(&search.means(&o), false).unwrap();
+            if out.done() {
+                break out;
+            }
+        };
+        let at = first_contact.expect("the peg never rested on the box");
+        println!(
+            "seed {seed}: error ({:.1}, {:.1}) mm, first carried at ({:.1}, {:.1}) mm, \
+             {carried} steps carried, {}",
+            e[0] * 1e3,
+            e[1] * 1e3,
+            at.x * 1e3,
+            at.y * 1e3,
+            last.outcome.name()
+        );
+        // It came down where it was told, beside the opening (the hole's
+        // outline is 1 mm wider than the peg on each side) ...
+        assert!(at.x.abs().max(at.y.abs()) > 0.002, "{at:?}");
+        // ... searched on the top face, and found it.
+        assert!(carried >= 5, "{carried}");
+        assert_eq!(last.outcome, Outcome::CompletedInsertion);
+    }
+}
+
+/// A [`SearchView`] observation: believed offset, height, roll, force in
+/// the hole frame, hole yaw.
+fn obs(b: [f64; 2], z: f64, f: [f64; 3]) -> [f64; SEARCH_VIEW_DIM] {
+    [b[0], b[1], z, 0.0, f[0], f[1], f[2], 0.0]
+}
+
+#[test]
+fn the_search_step_follows_its_spiral() {
+    let cfg = TouchSearchConfig::default();
+    let s = TouchSearch {
+        cfg: cfg.clone(),
+        scale: Default::default(),
+    };
+    // Above the box, 5 mm off: towards the believed hole and down.
+    let d = s.step(&obs([0.005, 0.0], 0.05, [0.0; 3]));
+    assert!(
+        (d.x + cfg.step_m).abs() < 1e-12 && d.y == 0.0 && d.z == -cfg.step_m,
+        "{d}"
+    );
+    // Over it, high up: straight down.
+    let d = s.step(&obs([0.0002, 0.0], 0.05, [0.0; 3]));
+    assert!(d.z == -cfg.step_m && d.x.abs() < 1e-3, "{d}");
+    // In the opening: down, no lateral move.
+    let d = s.step(&obs([0.003, 0.0], -0.01, [0.0; 3]));
+    assert_eq!((d.x, d.y, d.z), (0.0, 0.0, -cfg.step_m));
+    // Carried at r = 5 mm on +x with no lateral force: a tangential slide
+    // (anticlockwise, +y) of the slide length, radial part
+    // (p/2π − L/2)/r of it; pressing at the set force holds the height.
+    let r = 0.005;
+    let d = s.step(&obs([r, 0.0], 0.0, [0.0, 0.0, cfg.press_n * 1.5]));
+    let k = (cfg.pitch_m / std::f64::consts::TAU - 0.5 * cfg.slide_m) / r;
+    assert!((d.y - cfg.slide_m).abs() < 1e-12, "{d}");
+    assert!((d.x - k * cfg.slide_m).abs() < 1e-12, "{d}");
+    assert_eq!(d.z, 0.0);
+    // A lateral force (the target leading the tip) turns it inwards.
+    let d2 = s.step(&obs([r, 0.0], 0.0, [0.0, 1.0, cfg.press_n * 1.5]));
+    assert!(d2.x < d.x - 1e-4, "{d2}");
+    // Too little force presses down, too much backs off.
+    assert!(s.step(&obs([r, 0.0], 0.0, [0.0, 0.0, 0.3 * cfg.press_n])).z < 0.0);
+    assert!(s.step(&obs([r, 0.0], 0.0, [0.0, 0.0, 3.0 * cfg.press_n])).z > 0.0);
+    // The hole's yaw turns the base-frame action: a step along the hole's
+    // x at yaw 90° is a base-frame y step.
+    let mut o = obs([0.005, 0.0], 0.05, [0.0; 3]);
+    o[7] = std::f64::consts::FRAC_PI_2;
+    let a = s.means(&o);
+    assert!(a[0].abs() < 1e-9 && a[1] < -0.5, "{a:?}");
+}
+
+#[test]
+fn bad_search_settings_are_named() {
+    for (name, cfg) in [
+        (
+            "search_teacher.pitch_m",
+            TouchSearchConfig {
+                pitch_m: 0.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.hole_error_m",
+            TouchSearchConfig {
+                hole_error_m: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.lead_m_per_n",
+            TouchSearchConfig {
+                lead_m_per_n: -1.0,
+                ..Default::default()
+            },
+        ),
+    ] {
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains(name), "{e}");
+    }
+    TouchSearchConfig::default().validate().unwrap();
+}
