@@ -1,18 +1,27 @@
-//! Does the wrench tell where the opening is? Two measurements on the RL
-//! environment with the stiff tilt wrist (gt-trpo-stiff-ft's controller):
+//! Finding the opening by touch: measurements on the RL environment with the
+//! stiff tilt wrist (gt-trpo-stiff-ft's controller), docs/experiments.md "A
+//! policy that searches by touch".
 //!
 //! - `touch_probe press`: the peg pressed onto the box's top face at a set
-//!   of offsets from the hole's axis; prints the wrench in the hole frame and
-//!   the centre of pressure it implies on the peg's bottom face, relative to
-//!   the tip. Over the rim the box carries the peg only where its face is
-//!   outside the opening, so the centre of pressure lies on the side away
-//!   from the hole.
-//! - `touch_probe search SIGMA_MM EPISODES`: a memoryless scripted policy
-//!   told the hole with a per-episode error of SIGMA_MM per axis
-//!   (`observe::HoleError`, the same draw as `policy eval --hole-error-mm`):
-//!   it goes to where it believes the hole is and comes down; once the box
-//!   carries it, it steps against the centre of pressure until the peg
-//!   drops in. Prints each episode and the outcomes.
+//!   of offsets from the hole's axis (with about 35 N: the target keeps
+//!   going down for 15 steps; the raw reading, the free-space wrench not
+//!   subtracted); prints the wrench in the hole frame and the centre of
+//!   pressure it implies on the peg's bottom face, relative to the tip. Were
+//!   the peg square to the face, over the rim the centre of pressure would
+//!   lie on the side away from the opening; it sits at the lowest edge or
+//!   corner the box carries. At (0, 0) the peg goes into the hole.
+//! - `touch_probe search SIGMA_MM EPISODES`: the touch search
+//!   (`learner::rl::search::TouchSearch`) told the hole with a per-episode
+//!   error of SIGMA_MM per axis (`observe::HoleError`, the same draw as
+//!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
+//!   `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N` override its settings,
+//!   `TOUCH_TRACE` prints the steps near the box. Prints each episode and
+//!   the outcomes.
+//! - `touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT TEST`: the search told
+//!   where the opening is by a linear probe of a representation's z means
+//!   (`search::ProbedSearchView`), fitted on FIT episodes (seeds from
+//!   3 000 000), run on TEST episodes; `TOUCH_TRUE_ROLL` gives it the true
+//!   roll instead of the probe's.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -21,8 +30,8 @@ use learner::rl::search::{SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchC
 use learner::rl::{Outcome, RlEnv, RlEnvConfig};
 use nalgebra::{Point3, Vector3};
 
-/// The wrench the peg exerts on the flange in the hole frame, force and
-/// moment about the tip; and the tip's height above the box, m.
+/// The wrench the peg exerts on the flange in the hole frame: force, and
+/// moment about the tip.
 fn wrench_at_tip(env: &RlEnv) -> (Vector3<f64>, Vector3<f64>) {
     let w = env.fast().world();
     let peg = w.peg().expect("peg");
@@ -93,8 +102,6 @@ fn press() {
         for _ in 0..cfg.max_steps {
             let t = env.task();
             let s = t.s_m;
-            let k = env.task_geometry().symmetry.max(1) as f64;
-            let _ = k;
             let roll = -t.s_psi_rad;
             let mut d = goal - s;
             let lateral = (d.x * d.x + d.y * d.y).sqrt();
@@ -221,11 +228,12 @@ fn search(sigma_mm: f64, episodes: u64) {
 
 /// The search told where the hole is by a representation
 /// (`search::ProbedSearchView`): a linear probe from its z means to the
-/// tip's offset from the hole, fitted on `fit` episodes of the search told
-/// the truth with a 10 mm error (`TOUCH_FIT_ERROR_MM`), replaces the
-/// believed offset below 30 mm above the box on `test` other episodes.
-/// Height, roll, force and the hole's yaw stay the truth's: this asks
-/// whether z places the opening well enough for the search.
+/// tip's offset from the hole and the peg's roll relative to it, fitted on
+/// `fit` episodes of the search told the truth with a 10 mm error
+/// (`TOUCH_FIT_ERROR_MM`), replaces the believed offset and roll below 30
+/// mm above the box on `test` other episodes (`TOUCH_TRUE_ROLL`: the roll
+/// stays the truth's). Height, force and the hole's yaw stay the truth's:
+/// this asks whether z places the opening well enough for the search.
 fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     use learner::rl::ObservationKind;
     use learner::rl::search::{BeliefProbeConfig, ProbedSearchView, fit_belief_probe};
@@ -244,9 +252,15 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         fit_hole_error_m: fit_err * 1e-3,
         below_m: 0.03,
     };
-    let probe = fit_belief_probe(&cfg, repr.as_ref(), &pc, 3_000_000, &mut |ep, rows| {
-        eprint!("\rfit: {ep}/{fit} episodes, {rows} states")
-    })
+    let search = TouchSearchConfig::default();
+    let probe = fit_belief_probe(
+        &cfg,
+        repr.as_ref(),
+        &search,
+        &pc,
+        3_000_000,
+        &mut |ep, rows| eprint!("\rfit: {ep}/{fit} episodes, {rows} states"),
+    )
     .unwrap_or_else(|e| panic!("{e}"));
     eprintln!();
     let view = ProbedSearchView {
@@ -259,8 +273,10 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         scale: cfg.action.clone(),
     };
     let mut env = RlEnv::new(&cfg).expect("env");
+    // TOUCH_TRUE_ROLL: the roll from the truth instead of the probe.
+    let true_roll = std::env::var_os("TOUCH_TRUE_ROLL").is_some();
     let mut counts = [0u32; 4];
-    let (mut se, mut n) = (0.0, 0usize);
+    let (mut se, mut n, mut psi_se) = (0.0, 0usize, 0.0);
     for ep in 0..test {
         env.reset(1_000_000 + ep, true).expect("reset");
         let (mut ep_se, mut ep_n) = (0.0, 0usize);
@@ -268,6 +284,13 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             let mut o = [0.0; SEARCH_VIEW_DIM];
             view.observe(&[env.view().expect("view")], &mut o);
             let s = env.task().s_m;
+            let psi = env.task().s_psi_rad;
+            if s.z < pc.below_m && s.z > -0.002 {
+                psi_se += (o[3] - psi).powi(2);
+            }
+            if true_roll {
+                o[3] = psi;
+            }
             // The probe's error where it is read, above the opening.
             if s.z < pc.below_m && s.z > -0.002 {
                 ep_se += (o[0] - s.x).powi(2) + (o[1] - s.y).powi(2);
@@ -291,8 +314,9 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         );
     }
     println!(
-        "z-told search: probe RMS {:.1} mm; rejected frames {}; outcomes {:?} over {test}",
+        "z-told search: probe RMS {:.1} mm, roll {:.3} rad; rejected frames {}; outcomes {:?} over {test}",
         1e3 * (se / n.max(1) as f64).sqrt(),
+        (psi_se / n.max(1) as f64).sqrt(),
         view.rejected(),
         Outcome::ALL
             .iter()

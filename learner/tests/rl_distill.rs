@@ -275,8 +275,8 @@ fn the_touch_search_teaches_in_the_students_environment() {
         ObservationKind::GroundTruthHoleError(0.003)
     );
     // The teacher's labels: in 40 steps from the start the search moves
-    // towards the believed hole at its 1 mm step (2/3 of the 1.5 mm scale)
-    // and does not roll much.
+    // towards the believed hole and down, each at its 1 mm step (2/3 of
+    // the 1.5 mm scale).
     let s = learner::rl::distill::Samples::read(&out.join("rounds/round-000.bin")).unwrap();
     assert_eq!(s.len(), 80);
     let lateral = s
@@ -285,6 +285,12 @@ fn the_touch_search_teaches_in_the_students_environment() {
         .map(|a| (a[0] as f64).hypot(a[1] as f64))
         .fold(0.0, f64::max);
     assert!((lateral - 2.0 / 3.0).abs() < 1e-3, "{lateral}");
+    assert!(
+        s.actions
+            .chunks_exact(4)
+            .all(|a| (a[2] + 2.0 / 3.0).abs() < 1e-6),
+        "it descends at every step of the approach"
+    );
     // Both teachers, or neither, are refused by name.
     for text in [
         text.clone().replace(
@@ -295,11 +301,14 @@ fn the_touch_search_teaches_in_the_students_environment() {
     ] {
         let cfg: DistillConfig = toml::from_str(&text).unwrap();
         let e = distill(cfg, &dir.path().join("t"), false, &|| false).unwrap_err();
-        assert!(e.to_string().contains("teacher"), "{e}");
+        assert!(e.to_string().contains("give exactly one teacher"), "{e}");
     }
-    // A bad search setting is named.
-    let mut bad = cfg;
-    bad.search_teacher.as_mut().unwrap().slide_m = -1.0;
-    let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
-    assert!(e.to_string().contains("search_teacher.slide_m"), "{e}");
+    // A bad search setting is named, and so is a slide the action scale
+    // (1.5 mm) would clip.
+    for slide in [-1.0, 0.002] {
+        let mut bad = cfg.clone();
+        bad.search_teacher.as_mut().unwrap().slide_m = slide;
+        let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
+        assert!(e.to_string().contains("search_teacher.slide_m"), "{e}");
+    }
 }

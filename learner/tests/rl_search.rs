@@ -88,9 +88,9 @@ fn the_search_step_follows_its_spiral() {
         (d.x + cfg.step_m).abs() < 1e-12 && d.y == 0.0 && d.z == -cfg.step_m,
         "{d}"
     );
-    // Over it, high up: straight down.
+    // 0.2 mm off, high up: the rest of the way over and down.
     let d = s.step(&obs([0.0002, 0.0], 0.05, [0.0; 3]));
-    assert!(d.z == -cfg.step_m && d.x.abs() < 1e-3, "{d}");
+    assert!(d.z == -cfg.step_m && d.x == -0.0002 && d.y == 0.0, "{d}");
     // In the opening: down, no lateral move.
     let d = s.step(&obs([0.003, 0.0], -0.01, [0.0; 3]));
     assert_eq!((d.x, d.y, d.z), (0.0, 0.0, -cfg.step_m));

@@ -383,6 +383,18 @@ pub fn distill(
         }
         (None, Some(search)) => {
             search.validate().map_err(RlEnvError::from)?;
+            // A step the action scale would clip per component would turn
+            // the spiral, not just shorten it.
+            let max = student_cfg.env.action.max_step_m;
+            for (name, v) in [("slide_m", search.slide_m), ("step_m", search.step_m)] {
+                if v > max {
+                    return Err(field(
+                        &format!("search_teacher.{name}"),
+                        &v,
+                        &format!("must not exceed the action scale's step, {max} m"),
+                    ));
+                }
+            }
             eprintln!("learner: teacher: the touch search, {search:?}");
             let t_obs: Arc<dyn Observer> = Arc::new(SearchView {
                 std_m: search.hole_error_m,
@@ -391,13 +403,21 @@ pub fn distill(
                 cfg: search.clone(),
                 scale: student_cfg.env.action.clone(),
             });
-            (teacher, t_obs, PathBuf::from("(search_teacher)"), None)
+            (teacher, t_obs, PathBuf::from("[search_teacher]"), None)
         }
-        _ => {
+        (Some(path), Some(_)) => {
             return Err(field(
                 "teacher",
-                &"(teacher and search_teacher)",
-                "give exactly one: a checkpoint (teacher = \"…\") or [search_teacher]",
+                &path.display(),
+                "give exactly one teacher: a checkpoint (teacher = \"…\") or \
+                 [search_teacher], not both",
+            ));
+        }
+        (None, None) => {
+            return Err(field(
+                "teacher",
+                &"(none)",
+                "give exactly one teacher: a checkpoint (teacher = \"…\") or [search_teacher]",
             ));
         }
     };
@@ -417,7 +437,15 @@ pub fn distill(
     }
     let probe_cfg = cfg.search_teacher.as_ref().and_then(|s| s.probe.as_ref());
     if let Some(camera) = &cfg.camera {
-        if t_obs.needs_camera() || probe_cfg.is_some() {
+        if probe_cfg.is_some() {
+            return Err(field(
+                "camera",
+                &"(set)",
+                "the search teacher reads a representation through the environment's \
+                 camera; set [student.env.world.camera] instead",
+            ));
+        }
+        if t_obs.needs_camera() {
             return Err(field(
                 "camera",
                 &"(set)",
@@ -458,8 +486,8 @@ pub fn distill(
         }
     }
     write_json(&cfg_path, &recorded)?;
-    if let Some(p) = probe_cfg {
-        t_obs = probed_view(p, &student_cfg, out, fresh)?;
+    if let (Some(search), Some(p)) = (&cfg.search_teacher, probe_cfg) {
+        t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
     }
 
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
@@ -694,23 +722,37 @@ fn probe_path(out: &Path) -> PathBuf {
     out.join("search-probe.json")
 }
 
-/// Seed of the first episode a search teacher's probe is fitted on (apart
-/// from DAgger's, validation's and evaluation's episodes).
-const PROBE_FIT_SEED: u64 = 5_000_000;
+/// Seed of the first episode a search teacher's probe is fitted on: apart
+/// from DAgger's (from `dagger.episode_seed`, 5 000 000 by default),
+/// validation's and evaluation's (from 1 000 000) episodes.
+const PROBE_FIT_SEED: u64 = 7_000_000;
 
 /// The representation-told search teacher's view: its probe fitted in the
 /// student's environment (a fresh run) or read back (a resumed one).
 fn probed_view(
+    search: &TouchSearchConfig,
     p: &BeliefProbeConfig,
     student_cfg: &TrainConfig,
     out: &Path,
     fresh: bool,
 ) -> Result<Arc<dyn Observer>, RunError> {
+    let path = probe_path(out);
+    // A resumed run's rounds were labelled through its probe: a refit one
+    // could label the next rounds differently.
+    if !fresh && !path.exists() {
+        return Err(refuse(
+            "resuming: the search teacher's probe is missing; its rounds were labelled \
+             through it (start afresh without --resume)"
+                .into(),
+            &path,
+        ));
+    }
     let repr = super::ObservationKind::Representation(p.representation.clone())
         .observer_on(student_cfg.threads)?;
-    let path = probe_path(out);
-    let probe: LinearProbe = if !fresh && path.exists() {
-        read_json(&path)?
+    let probe: LinearProbe = if !fresh {
+        let probe: LinearProbe = read_json(&path)?;
+        probe.check().map_err(|e| refuse(e.to_string(), &path))?;
+        probe
     } else {
         eprintln!(
             "learner: fitting the search teacher's probe of {} on {} episodes",
@@ -721,6 +763,7 @@ fn probed_view(
         let probe = fit_belief_probe(
             &student_cfg.env,
             repr.as_ref(),
+            search,
             p,
             PROBE_FIT_SEED,
             &mut |ep, rows| progress.update(ep, format!("{rows} states")),

@@ -5,7 +5,9 @@
 //! with its observation normalisation ([`obs_norm`]), the value baselines
 //! ([`gaussian`], [`value`], on the small differentiable network of
 //! [`mlp`]), TRPO ([`trpo`]) and PPO ([`ppo`]), and the training loop
-//! ([`train`]), and DAgger from a privileged teacher ([`distill`]).
+//! ([`train`]), DAgger from a privileged teacher ([`distill`]), and the
+//! scripted touch search such a teacher can be ([`search`], told where the
+//! hole is through a linear probe of z: [`probe`]).
 //! docs/rl.md gives every
 //! constant and setting with its source or reason.
 

@@ -29,6 +29,15 @@ pub enum ProbeError {
     /// A feature or a target is not finite.
     #[error("a probe's data must be finite: row {0} is not")]
     NotFinite(usize),
+    /// The ridge is negative or not finite.
+    #[error("a probe's ridge must be finite and not negative, not {0}")]
+    Ridge(f64),
+    /// With no ridge, some features are linear combinations of others.
+    #[error("the features are collinear; fit with a positive ridge")]
+    Collinear,
+    /// A probe read from a file that no fit could have made.
+    #[error("not a fitted probe: {0}")]
+    Malformed(String),
 }
 
 /// Mean and standard deviation (at least 10⁻¹²) of each of the `d`
@@ -60,6 +69,9 @@ impl LinearProbe {
     pub fn fit(x: &[Vec<f64>], y: &[Vec<f64>], ridge: f64) -> Result<Self, ProbeError> {
         use faer::Mat;
         use faer::prelude::*;
+        if !(ridge.is_finite() && ridge >= 0.0) {
+            return Err(ProbeError::Ridge(ridge));
+        }
         let n = x.len();
         if n == 0 || n != y.len() {
             return Err(ProbeError::Shape(format!(
@@ -96,16 +108,18 @@ impl LinearProbe {
         let m = Mat::<f64>::from_fn(d + 1, d + 1, |i, j| {
             // The bias (last) is not penalised: a strong ridge shrinks
             // towards the mean target, not towards 0.
-            ata[(i, j)] + if i == j && i < d { ridge * n as f64 } else { 0.0 }
+            ata[(i, j)]
+                + if i == j && i < d {
+                    ridge * n as f64
+                } else {
+                    0.0
+                }
         });
         let w = match m.llt(faer::Side::Lower) {
             Ok(llt) => llt.solve(a.transpose() * &b),
-            // Only a zero ridge on collinear features gets here.
-            Err(_) => {
-                return Err(ProbeError::Shape(
-                    "the features are collinear; fit with a positive ridge".into(),
-                ));
-            }
+            // Only a zero ridge on collinear features gets here (the bias
+            // column is all ones, never zero).
+            Err(_) => return Err(ProbeError::Collinear),
         };
         probe.weights = (0..=d)
             .flat_map(|c| (0..k).map(move |t| (c, t)))
@@ -122,6 +136,37 @@ impl LinearProbe {
         } else {
             (r[c] - self.mean[c]) / self.sd[c]
         }
+    }
+
+    /// Refuses a probe that no fit could have made (one read from a file):
+    /// inconsistent lengths, a deviation that is not positive, a value that
+    /// is not finite. Prediction assumes this holds.
+    pub fn check(&self) -> Result<(), ProbeError> {
+        let d = self.mean.len();
+        if d == 0 || self.targets == 0 || self.sd.len() != d {
+            return Err(ProbeError::Malformed(format!(
+                "{d} means, {} deviations, {} targets",
+                self.sd.len(),
+                self.targets
+            )));
+        }
+        if self.weights.len() != (d + 1) * self.targets {
+            return Err(ProbeError::Malformed(format!(
+                "{} weights; {d} features and {} targets need {}",
+                self.weights.len(),
+                self.targets,
+                (d + 1) * self.targets
+            )));
+        }
+        if !self.sd.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(ProbeError::Malformed(
+                "a deviation is not positive and finite".into(),
+            ));
+        }
+        if !self.mean.iter().chain(&self.weights).all(|v| v.is_finite()) {
+            return Err(ProbeError::Malformed("a value is not finite".into()));
+        }
+        Ok(())
     }
 
     /// Number of features it takes.
@@ -195,5 +240,17 @@ mod tests {
             "{e}"
         );
         assert!(LinearProbe::fit(&[], &[], 1e-3).is_err());
+        assert_eq!(LinearProbe::fit(&x, &y, -1.0), Err(ProbeError::Ridge(-1.0)));
+        // A fitted probe passes its check; damaged ones are named.
+        p.check().unwrap();
+        let mut bad = p.clone();
+        bad.weights.pop();
+        assert!(bad.check().unwrap_err().to_string().contains("5 weights"));
+        let mut bad = p.clone();
+        bad.sd[1] = 0.0;
+        assert!(bad.check().unwrap_err().to_string().contains("deviation"));
+        let mut bad = p.clone();
+        bad.mean[0] = f64::INFINITY;
+        assert!(bad.check().is_err());
     }
 }

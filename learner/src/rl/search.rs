@@ -6,11 +6,13 @@
 //! imitate it exactly (DAgger, `learner policy distill`'s
 //! `[search_teacher]`).
 //!
-//! Why a spiral and not the wrench's centre of pressure: with the peg over
-//! the rim the box carries it on an L-shaped strip, and the measured centre
-//! of pressure rocks between the strip's two ends with every lateral step
-//! (`touch_probe press`/`search`, docs/experiments.md "A policy that
-//! searches by touch"), so it does not point at the opening.
+//! Why a spiral and not the wrench's centre of pressure: pressed over the
+//! rim, the peg rests on its lowest edge or corner that the box carries
+//! (it is not exactly square to the face), so the centre of pressure sits
+//! there rather than on the side away from the opening (`touch_probe
+//! press`), and a policy stepping against it saw it flip between the ends
+//! of the carrying strip with every lateral step (docs/experiments.md "A
+//! policy that searches by touch").
 //!
 //! Why the lead term: the trajectory target accumulates the steps while
 //! friction holds the tip back, so the target leads the tip along the
@@ -46,7 +48,10 @@ pub struct TouchSearchConfig {
     /// (0.3 of it) holds the sliding tip back.
     pub press_n: f64,
     /// The trajectory target's lead over the tip per newton of lateral
-    /// force, m/N (the friction's lag; see the module's doc).
+    /// force, m/N (the friction's lag; see the module's doc). Tuned, with
+    /// `touch_probe search`, for the lateral stiffness of 300 N/m the
+    /// controller has by default and with the stiff wrist; another
+    /// stiffness needs it tuned again.
     pub lead_m_per_n: f64,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
@@ -140,6 +145,13 @@ impl TouchSearchConfig {
                     "must be 0 with [search_teacher.probe]: the probe says where the hole is",
                 ));
             }
+            if !(p.below_m.is_finite() && p.below_m > 0.0) {
+                return Err(FieldError::new(
+                    f("probe.below_m"),
+                    p.below_m,
+                    "must be positive and finite (the probe is read below it)",
+                ));
+            }
             if p.fit_episodes == 0 {
                 return Err(FieldError::new(
                     f("probe.fit_episodes"),
@@ -147,17 +159,12 @@ impl TouchSearchConfig {
                     "must be at least 1",
                 ));
             }
-            for (name, v) in [
-                ("probe.fit_hole_error_m", p.fit_hole_error_m),
-                ("probe.below_m", p.below_m),
-            ] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(FieldError::new(
-                        f(name),
-                        v,
-                        "must be finite and not negative",
-                    ));
-                }
+            if !(p.fit_hole_error_m.is_finite() && p.fit_hole_error_m >= 0.0) {
+                return Err(FieldError::new(
+                    f("probe.fit_hole_error_m"),
+                    p.fit_hole_error_m,
+                    "must be finite and not negative",
+                ));
             }
         }
         Ok(())
@@ -179,6 +186,10 @@ pub struct SearchView {
 
 /// Length of a [`SearchView`] observation.
 pub const SEARCH_VIEW_DIM: usize = 8;
+
+/// Height above the box below which the tip is in the opening and the
+/// search goes straight down, m.
+const IN_OPENING_M: f64 = -0.002;
 
 /// Readings averaged for the force (as the ground truth does).
 const FORCE_MEAN_READINGS: usize = 8;
@@ -234,7 +245,7 @@ impl TouchSearch {
         let c = &self.cfg;
         let (bx, by, z) = (o[0], o[1], o[2]);
         let f = Vector3::new(o[4], o[5], o[6]);
-        if z < -0.002 {
+        if z < IN_OPENING_M {
             // In the opening: straight down.
             return Vector3::new(0.0, 0.0, -c.step_m);
         }
@@ -292,9 +303,10 @@ impl TouchSearch {
 }
 
 /// [`SearchView`] told where the hole is by a representation: below
-/// `below_m` above the box the believed offset (x, y) and the peg's roll
-/// relative to the hole are a linear probe's reading of the
-/// representation's z means, higher up the truth (the probe is fitted near
+/// `below_m` above the box (and above the opening, where the belief is not
+/// read) the believed offset (x, y) and the peg's roll relative to the hole
+/// are a linear probe's reading of the representation's z means, higher up
+/// the truth (the probe is fitted near
 /// the box; far above it the approach needs no precision). Height, force
 /// and the hole's yaw stay the truth's.
 ///
@@ -331,7 +343,7 @@ impl Observer for ProbedSearchView {
             .chunks_exact_mut(SEARCH_VIEW_DIM)
             .zip(z.chunks_exact(zd))
         {
-            if o[2] < self.below_m {
+            if o[2] < self.below_m && o[2] >= IN_OPENING_M {
                 let mut b = [0.0; 3];
                 self.probe.predict_into(z, &mut b);
                 (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
@@ -349,13 +361,17 @@ impl Observer for ProbedSearchView {
 }
 
 /// Fits a [`ProbedSearchView`]'s probe: `cfg.fit_episodes` episodes (seeds
-/// from `first_seed`) of the search told the truth with a
-/// `cfg.fit_hole_error_m` error, in `env_cfg`'s world, each state below
-/// `cfg.below_m` giving a row (the z means; the tip's true x, y relative to
-/// the hole and the peg's roll relative to it). `progress` is called after each episode with the rows so far.
+/// from `first_seed`) of the search `search` (its settings, told the truth
+/// with a `cfg.fit_hole_error_m` error instead of by a probe), in
+/// `env_cfg`'s world, each state where the probe is read (below
+/// `cfg.below_m` above the box and not in the opening) giving a row: the z
+/// means; the tip's true x, y relative to the hole and the peg's roll
+/// relative to it. `progress` is called after each episode with the rows
+/// so far.
 pub fn fit_belief_probe(
     env_cfg: &super::RlEnvConfig,
     repr: &dyn Observer,
+    search: &TouchSearchConfig,
     cfg: &BeliefProbeConfig,
     first_seed: u64,
     progress: &mut dyn FnMut(u64, usize),
@@ -365,7 +381,8 @@ pub fn fit_belief_probe(
     let search = TouchSearch {
         cfg: TouchSearchConfig {
             hole_error_m: cfg.fit_hole_error_m,
-            ..Default::default()
+            probe: None,
+            ..search.clone()
         },
         scale: env_cfg.action.clone(),
     };
@@ -379,7 +396,9 @@ pub fn fit_belief_probe(
         loop {
             let v = env.view().expect("reset gives a view");
             let s = v.task.s_m;
-            if s.z < cfg.below_m {
+            // Where the search reads the belief: above the opening (in it,
+            // it goes straight down whatever it believes).
+            if s.z < cfg.below_m && s.z >= IN_OPENING_M {
                 let mut z = vec![0.0; repr.dim()];
                 repr.observe(std::slice::from_ref(&v), &mut z);
                 xs.push(z);
@@ -392,6 +411,14 @@ pub fn fit_belief_probe(
             }
         }
         progress(ep + 1, xs.len());
+    }
+    if xs.is_empty() {
+        return Err(FieldError::new(
+            "search_teacher.probe.below_m",
+            cfg.below_m,
+            "no state of the fitting episodes came below it",
+        )
+        .into());
     }
     LinearProbe::fit(&xs, &ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
 }
