@@ -250,6 +250,9 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         representation: model.into(),
         fit_episodes: fit,
         fit_hole_error_m: fit_err * 1e-3,
+        // TOUCH_FIT_ROLL_ERROR_RAD: the fitting episodes' roll error.
+        fit_roll_error_rad: std::env::var("TOUCH_FIT_ROLL_ERROR_RAD")
+            .map_or(0.0, |v| v.parse().expect("rad")),
         below_m: 0.03,
     };
     let search = TouchSearchConfig::default();

@@ -4,7 +4,9 @@
 //! the spiral it is built on; bad settings are named.
 
 use learner::rl::observe::{HoleError, Observer};
-use learner::rl::search::{SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig};
+use learner::rl::search::{
+    BeliefProbeConfig, SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig,
+};
 use learner::rl::{Outcome, RlEnv, RlEnvConfig};
 
 fn config() -> RlEnvConfig {
@@ -146,4 +148,54 @@ fn bad_search_settings_are_named() {
         assert!(e.contains(name), "{e}");
     }
     TouchSearchConfig::default().validate().unwrap();
+    // A probe's settings, and a hole error beside a probe.
+    let probe = BeliefProbeConfig {
+        representation: "model".into(),
+        fit_episodes: 40,
+        fit_hole_error_m: 0.01,
+        fit_roll_error_rad: 0.1,
+        below_m: 0.03,
+    };
+    let with = |p: BeliefProbeConfig, hole_error_m: f64| TouchSearchConfig {
+        hole_error_m,
+        probe: Some(p),
+        ..Default::default()
+    };
+    with(probe.clone(), 0.0).validate().unwrap();
+    for (name, cfg) in [
+        ("search_teacher.hole_error_m", with(probe.clone(), 0.002)),
+        (
+            "search_teacher.probe.below_m",
+            with(
+                BeliefProbeConfig {
+                    below_m: 0.0,
+                    ..probe.clone()
+                },
+                0.0,
+            ),
+        ),
+        (
+            "search_teacher.probe.fit_roll_error_rad",
+            with(
+                BeliefProbeConfig {
+                    fit_roll_error_rad: -0.1,
+                    ..probe.clone()
+                },
+                0.0,
+            ),
+        ),
+        (
+            "search_teacher.probe.fit_episodes",
+            with(
+                BeliefProbeConfig {
+                    fit_episodes: 0,
+                    ..probe
+                },
+                0.0,
+            ),
+        ),
+    ] {
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains(name), "{e}");
+    }
 }

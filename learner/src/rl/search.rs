@@ -73,6 +73,14 @@ pub struct BeliefProbeConfig {
     /// over the top face around the opening.
     #[serde(default = "default_fit_error")]
     pub fit_hole_error_m: f64,
+    /// Standard deviation of a per-episode error of the roll the fitting
+    /// episodes' search is told, rad: it leaves the peg rolled off the hole
+    /// in those episodes, so that the probe sees roll errors to read (a
+    /// search told the true roll keeps it aligned). 0 by default: with 0.1
+    /// rad the probe of full-near read the roll worse (docs/experiments.md,
+    /// "A policy that searches by touch").
+    #[serde(default = "default_fit_roll_error")]
+    pub fit_roll_error_rad: f64,
     /// The probe is fitted on, and used at, states below this height above
     /// the box, m; higher up the search is told the truth.
     #[serde(default = "default_below")]
@@ -85,6 +93,10 @@ fn default_fit_episodes() -> u64 {
 
 fn default_fit_error() -> f64 {
     0.01
+}
+
+fn default_fit_roll_error() -> f64 {
+    0.0
 }
 
 fn default_below() -> f64 {
@@ -157,6 +169,13 @@ impl TouchSearchConfig {
                     f("probe.fit_episodes"),
                     0,
                     "must be at least 1",
+                ));
+            }
+            if !(p.fit_roll_error_rad.is_finite() && p.fit_roll_error_rad >= 0.0) {
+                return Err(FieldError::new(
+                    f("probe.fit_roll_error_rad"),
+                    p.fit_roll_error_rad,
+                    "must be finite and not negative",
                 ));
             }
             if !(p.fit_hole_error_m.is_finite() && p.fit_hole_error_m >= 0.0) {
@@ -362,7 +381,8 @@ impl Observer for ProbedSearchView {
 
 /// Fits a [`ProbedSearchView`]'s probe: `cfg.fit_episodes` episodes (seeds
 /// from `first_seed`) of the search `search` (its settings, told the truth
-/// with a `cfg.fit_hole_error_m` error instead of by a probe), in
+/// with a `cfg.fit_hole_error_m` error and the roll with a per-episode
+/// `cfg.fit_roll_error_rad` one instead of by a probe), in
 /// `env_cfg`'s world, each state where the probe is read (below
 /// `cfg.below_m` above the box and not in the opening) giving a row: the z
 /// means; the tip's true x, y relative to the hole and the peg's roll
@@ -393,6 +413,8 @@ pub fn fit_belief_probe(
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
     for ep in 0..cfg.fit_episodes {
         env.reset(first_seed + ep, camera)?;
+        let roll_error = cfg.fit_roll_error_rad
+            * hw_sim::rng::normal(&mut hw_sim::rng::seeded(first_seed + ep, 0x7011));
         loop {
             let v = env.view().expect("reset gives a view");
             let s = v.task.s_m;
@@ -406,6 +428,7 @@ pub fn fit_belief_probe(
             }
             let mut o = [0.0; SEARCH_VIEW_DIM];
             view.observe(&[v], &mut o);
+            o[3] += roll_error;
             if env.step(&search.means(&o), camera)?.done() {
                 break;
             }
