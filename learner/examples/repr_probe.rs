@@ -10,7 +10,9 @@
 //!
 //! Targets: the tip relative to the hole (x, y, z in the hole frame), the
 //! hole's position in the base frame (x, y: only the camera sees where the
-//! randomised box is), and the tip's base-frame position (x, y). Each is
+//! randomised box is), the tip's base-frame position (x, y), the peg's roll
+//! relative to the hole (the task's s_ψ) and its proprioceptive roll (from
+//! the episode's start); the roll errors print in mrad. Each is
 //! also probed from the tip's base-frame position and roll alone (what
 //! proprioception gives), so that the camera's share shows.
 //!
@@ -177,7 +179,17 @@ fn main() {
             let o = env.observation().expect("observation");
             z.push(out);
             own.push(vec![o.ee_pos.x, o.ee_pos.y, o.ee_pos.z, o.proprio.roll_rad]);
-            targets.push(vec![s.x, s.y, s.z, hole.x, hole.y, o.ee_pos.x, o.ee_pos.y]);
+            targets.push(vec![
+                s.x,
+                s.y,
+                s.z,
+                hole.x,
+                hole.y,
+                o.ee_pos.x,
+                o.ee_pos.y,
+                env.task().s_psi_rad,
+                o.proprio.roll_rad,
+            ]);
             episode.push(ep);
             if env.step(&a, true).expect("step").done() {
                 break;
@@ -201,6 +213,8 @@ fn main() {
         "hole y",
         "tip x",
         "tip y",
+        "psi (mrad)",
+        "roll (mrad)",
     ];
     let from_z = probe(&z, &targets, &train, &test);
     let from_own = probe(&own, &targets, &train, &test);
