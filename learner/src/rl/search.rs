@@ -270,7 +270,7 @@ impl TouchSearch {
         }
         let carried = f.z > 0.5 * c.press_n;
         if carried || z < 0.001 {
-            let r = (bx * bx + by * by).sqrt();
+            let r = r2(bx, by);
             let (rx, ry) = if r > 1e-4 {
                 (bx / r, by / r)
             } else {
@@ -279,7 +279,7 @@ impl TouchSearch {
             // Radial part per unit of tangential step: the pitch's growth
             // p/(2π r), less what a chord of length L adds by itself, L/(2r),
             // less the lead's drift.
-            let fxy = (f.x * f.x + f.y * f.y).sqrt();
+            let fxy = r2(f.x, f.y);
             let k = ((c.pitch_m / std::f64::consts::TAU - 0.5 * c.slide_m - c.lead_m_per_n * fxy)
                 / r.max(1e-4))
             .clamp(-1.0, 1.0);
@@ -446,6 +446,7 @@ pub fn fit_belief_probe(
     LinearProbe::fit(&xs, &ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
 }
 
+/// The length of the horizontal vector (x, y).
 fn r2(x: f64, y: f64) -> f64 {
     (x * x + y * y).sqrt()
 }
