@@ -65,7 +65,7 @@ fn main() {
             mask: sign(randn(b * s * s)),
             contact_next: sign(randn(b)),
             paired: sign(randn(b)),
-            ee_delta: randn(b * 3),
+            ee: randn(b * 3),
             rgb01: vec![0.5; b * 3 * s * s],
             last_wrench: randn(b * 6),
         };

@@ -238,7 +238,12 @@ fn a_short_collection_builds_the_expected_dataset() {
     for w in direct.samples.windows(2) {
         assert_eq!(
             w[0].ee_next,
-            [w[1].proprio[0], w[1].proprio[1], w[1].proprio[2]]
+            [
+                w[1].proprio[0],
+                w[1].proprio[1],
+                w[1].proprio[2],
+                w[1].proprio[3]
+            ]
         );
     }
 

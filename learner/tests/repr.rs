@@ -97,6 +97,13 @@ fn the_baselines_have_their_own_parts() {
     );
     assert_eq!(out.z.dims(), [3, 16]);
     assert_eq!(out.flow.unwrap().flow.dims(), [3, 2, 64, 64]);
+    // The authors' end-effector target: the next position and roll.
+    let pose = ModelConfig {
+        ee_target: learner::models::EeTarget::Pose,
+        ..config(ModelKind::Full, 16, 64)
+    };
+    let out = new_net(&pose, &dev).forward(&pose, &x, act.clone(), None, Modalities::ALL);
+    assert_eq!(out.ee.unwrap().dims(), [3, 4]);
     let rec = config(ModelKind::Reconstruction, 16, 64);
     let out = new_net(&rec, &dev).forward(&rec, &x, act, None, Modalities::ALL);
     assert!(out.flow.is_none() && out.contact_logits.is_none() && out.pairing_logits.is_none());
@@ -193,6 +200,42 @@ fn the_losses_give_known_values() {
 }
 
 #[test]
+fn the_end_effector_target_is_the_normalised_displacement_or_next_pose() {
+    use learner::models::{EeTarget, Normaliser};
+    let mut norm = Normaliser::identity();
+    norm.ee_delta_mean = [0.001, -0.002, 0.0];
+    norm.ee_delta_std = [0.002, 0.004, 0.01];
+    norm.proprio_mean[..4].copy_from_slice(&[0.5, 0.1, 0.3, 0.05]);
+    norm.proprio_std[..4].copy_from_slice(&[0.1, 0.2, 0.05, 0.25]);
+    let mut s = learner::dataset::Sample {
+        rgb: vec![0; 3],
+        depth: vec![0.0],
+        flow: vec![0.0; 2],
+        mask: vec![0],
+        wrench: vec![0.0; 32 * 6],
+        ee_next: [0.51, 0.096, 0.28, 0.3],
+        ..Default::default()
+    };
+    s.proprio[..4].copy_from_slice(&[0.505, 0.1, 0.29, 0.2]);
+    let d = norm.labels(
+        std::slice::from_ref(&s),
+        &[1],
+        1,
+        EeTarget::Displacement,
+        false,
+    );
+    // (next − now − mean) / sd, position only.
+    close(
+        &d.ee,
+        &[(0.005 - 0.001) / 0.002, (-0.004 + 0.002) / 0.004, -1.0],
+        1e-4,
+    );
+    let p = norm.labels(std::slice::from_ref(&s), &[1], 1, EeTarget::Pose, false);
+    // (next − proprioception's mean) / its sd, position and roll.
+    close(&p.ee, &[0.1, -0.02, -0.4, 1.0], 1e-4);
+}
+
+#[test]
 fn the_whole_loss_weights_its_terms_and_skips_unaligned_samples() {
     use learner::models::LossWeights;
     use learner::models::losses::{LabelTensors, losses};
@@ -206,7 +249,7 @@ fn the_whole_loss_weights_its_terms_and_skips_unaligned_samples() {
         mask: vec![1.0; 2 * 64 * 64],
         contact_next: vec![1.0, 0.0],
         paired,
-        ee_delta: vec![0.1; 6],
+        ee: vec![0.1; 6],
         rgb01: vec![0.5; 2 * 3 * 64 * 64],
         last_wrench: vec![0.0; 12],
     };
@@ -299,13 +342,17 @@ fn configurations_are_checked_and_the_shipped_files_load() {
                 assert!(!cfg.learns_pairing() && cfg.negatives() == 0.0);
                 assert_eq!(cfg.loss_weights().pairing, 0.0);
             }
-            "full" => assert!(cfg.learns_pairing() && cfg.negatives() == 0.5),
+            "full" => {
+                assert!(cfg.learns_pairing() && cfg.negatives() == 0.5);
+                assert_eq!(cfg.model.ee_target, learner::models::EeTarget::Displacement);
+            }
+            "full-ee-pose" => assert_eq!(cfg.model.ee_target, learner::models::EeTarget::Pose),
             "no_rgb" => assert!(!cfg.model.modalities.rgb),
             "d16" => assert_eq!(cfg.model.latent_dim, 16),
             _ => {}
         }
     }
-    assert_eq!(n, 10, "the paper's ten models");
+    assert_eq!(n, 11, "the paper's ten models and full-ee-pose");
     let bad = test_support::scratch_dir("bad-config");
     let p = bad.join("x.toml");
     std::fs::write(&p, "[train]\nlr = -1.0\n").unwrap();

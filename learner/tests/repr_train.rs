@@ -308,6 +308,20 @@ fn the_baselines_train_on_the_same_data() {
 }
 
 #[test]
+fn the_pose_target_trains_exports_and_encodes() {
+    let out = test_support::scratch_dir("repr-ee-pose");
+    let mut cfg = small(ModelKind::Full, 1);
+    cfg.model.ee_target = learner::models::EeTarget::Pose;
+    cfg.train.max_batches_per_epoch = 3;
+    let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
+    let test = s.rows.iter().find(|r| r.split == "test").unwrap();
+    assert!(test.loss.ee.is_finite() && test.loss.ee > 0.0, "{test:?}");
+    // The export says which head it has, so it loads into the same shape.
+    let enc = learner::models::Encoder::load(&s.model_dir, &Device::flex()).unwrap();
+    assert_eq!(enc.config().ee_target, learner::models::EeTarget::Pose);
+}
+
+#[test]
 fn a_dataset_of_another_image_size_is_refused() {
     let out = test_support::scratch_dir("repr-mismatch");
     let mut cfg = small(ModelKind::Full, 1);

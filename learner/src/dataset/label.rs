@@ -240,6 +240,7 @@ pub fn episode_samples(
         }
         let proprio = Proprio::from_frame(f0, roll_ref).to_array();
         let ee1 = frames[i1].ee_pos_m;
+        let roll1 = Proprio::from_frame(&frames[i1], roll_ref).roll_rad;
         let moved = (0..3)
             .map(|k| (ee1[k] - f0.ee_pos_m[k]).powi(2))
             .sum::<f64>()
@@ -263,7 +264,7 @@ pub fn episode_samples(
             action: a.delta().map(|x| x as f32),
             flow: l.flow_px.iter().flat_map(|f| [f[0], f[1]]).collect(),
             mask: l.mask.clone(),
-            ee_next: [ee1[0] as f32, ee1[1] as f32, ee1[2] as f32],
+            ee_next: [ee1[0] as f32, ee1[1] as f32, ee1[2] as f32, roll1 as f32],
         });
     }
     Ok(EpisodeSamples {

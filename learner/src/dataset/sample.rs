@@ -33,13 +33,15 @@ pub struct Sample {
     pub flow: Vec<f32>,
     /// Label: flow mask, H×W.
     pub mask: Vec<u8>,
-    /// Label: next end-effector position, m.
-    pub ee_next: [f32; 3],
+    /// Label: the end-effector's position (m) and roll (rad, the episode's
+    /// reference, as in `proprio[3]`) at the next step: the next sample's
+    /// first four proprioception values (format 5; position only before).
+    pub ee_next: [f32; 4],
 }
 
 pub(super) fn sample_bytes(w: usize, h: usize) -> usize {
     let n = w * h;
-    24 + 3 * n + 4 * n + 4 * WRENCH_WINDOW * 6 + 4 * PROPRIO + 16 + 8 * n + n + 12
+    24 + 3 * n + 4 * n + 4 * WRENCH_WINDOW * 6 + 4 * PROPRIO + 16 + 8 * n + n + 16
 }
 
 pub(super) fn put_f32s(out: &mut Vec<u8>, xs: &[f32]) {

@@ -23,6 +23,35 @@ pub enum ModelKind {
     Reconstruction,
 }
 
+/// What the end-effector head predicts from the action-conditioned feature.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EeTarget {
+    /// The paper's text ("the future end-effector position"), as the
+    /// displacement to it: next position minus current, normalised by the
+    /// dataset's displacement statistics (3 values). The default, and what
+    /// every model exported before the choice existed predicts.
+    #[default]
+    Displacement,
+    /// The authors' public code (`ee_yaw_next`, the next step's first
+    /// `action_dim` = 4 proprioception values): the next position and roll
+    /// themselves, normalised with the proprioception's statistics (4
+    /// values). A displacement can be predicted without knowing where the
+    /// arm is; the pose cannot, so this target asks z to keep the position
+    /// and the roll.
+    Pose,
+}
+
+impl EeTarget {
+    /// Values the head predicts.
+    pub fn dim(self) -> usize {
+        match self {
+            Self::Displacement => 3,
+            Self::Pose => 4,
+        }
+    }
+}
+
 /// Which sensors a model sees. A modality left out contributes no expert to
 /// the product (no input to the concatenation of the deterministic model);
 /// the same switch masks a sensor of a trained model at run time.
@@ -152,6 +181,9 @@ pub struct ModelConfig {
     /// 3×3 convolutions per stage of the VGG-like depth encoder (six stages;
     /// 3 gives the paper's eighteen layers).
     pub depth_convs_per_stage: usize,
+    /// The end-effector head's target (dataset format 5 for
+    /// [`EeTarget::Pose`]).
+    pub ee_target: EeTarget,
 }
 
 impl Default for ModelConfig {
@@ -162,6 +194,7 @@ impl Default for ModelConfig {
             modalities: Modalities::ALL,
             image_size: 128,
             depth_convs_per_stage: 3,
+            ee_target: EeTarget::Displacement,
         }
     }
 }

@@ -34,6 +34,11 @@ impl Encoder {
         Ok(e)
     }
 
+    /// The model's configuration, as exported.
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
     /// From parts in memory.
     pub fn new(net: ReprNet, config: ModelConfig, normaliser: Normaliser, device: &Device) -> Self {
         Self {

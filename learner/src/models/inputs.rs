@@ -3,6 +3,7 @@
 //! vectors, no tensors: the same arrays feed training, evaluation and the
 //! inference API, and can be checked without a backend.
 
+use super::EeTarget;
 use crate::dataset::{Sample, Stats};
 use crate::policy::WRENCH_WINDOW;
 use crate::proprio::PROPRIO;
@@ -169,8 +170,8 @@ pub struct LabelArrays {
     pub contact_next: Vec<f32>,
     /// B: 1 time-aligned, 0 haptics from another time.
     pub paired: Vec<f32>,
-    /// B×3: next end-effector position minus the current one, normalised.
-    pub ee_delta: Vec<f32>,
+    /// B×k: the end-effector target ([`EeTarget`]), normalised.
+    pub ee: Vec<f32>,
     /// Reconstruction targets: B×3×S×S RGB in 0..1 (empty unless asked
     /// for: only the reconstruction model reads it).
     pub rgb01: Vec<f32>,
@@ -274,12 +275,14 @@ impl Normaliser {
     }
 
     /// The labels of `samples` (`paired[i]`: whether sample i keeps its own
-    /// haptics); the RGB reconstruction target only `with_rgb01`.
+    /// haptics) with the end-effector target `ee`; the RGB reconstruction
+    /// target only `with_rgb01`.
     pub fn labels(
         &self,
         samples: &[Sample],
         paired: &[u8],
         side: usize,
+        ee: EeTarget,
         with_rgb01: bool,
     ) -> LabelArrays {
         let n = side * side;
@@ -290,7 +293,7 @@ impl Normaliser {
             mask: Vec::with_capacity(b * n),
             contact_next: Vec::with_capacity(b),
             paired: paired.iter().map(|&p| p as f32).collect(),
-            ee_delta: Vec::with_capacity(b * 3),
+            ee: Vec::with_capacity(b * ee.dim()),
             rgb01: Vec::with_capacity(if with_rgb01 { b * 3 * n } else { 0 }),
             last_wrench: Vec::with_capacity(b * 6),
         };
@@ -307,10 +310,22 @@ impl Normaliser {
             out.mask
                 .extend(s.mask.iter().map(|&m| (m != 0) as u8 as f32));
             out.contact_next.push(s.contact_next as u8 as f32);
-            for k in 0..3 {
-                let d = s.ee_next[k] - s.proprio[k];
-                out.ee_delta
-                    .push((d - self.ee_delta_mean[k]) / self.ee_delta_std[k]);
+            match ee {
+                EeTarget::Displacement => {
+                    for k in 0..3 {
+                        let d = s.ee_next[k] - s.proprio[k];
+                        out.ee
+                            .push((d - self.ee_delta_mean[k]) / self.ee_delta_std[k]);
+                    }
+                }
+                // The next pose is distributed as the proprioception's
+                // position and roll are, so their statistics normalise it.
+                EeTarget::Pose => {
+                    for k in 0..4 {
+                        out.ee
+                            .push((s.ee_next[k] - self.proprio_mean[k]) / self.proprio_std[k]);
+                    }
+                }
             }
             for c in (0..3).filter(|_| with_rgb01) {
                 out.rgb01

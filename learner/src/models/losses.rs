@@ -30,8 +30,9 @@ pub struct LabelTensors {
     /// Time-aligned samples in the batch (the sum of `paired`, counted on
     /// the host: no device round trip per step).
     pub n_paired: f64,
-    /// `[B, 3]`, normalised.
-    pub ee_delta: Tensor<2>,
+    /// `[B, k]`, normalised: the end-effector target
+    /// ([`super::EeTarget`]).
+    pub ee: Tensor<2>,
     /// `[B, 3, S, S]`, 0..1 (`None` when the arrays carry none).
     pub rgb01: Option<Tensor<4>>,
     /// `[B, 6]`, normalised.
@@ -49,7 +50,7 @@ impl LabelTensors {
             contact_next: tensor(a.contact_next.clone(), [b], device),
             paired: tensor(a.paired.clone(), [b], device),
             n_paired: a.paired.iter().map(|&p| p as f64).sum(),
-            ee_delta: tensor(a.ee_delta.clone(), [b, 3], device),
+            ee: tensor(a.ee.clone(), [b, a.ee.len() / b.max(1)], device),
             rgb01: (!a.rgb01.is_empty())
                 .then(|| tensor(a.rgb01.clone(), [b, 3, side, side], device)),
             last_wrench: tensor(a.last_wrench.clone(), [b, 6], device),
@@ -154,7 +155,7 @@ pub fn losses(out: &Outputs, y: &LabelTensors, proprio: &Tensor<2>, w: &LossWeig
     }
     if let Some(e) = &out.ee {
         let t = weighted_mean(
-            per_sample_mean((e.clone() - y.ee_delta.clone()).powf_scalar(2.0)),
+            per_sample_mean((e.clone() - y.ee.clone()).powf_scalar(2.0)),
             paired,
             n_paired,
         );

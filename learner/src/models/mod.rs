@@ -28,7 +28,7 @@ pub mod inputs;
 pub mod losses;
 pub mod net;
 
-pub use config::{LossWeights, Modalities, ModelConfig, ModelKind};
+pub use config::{EeTarget, LossWeights, Modalities, ModelConfig, ModelKind};
 pub use encoder::Encoder;
 pub use inputs::{InputArrays, LabelArrays, Normaliser, ObservationRef};
 pub use net::{InputTensors, Outputs, ReprNet};

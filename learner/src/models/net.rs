@@ -120,7 +120,7 @@ impl ReprNet {
             flow: predictive.then(|| FlowDecoder::new(d, device)),
             contact: predictive.then(|| LinearConfig::new(d, 1).init(device)),
             pairing: predictive.then(|| LinearConfig::new(d, 1).init(device)),
-            ee: predictive.then(|| Mlp::new(&[d, 128, 64, 32, 3], device)),
+            ee: predictive.then(|| Mlp::new(&[d, 128, 64, 32, cfg.ee_target.dim()], device)),
             recon: (!predictive).then(|| ReconDecoders::new(d, s, device)),
         }
     }

@@ -320,7 +320,7 @@ fn flow_picture(
                 .collect(),
             paired: vec![1; k],
         };
-        let p = prepare(&batch, norm, s, false, device)?;
+        let p = prepare(&batch, norm, s, model.ee_target, false, device)?;
         let out = net.forward(model, &p.x, p.y.action.clone(), None, model.modalities);
         let flow = out.flow.expect("a predictive model").flow;
         let f: Vec<f32> = flow.try_into_vec_as::<f32>().expect("f32");

@@ -6,7 +6,9 @@ use super::{DeviceKind, Result, Split, TrainConfig, TrainError, io_err};
 use crate::dataset::{Batch, Dataset, Loader, LoaderConfig};
 use crate::models::losses::{LabelTensors, losses};
 use crate::models::net::tensor;
-use crate::models::{InputTensors, Modalities, ModelKind, Normaliser, ObservationRef, ReprNet};
+use crate::models::{
+    EeTarget, InputTensors, Modalities, ModelKind, Normaliser, ObservationRef, ReprNet,
+};
 use crate::policy::WRENCH_WINDOW;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
@@ -129,18 +131,19 @@ pub(crate) struct Prepared {
     pub zero_flow_epe: Vec<f32>,
 }
 
-/// Normalises `b` and uploads it to `device` (with the RGB reconstruction
-/// target when `with_rgb01`).
+/// Normalises `b` and uploads it to `device` (with the end-effector target
+/// `ee`, and the RGB reconstruction target when `with_rgb01`).
 pub(crate) fn prepare(
     b: &Batch,
     norm: &Normaliser,
     side: usize,
+    ee: EeTarget,
     with_rgb01: bool,
     device: &Device,
 ) -> Result<Prepared> {
     let obs: Vec<ObservationRef<'_>> = b.samples.iter().map(ObservationRef::from).collect();
     let inputs = norm.inputs(&obs, side)?;
-    let labels = norm.labels(&b.samples, &b.paired, side, with_rgb01);
+    let labels = norm.labels(&b.samples, &b.paired, side, ee, with_rgb01);
     let n = side * side;
     let zero_flow_epe = labels
         .flow
@@ -202,7 +205,14 @@ pub fn evaluate(
         if cfg.train.max_test_batches > 0 && k as u64 >= cfg.train.max_test_batches {
             break;
         }
-        let p = prepare(&b?, norm, cfg.model.image_size, recon, &device)?;
+        let p = prepare(
+            &b?,
+            norm,
+            cfg.model.image_size,
+            cfg.model.ee_target,
+            recon,
+            &device,
+        )?;
         let out = net.forward(&cfg.model, &p.x, p.y.action.clone(), None, active);
         let l = losses(&out, &p.y, &p.x.proprio, &cfg.loss_weights());
         m.add(&l, &out, &p.paired, &p.contact_next, &p.zero_flow_epe);
@@ -291,7 +301,7 @@ pub fn train(
                 // exactly where the interrupted run stood.
                 continue;
             }
-            let p = prepare(&b?, &norm, side, recon, &device)?;
+            let p = prepare(&b?, &norm, side, cfg.model.ee_target, recon, &device)?;
             let eps = variational.then(|| {
                 noise(
                     t.seed,
