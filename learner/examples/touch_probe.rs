@@ -21,7 +21,8 @@
 //!   where the opening is by a linear probe of a representation's z means
 //!   (`search::ProbedSearchView`), fitted on FIT episodes (seeds from
 //!   3 000 000), run on TEST episodes; `TOUCH_TRUE_ROLL` gives it the true
-//!   roll instead of the probe's.
+//!   roll instead of the probe's, `TOUCH_ROLL_GAIN` sets the search's
+//!   `roll_gain` (also in `search`).
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -162,6 +163,7 @@ fn search(sigma_mm: f64, episodes: u64) {
     var("TOUCH_SLIDE_MM", &mut sc.slide_m, 1e-3);
     var("TOUCH_PRESS_N", &mut sc.press_n, 1.0);
     var("TOUCH_LEAD_MM_PER_N", &mut sc.lead_m_per_n, 1e-3);
+    var("TOUCH_ROLL_GAIN", &mut sc.roll_gain, 1.0);
     sc.validate().unwrap_or_else(|e| panic!("{e}"));
     let view = SearchView {
         std_m: sc.hole_error_m,
@@ -255,7 +257,12 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             .map_or(0.0, |v| v.parse().expect("rad")),
         below_m: 0.03,
     };
-    let search = TouchSearchConfig::default();
+    // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
+    let search = TouchSearchConfig {
+        roll_gain: std::env::var("TOUCH_ROLL_GAIN").map_or(1.0, |v| v.parse().expect("gain")),
+        ..Default::default()
+    };
+    search.validate().unwrap_or_else(|e| panic!("{e}"));
     let probe = fit_belief_probe(
         &cfg,
         repr.as_ref(),
@@ -272,14 +279,14 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         below_m: pc.below_m,
     };
     let policy = TouchSearch {
-        cfg: TouchSearchConfig::default(),
+        cfg: search.clone(),
         scale: cfg.action.clone(),
     };
     let mut env = RlEnv::new(&cfg).expect("env");
     // TOUCH_TRUE_ROLL: the roll from the truth instead of the probe.
     let true_roll = std::env::var_os("TOUCH_TRUE_ROLL").is_some();
     let mut counts = [0u32; 4];
-    let (mut se, mut n, mut psi_se) = (0.0, 0usize, 0.0);
+    let (mut se, mut n, mut psi_se, mut roll_se) = (0.0, 0usize, 0.0, 0.0);
     for ep in 0..test {
         env.reset(1_000_000 + ep, true).expect("reset");
         let (mut ep_se, mut ep_n) = (0.0, 0usize);
@@ -290,6 +297,7 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             let psi = env.task().s_psi_rad;
             if s.z < pc.below_m && s.z > -0.002 {
                 psi_se += (o[3] - psi).powi(2);
+                roll_se += psi * psi;
             }
             if true_roll {
                 o[3] = psi;
@@ -317,9 +325,10 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         );
     }
     println!(
-        "z-told search: probe RMS {:.1} mm, roll {:.3} rad; rejected frames {}; outcomes {:?} over {test}",
+        "z-told search: probe RMS {:.1} mm, roll {:.3} rad; the peg's roll off the hole's {:.3} rad RMS; rejected frames {}; outcomes {:?} over {test}",
         1e3 * (se / n.max(1) as f64).sqrt(),
         (psi_se / n.max(1) as f64).sqrt(),
+        (roll_se / n.max(1) as f64).sqrt(),
         view.rejected(),
         Outcome::ALL
             .iter()

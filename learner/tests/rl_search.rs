@@ -117,6 +117,20 @@ fn the_search_step_follows_its_spiral() {
     o[7] = std::f64::consts::FRAC_PI_2;
     let a = s.means(&o);
     assert!(a[0].abs() < 1e-9 && a[1] < -0.5, "{a:?}");
+    // The roll turns against the believed roll error: all of it, or the
+    // gain's share.
+    o[3] = 0.01;
+    let whole = s.means(&o)[3];
+    assert!(whole < 0.0, "{whole}");
+    let quarter = TouchSearch {
+        cfg: TouchSearchConfig {
+            roll_gain: 0.25,
+            ..cfg.clone()
+        },
+        scale: Default::default(),
+    }
+    .means(&o)[3];
+    assert!((quarter - 0.25 * whole).abs() < 1e-12, "{quarter} {whole}");
 }
 
 #[test]
@@ -133,6 +147,13 @@ fn bad_search_settings_are_named() {
             "search_teacher.hole_error_m",
             TouchSearchConfig {
                 hole_error_m: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.roll_gain",
+            TouchSearchConfig {
+                roll_gain: 0.0,
                 ..Default::default()
             },
         ),

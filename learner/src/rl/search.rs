@@ -53,6 +53,12 @@ pub struct TouchSearchConfig {
     /// controller has by default and with the stiff wrist; another
     /// stiffness needs it tuned again.
     pub lead_m_per_n: f64,
+    /// Share of the believed roll error turned each step (0 < g ≤ 1). 1
+    /// turns the whole of it; below 1 the roll, which integrates the steps,
+    /// averages a belief whose error changes from step to step over about
+    /// 1/g steps instead of following each reading (a probe of z reads the
+    /// roll with about 0.1 rad of error; the clearance admits about 0.07).
+    pub roll_gain: f64,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
     /// `hole_error_m` must then be 0.
@@ -114,6 +120,7 @@ impl Default for TouchSearchConfig {
             step_m: 0.001,
             press_n: 2.0,
             lead_m_per_n: 0.002,
+            roll_gain: 1.0,
             probe: None,
         }
     }
@@ -148,6 +155,13 @@ impl TouchSearchConfig {
                     "must be finite and not negative",
                 ));
             }
+        }
+        if !(self.roll_gain.is_finite() && self.roll_gain > 0.0 && self.roll_gain <= 1.0) {
+            return Err(FieldError::new(
+                f("roll_gain"),
+                self.roll_gain,
+                "must lie in (0, 1]",
+            ));
         }
         if let Some(p) = &self.probe {
             if self.hole_error_m != 0.0 {
@@ -315,7 +329,12 @@ impl TouchSearch {
         let mut out = Vec::with_capacity(obs.len() / SEARCH_VIEW_DIM * 4);
         for o in obs.chunks_exact(SEARCH_VIEW_DIM) {
             let d = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), o[7]) * self.step(o);
-            out.extend_from_slice(&self.scale.from_delta(&[d.x, d.y, d.z, -o[3]]));
+            out.extend_from_slice(&self.scale.from_delta(&[
+                d.x,
+                d.y,
+                d.z,
+                -self.cfg.roll_gain * o[3],
+            ]));
         }
         out
     }
