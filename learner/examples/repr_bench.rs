@@ -66,6 +66,7 @@ fn main() {
             contact_next: sign(randn(b)),
             paired: sign(randn(b)),
             ee: randn(b * 3),
+            ee_dim: 3,
             rgb01: vec![0.5; b * 3 * s * s],
             last_wrench: randn(b * 6),
         };

@@ -22,7 +22,8 @@
 //!   (`search::ProbedSearchView`), fitted on FIT episodes (seeds from
 //!   3 000 000), run on TEST episodes; `TOUCH_TRUE_ROLL` gives it the true
 //!   roll instead of the probe's, `TOUCH_ROLL_GAIN` sets the search's
-//!   `roll_gain` (also in `search`).
+//!   `roll_gain` (also in `search`), `TOUCH_TRACE` prints each step's height
+//!   and roll.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -285,8 +286,10 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     let mut env = RlEnv::new(&cfg).expect("env");
     // TOUCH_TRUE_ROLL: the roll from the truth instead of the probe.
     let true_roll = std::env::var_os("TOUCH_TRUE_ROLL").is_some();
+    // TOUCH_TRACE: each step's height and roll.
+    let zs_trace = std::env::var_os("TOUCH_TRACE").is_some();
     let mut counts = [0u32; 4];
-    let (mut se, mut n, mut psi_se, mut roll_se) = (0.0, 0usize, 0.0, 0.0);
+    let (mut se, mut n, mut psi_se, mut roll_se, mut read_ss) = (0.0, 0usize, 0.0, 0.0, 0.0);
     for ep in 0..test {
         env.reset(1_000_000 + ep, true).expect("reset");
         let (mut ep_se, mut ep_n) = (0.0, 0usize);
@@ -298,9 +301,18 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             if s.z < pc.below_m && s.z > -0.002 {
                 psi_se += (o[3] - psi).powi(2);
                 roll_se += psi * psi;
+                read_ss += o[3] * o[3];
             }
             if true_roll {
                 o[3] = psi;
+            }
+            if zs_trace {
+                println!(
+                    "  z {:+.1} mm, roll off the hole {:+.3} rad, told {:+.3}",
+                    s.z * 1e3,
+                    psi,
+                    o[3]
+                );
             }
             // The probe's error where it is read, above the opening.
             if s.z < pc.below_m && s.z > -0.002 {
@@ -325,10 +337,11 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         );
     }
     println!(
-        "z-told search: probe RMS {:.1} mm, roll {:.3} rad; the peg's roll off the hole's {:.3} rad RMS; rejected frames {}; outcomes {:?} over {test}",
+        "z-told search: probe RMS {:.1} mm, roll {:.3} rad; the peg's roll off the hole's {:.3} rad RMS, the probe's reading of it {:.3} rad RMS; rejected frames {}; outcomes {:?} over {test}",
         1e3 * (se / n.max(1) as f64).sqrt(),
         (psi_se / n.max(1) as f64).sqrt(),
         (roll_se / n.max(1) as f64).sqrt(),
+        (read_ss / n.max(1) as f64).sqrt(),
         view.rejected(),
         Outcome::ALL
             .iter()

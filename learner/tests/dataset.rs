@@ -323,16 +323,19 @@ fn a_short_collection_builds_the_expected_dataset() {
     let text = std::fs::read_to_string(out.join("meta.json")).unwrap();
     let version = format!("\"format_version\": {}", dataset::FORMAT_VERSION);
     assert!(text.contains(&version), "{text}");
-    std::fs::write(
-        out.join("meta.json"),
-        text.replace(&version, "\"format_version\": 1"),
-    )
-    .unwrap();
-    let e = Dataset::open(&out).err().unwrap().to_string();
-    assert!(
-        e.contains("format version 1") && e.contains("learner dataset build"),
-        "{e}"
-    );
+    // Format 4, whose end-effector label had no roll, as well as 1.
+    for old in [1, 4] {
+        std::fs::write(
+            out.join("meta.json"),
+            text.replace(&version, &format!("\"format_version\": {old}")),
+        )
+        .unwrap();
+        let e = Dataset::open(&out).err().unwrap().to_string();
+        assert!(
+            e.contains(&format!("format version {old}")) && e.contains("learner dataset build"),
+            "{e}"
+        );
+    }
 }
 
 #[test]

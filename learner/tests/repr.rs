@@ -250,6 +250,7 @@ fn the_whole_loss_weights_its_terms_and_skips_unaligned_samples() {
         contact_next: vec![1.0, 0.0],
         paired,
         ee: vec![0.1; 6],
+        ee_dim: 3,
         rgb01: vec![0.5; 2 * 3 * 64 * 64],
         last_wrench: vec![0.0; 12],
     };
@@ -353,6 +354,10 @@ fn configurations_are_checked_and_the_shipped_files_load() {
         }
     }
     assert_eq!(n, 11, "the paper's ten models and full-ee-pose");
+    // A model exported before the target was a choice predicts the
+    // displacement.
+    let old: ModelConfig = serde_json::from_str(r#"{"kind": "full", "latent_dim": 128}"#).unwrap();
+    assert_eq!(old.ee_target, learner::models::EeTarget::Displacement);
     let bad = test_support::scratch_dir("bad-config");
     let p = bad.join("x.toml");
     std::fs::write(&p, "[train]\nlr = -1.0\n").unwrap();

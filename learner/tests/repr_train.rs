@@ -316,9 +316,38 @@ fn the_pose_target_trains_exports_and_encodes() {
     let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
     let test = s.rows.iter().find(|r| r.split == "test").unwrap();
     assert!(test.loss.ee.is_finite() && test.loss.ee > 0.0, "{test:?}");
-    // The export says which head it has, so it loads into the same shape.
+    // The export says which head it has, so it loads into the same shape,
+    // and encodes.
     let enc = learner::models::Encoder::load(&s.model_dir, &Device::flex()).unwrap();
     assert_eq!(enc.config().ee_target, learner::models::EeTarget::Pose);
+    let ds = Dataset::open(dataset()).unwrap();
+    let smp = ds.read_block(0, 0).unwrap();
+    let obs: Vec<ObservationRef<'_>> = smp.iter().take(3).map(ObservationRef::from).collect();
+    let z = enc.encode(&obs).unwrap();
+    assert!(z.len() == 3 * 16 && z.iter().all(|x| x.is_finite()));
+    // Evaluation makes the pose labels and names the target.
+    let opts = train::eval::EvalOptions {
+        run: out.to_path_buf(),
+        data: dataset().to_path_buf(),
+        out: out.join("eval"),
+        device: Default::default(),
+        pca_samples: 50,
+        flow_images: 1,
+    };
+    let r = train::eval::eval(&opts).unwrap();
+    assert!(
+        r.markdown.contains("end-effector target Pose"),
+        "{}",
+        r.markdown
+    );
+    assert!(r.rows[0].1.loss.ee.is_finite());
+    // A run whose configuration no longer matches its export is refused.
+    let cfg_path = out.join("config.toml");
+    let text = std::fs::read_to_string(&cfg_path).unwrap();
+    assert!(text.contains("ee_target = \"pose\""), "{text}");
+    std::fs::write(&cfg_path, text.replace("ee_target = \"pose\"", "")).unwrap();
+    let e = train::eval::eval(&opts).unwrap_err().to_string();
+    assert!(e.contains("disagree"), "{e}");
 }
 
 #[test]

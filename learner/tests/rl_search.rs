@@ -158,6 +158,20 @@ fn bad_search_settings_are_named() {
             },
         ),
         (
+            "search_teacher.roll_gain",
+            TouchSearchConfig {
+                roll_gain: 1.5,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.roll_gain",
+            TouchSearchConfig {
+                roll_gain: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
             "search_teacher.lead_m_per_n",
             TouchSearchConfig {
                 lead_m_per_n: -1.0,

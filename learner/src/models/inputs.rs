@@ -172,6 +172,9 @@ pub struct LabelArrays {
     pub paired: Vec<f32>,
     /// B×k: the end-effector target ([`EeTarget`]), normalised.
     pub ee: Vec<f32>,
+    /// k, the values per sample in `ee` (kept, since an empty batch cannot
+    /// tell it).
+    pub ee_dim: usize,
     /// Reconstruction targets: B×3×S×S RGB in 0..1 (empty unless asked
     /// for: only the reconstruction model reads it).
     pub rgb01: Vec<f32>,
@@ -294,6 +297,7 @@ impl Normaliser {
             contact_next: Vec::with_capacity(b),
             paired: paired.iter().map(|&p| p as f32).collect(),
             ee: Vec::with_capacity(b * ee.dim()),
+            ee_dim: ee.dim(),
             rgb01: Vec::with_capacity(if with_rgb01 { b * 3 * n } else { 0 }),
             last_wrench: Vec::with_capacity(b * 6),
         };

@@ -50,7 +50,16 @@ impl LabelTensors {
             contact_next: tensor(a.contact_next.clone(), [b], device),
             paired: tensor(a.paired.clone(), [b], device),
             n_paired: a.paired.iter().map(|&p| p as f64).sum(),
-            ee: tensor(a.ee.clone(), [b, a.ee.len() / b.max(1)], device),
+            ee: {
+                assert_eq!(
+                    a.ee.len(),
+                    b * a.ee_dim,
+                    "end-effector labels: {} values for {b} samples of {}",
+                    a.ee.len(),
+                    a.ee_dim
+                );
+                tensor(a.ee.clone(), [b, a.ee_dim], device)
+            },
             rgb01: (!a.rgb01.is_empty())
                 .then(|| tensor(a.rgb01.clone(), [b, 3, side, side], device)),
             last_wrench: tensor(a.last_wrench.clone(), [b, 6], device),

@@ -75,7 +75,7 @@ pub struct Outputs {
     pub contact_logits: Option<Tensor<1>>,
     /// Time alignment of the inputs, logits `[B]`.
     pub pairing_logits: Option<Tensor<1>>,
-    /// Next end-effector displacement, normalised, `[B, 3]`.
+    /// The end-effector target ([`super::EeTarget`]), normalised, `[B, k]`.
     pub ee: Option<Tensor<2>>,
     /// Flow and mask.
     pub flow: Option<FlowPrediction>,

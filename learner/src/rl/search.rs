@@ -54,10 +54,10 @@ pub struct TouchSearchConfig {
     /// stiffness needs it tuned again.
     pub lead_m_per_n: f64,
     /// Share of the believed roll error turned each step (0 < g ≤ 1). 1
-    /// turns the whole of it; below 1 the roll, which integrates the steps,
-    /// averages a belief whose error changes from step to step over about
-    /// 1/g steps instead of following each reading (a probe of z reads the
-    /// roll with about 0.1 rad of error; the clearance admits about 0.07).
+    /// turns the whole of it, so the roll follows every reading; below 1 a
+    /// reading that errs moves the roll by only that share of its error.
+    /// Told the roll by a probe of z, 0.1 kept it closer to the hole's than
+    /// 1 (docs/experiments.md, "A policy that searches by touch").
     pub roll_gain: f64,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].

@@ -56,6 +56,16 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
     })?;
     let device = opts.device.device(false).map_err(TrainError::Mismatch)?;
     let (net, meta) = checkpoint::import(&opts.run.join(files::MODEL_DIR), &device)?;
+    // The labels are made and the heads read with the run's configuration,
+    // the network built from the export's: they must be one model.
+    if cfg.model != meta.model {
+        return Err(TrainError::Mismatch(format!(
+            "{} and the exported model disagree on the model: {:?} against {:?}",
+            cfg_path.display(),
+            cfg.model,
+            meta.model
+        )));
+    }
     let ds = Dataset::open(&opts.data)?;
     if ds.meta.width != meta.model.image_size {
         return Err(TrainError::Mismatch(format!(
@@ -175,10 +185,11 @@ fn table(
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Model {:?}, d = {}, trained with {}; test split: {} episodes, {} samples (train: {} episodes).\n",
+        "Model {:?}, d = {}, trained with {}, end-effector target {:?}; test split: {} episodes, {} samples (train: {} episodes).\n",
         cfg.model.kind,
         cfg.model.latent_dim,
         cfg.model.modalities.names(),
+        cfg.model.ee_target,
         split.test.len(),
         Split::samples(&ds.meta, &split.test),
         split.train.len()
