@@ -147,11 +147,12 @@ impl MixedPolicy {
 pub struct CollectConfig {
     /// Where the shards go.
     pub out_dir: PathBuf,
-    /// 20 Hz states to collect (episodes run until this many are written).
+    /// 20 Hz states to collect: the first episodes whose states reach this
+    /// many ([`StateBudget`]).
     pub states: u64,
-    /// At most this many episodes (none: as many as `states` needs). With
-    /// several workers the episode count for a state budget depends on how
-    /// the threads were scheduled; a fixed count does not.
+    /// At most this many episodes (none: as many as `states` needs). A
+    /// state budget takes the same episodes whatever the worker count or
+    /// the threads' scheduling: see [`StateBudget`].
     pub episodes: Option<u64>,
     /// Actions per episode.
     pub episode_actions: u32,
@@ -274,6 +275,66 @@ impl RecentSpeeds {
 
     fn max(&self) -> f64 {
         self.v.iter().copied().fold(0.0, f64::max)
+    }
+}
+
+/// Which episodes a state budget takes: the shortest run of episodes from
+/// 0 whose states reach it. Workers finish episodes out of order, so the
+/// count of states written when a worker looks is scheduling luck; the
+/// first episodes whose states reach the budget are not. Episodes past that
+/// cut that a worker had already started are run to their end and dropped.
+#[derive(Debug, Clone)]
+pub struct StateBudget {
+    target: u64,
+    /// Finished episodes not yet part of the contiguous run from 0.
+    pending: std::collections::BTreeMap<u64, u64>,
+    /// The first episode not finished.
+    next: u64,
+    /// States of episodes `0..next`.
+    prefix: u64,
+    /// The last episode the budget takes, once known.
+    last: Option<u64>,
+}
+
+impl StateBudget {
+    /// A budget of `target` states; none of it spent.
+    pub fn new(target: u64) -> Self {
+        Self {
+            target,
+            pending: Default::default(),
+            next: 0,
+            prefix: 0,
+            last: None,
+        }
+    }
+
+    /// Records that `episode` finished with `states` states.
+    pub fn finish(&mut self, episode: u64, states: u64) {
+        if episode < self.next {
+            return;
+        }
+        self.pending.insert(episode, states);
+        while self.last.is_none()
+            && let Some(n) = self.pending.remove(&self.next)
+        {
+            self.prefix += n;
+            if self.prefix >= self.target {
+                self.last = Some(self.next);
+            }
+            self.next += 1;
+        }
+    }
+
+    /// Whether the budget takes `episode`: true until the episodes before
+    /// it are known to reach it.
+    pub fn takes(&self, episode: u64) -> bool {
+        self.target > 0 && self.last.is_none_or(|l| episode <= l)
+    }
+
+    /// Whether the episodes it takes are all known (no worker need start
+    /// another).
+    pub fn settled(&self) -> bool {
+        self.target == 0 || self.last.is_some()
     }
 }
 
@@ -579,18 +640,17 @@ pub fn collect_fast(
     if cfg.resume && manifest_path.exists() {
         // Rewritten with the records kept, so that a line cut short by a
         // crash does not run into the next one appended.
-        let mut text = String::new();
-        for s in &kept {
-            let line =
-                serde_json::to_string(s).map_err(|e| manifest_err(std::io::Error::other(e)))?;
-            text.push_str(&line);
-            text.push('\n');
-        }
-        crate::write_atomic(&manifest_path, text.as_bytes()).map_err(manifest_err)?;
+        write_manifest(&manifest_path, &kept).map_err(manifest_err)?;
     }
     let skip: std::collections::HashSet<u64> = kept.iter().map(|s| s.episode).collect();
     let next_episode = AtomicU64::new(0);
     let done = AtomicU64::new(kept.iter().map(|s| s.states).sum());
+    let mut budget = StateBudget::new(cfg.states);
+    for s in &kept {
+        budget.finish(s.episode, s.states);
+    }
+    let budget = Mutex::new(budget);
+    let taken = |i: u64| budget.lock().expect("not poisoned").takes(i);
     let episodes_done = AtomicU64::new(kept.len() as u64);
     let progress = Progress::new(cfg.states, "states");
     progress.resume_at(done.load(Ordering::Relaxed));
@@ -608,7 +668,9 @@ pub fn collect_fast(
             handles.push(s.spawn(|| -> Result<(), CollectError> {
                 let mut env: Option<FastEnv> = None;
                 loop {
-                    if stop.load(Ordering::Relaxed) || done.load(Ordering::Relaxed) >= cfg.states {
+                    if stop.load(Ordering::Relaxed)
+                        || budget.lock().expect("not poisoned").settled()
+                    {
                         return Ok(());
                     }
                     let i = next_episode.fetch_add(1, Ordering::Relaxed);
@@ -617,6 +679,9 @@ pub fn collect_fast(
                     }
                     if skip.contains(&i) {
                         continue;
+                    }
+                    if !taken(i) {
+                        return Ok(());
                     }
                     let mut world = cfg.world.clone();
                     world.task.enabled = true;
@@ -651,6 +716,9 @@ pub fn collect_fast(
                         source: Box::new(e),
                     })?;
                     episodes_done.fetch_add(1, Ordering::Relaxed);
+                    if !shard.interrupted {
+                        budget.lock().expect("not poisoned").finish(i, shard.states);
+                    }
                     // Fails only on a path that is not UTF-8.
                     let line = serde_json::to_string(&shard)
                         .map_err(|e| manifest_err(std::io::Error::other(e)))?;
@@ -673,11 +741,42 @@ pub fn collect_fast(
     progress.finish();
     let mut shards = shards.into_inner().expect("not poisoned");
     shards.sort_by_key(|s| s.episode);
+    // Episodes this run started past the budget's cut (another worker's
+    // episode reached it first) are dropped, file and record, so that a
+    // budget's episodes do not depend on the worker count. Episodes kept
+    // from an earlier run are recorded data and stay.
+    if let Some(last) = budget.into_inner().expect("not poisoned").last {
+        let (surplus, keep): (Vec<_>, Vec<_>) = shards
+            .into_iter()
+            .partition(|s| s.episode > last && !skip.contains(&s.episode));
+        shards = keep;
+        if !surplus.is_empty() {
+            drop(manifest);
+            write_manifest(&manifest_path, &shards).map_err(manifest_err)?;
+            for s in &surplus {
+                std::fs::remove_file(&s.file).map_err(|source| CollectError::Io {
+                    path: s.file.clone(),
+                    source,
+                })?;
+            }
+        }
+    }
     Ok(CollectSummary {
         states: shards.iter().map(|s| s.states).sum(),
         shards,
         wall_s: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Replaces the manifest at `path` with one record per shard, atomically.
+fn write_manifest(path: &Path, shards: &[EpisodeShard]) -> std::io::Result<()> {
+    let mut text = String::new();
+    for s in shards {
+        // Fails only on a path that is not UTF-8.
+        text.push_str(&serde_json::to_string(s).map_err(std::io::Error::other)?);
+        text.push('\n');
+    }
+    crate::write_atomic(path, text.as_bytes())
 }
 
 /// Whether `dir` holds episode files (`episode-*.mcap`).
@@ -801,4 +900,37 @@ pub enum CollectError {
         #[source]
         source: Box<CollectError>,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StateBudget;
+
+    #[test]
+    fn a_budget_takes_the_first_episodes_that_reach_it_in_any_finishing_order() {
+        // Episodes 0-3 of 4, 3, 5, 2 states against a budget of 9: 0-2.
+        let states = [4, 3, 5, 2];
+        for order in [[0, 1, 2, 3], [3, 2, 1, 0], [2, 0, 3, 1], [1, 3, 0, 2]] {
+            let mut b = StateBudget::new(9);
+            for &e in &order {
+                assert!(!b.settled() || !b.takes(3), "{order:?}");
+                b.finish(e, states[e as usize]);
+            }
+            assert!(b.settled(), "{order:?}");
+            assert!((0..3).all(|e| b.takes(e)) && !b.takes(3), "{order:?}");
+        }
+        // Finished episodes past a gap do not settle it.
+        let mut b = StateBudget::new(9);
+        b.finish(1, 100);
+        b.finish(2, 100);
+        assert!(!b.settled() && b.takes(5));
+        b.finish(0, 1);
+        assert!(b.settled() && b.takes(1) && !b.takes(2));
+        // Exactly the budget is enough; nothing is taken from none.
+        let mut b = StateBudget::new(4);
+        b.finish(0, 4);
+        assert!(b.settled() && !b.takes(1));
+        let b = StateBudget::new(0);
+        assert!(b.settled() && !b.takes(0));
+    }
 }

@@ -619,3 +619,57 @@ fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
     let e = read_manifest(&manifest).unwrap_err();
     assert!(e.to_string().contains("line 1"), "{e}");
 }
+
+#[test]
+fn a_state_budget_takes_the_same_episodes_whatever_the_worker_count() {
+    use learner::collect::read_manifest;
+    let run = |workers: usize, tag: &str| {
+        let dir = test_support::scratch_dir(tag);
+        let cfg = CollectConfig {
+            out_dir: dir.path().to_path_buf(),
+            // Six actions give each episode four to six states: a budget of
+            // seven is reached by the first two episodes.
+            states: 7,
+            episodes: None,
+            episode_actions: 6,
+            pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Triangle],
+            seed: 31,
+            workers,
+            world: world(),
+            controller: rt_controller::ControllerConfig::default(),
+            mix: Mix::default(),
+            log: LogOptions {
+                foxglove: false,
+                ..LogOptions::default()
+            },
+            resume: false,
+        };
+        let s = collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
+        let files: Vec<String> = dataset::find_logs(&[dir.path().to_path_buf()])
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        let listed: Vec<u64> = read_manifest(&dir.path().join("manifest.jsonl"))
+            .unwrap()
+            .iter()
+            .map(|s| s.episode)
+            .collect();
+        (s, files, listed, dir)
+    };
+    let (one, one_files, one_listed, _d1) = run(1, "budget-1");
+    let eps = |s: &learner::collect::CollectSummary| -> Vec<u64> {
+        s.shards.iter().map(|s| s.episode).collect()
+    };
+    // The premise: one worker stops after the episode that reached it.
+    assert_eq!(eps(&one), [0, 1], "{:?}", one.shards);
+    assert_eq!(one_listed, [0, 1]);
+    assert_eq!(one_files.len(), 2, "{one_files:?}");
+    // Three workers start episodes 0-2 at once; the budget takes 0 and 1
+    // only, and the third's file and record are gone.
+    let (three, three_files, three_listed, _d3) = run(3, "budget-3");
+    assert_eq!(eps(&three), eps(&one), "{:?}", three.shards);
+    assert_eq!(three.states, one.states);
+    assert_eq!(three_files, one_files);
+    assert_eq!(three_listed, one_listed);
+}
