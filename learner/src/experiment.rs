@@ -372,18 +372,17 @@ fn ensure_dataset(
         // Before hours of training: a representation of another camera's
         // images would be refused by the policy's environment. (Only a
         // variant with a representation uses the dataset.)
-        env.world.camera.validate()?;
-        let world = env.world.camera.calibration();
-        if let Some(c) = ds.meta.camera
-            && uses_representation
-            && !c.same_camera(&world)
-        {
-            bail!(
-                "data.dataset {}: its camera ({c}) is not the policy's world's ({world}); \
-                 give data.dataset a new path to collect one through the policy's camera, or \
-                 set the policy configuration's [env.world.camera] to the dataset's",
-                d.dataset.display()
-            );
+        if uses_representation {
+            match crate::rl::observe::check_calibration(&env.world.camera, ds.meta.camera) {
+                Ok(()) => {}
+                Err(crate::rl::RlEnvError::Camera { world, model }) => bail!(
+                    "data.dataset {}: its camera ({model}) is not the policy's world's ({world}); \
+                     give data.dataset a new path to collect one through the policy's camera, or \
+                     set the policy configuration's [env.world.camera] to the dataset's",
+                    d.dataset.display()
+                ),
+                Err(e) => return Err(e.into()),
+            }
         }
         return Ok(d.dataset.clone());
     }

@@ -64,7 +64,17 @@ pub fn check_camera(
     camera: &hw_sim::config::CameraConfig,
     observer: &dyn Observer,
 ) -> Result<(), super::env::RlEnvError> {
-    let Some(model) = observer.camera() else {
+    check_calibration(camera, observer.camera())
+}
+
+/// Refuses a world camera (`camera`) that is not `trained` (the camera a
+/// representation, or the dataset it learns from, was made through; `None`:
+/// any camera).
+pub fn check_calibration(
+    camera: &hw_sim::config::CameraConfig,
+    trained: Option<shared_mem_schema::CameraCalibration>,
+) -> Result<(), super::env::RlEnvError> {
+    let Some(model) = trained else {
         return Ok(());
     };
     // An invalid camera is named by its field, not reported as another one.
