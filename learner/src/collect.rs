@@ -662,77 +662,91 @@ pub fn collect_fast(
             .open(&manifest_path)
             .map_err(manifest_err)?,
     );
-    std::thread::scope(|s| -> Result<(), CollectError> {
+    // A worker's error stops the others after their episodes: the budget
+    // cannot settle past an episode that failed.
+    let failed = AtomicBool::new(false);
+    let ran = std::thread::scope(|s| -> Result<(), CollectError> {
         let mut handles = Vec::new();
         for _ in 0..cfg.workers.max(1) {
-            handles.push(s.spawn(|| -> Result<(), CollectError> {
-                let mut env: Option<FastEnv> = None;
-                loop {
-                    if stop.load(Ordering::Relaxed)
-                        || budget.lock().expect("not poisoned").settled()
-                    {
-                        return Ok(());
+            handles.push(s.spawn(|| {
+                let r = (|| -> Result<(), CollectError> {
+                    let mut env: Option<FastEnv> = None;
+                    loop {
+                        if stop.load(Ordering::Relaxed)
+                            || failed.load(Ordering::Relaxed)
+                            || budget.lock().expect("not poisoned").settled()
+                        {
+                            return Ok(());
+                        }
+                        let i = next_episode.fetch_add(1, Ordering::Relaxed);
+                        if cfg.episodes.is_some_and(|n| i >= n) {
+                            return Ok(());
+                        }
+                        if skip.contains(&i) {
+                            continue;
+                        }
+                        if !taken(i) {
+                            return Ok(());
+                        }
+                        let mut world = cfg.world.clone();
+                        world.task.enabled = true;
+                        world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
+                        if env.is_none() {
+                            env = Some(FastEnv::new(world.clone(), cfg.controller.clone())?);
+                        }
+                        let env = env.as_mut().expect("built");
+                        let path = cfg.out_dir.join(format!("episode-{i:06}.mcap"));
+                        let shard = run_episode(
+                            env,
+                            world,
+                            &cfg.controller,
+                            &cfg.mix,
+                            i,
+                            cfg.seed + i,
+                            cfg.episode_actions,
+                            &path,
+                            &cfg.log,
+                            || {
+                                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                                progress.update(
+                                    n,
+                                    format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
+                                );
+                                !stop.load(Ordering::Relaxed)
+                            },
+                        )
+                        .map_err(|e| CollectError::Episode {
+                            episode: i,
+                            path: path.clone(),
+                            source: Box::new(e),
+                        })?;
+                        episodes_done.fetch_add(1, Ordering::Relaxed);
+                        if !shard.interrupted {
+                            budget.lock().expect("not poisoned").finish(i, shard.states);
+                        }
+                        // Fails only on a path that is not UTF-8.
+                        let line = serde_json::to_string(&shard)
+                            .map_err(|e| manifest_err(std::io::Error::other(e)))?;
+                        writeln!(manifest.lock().expect("not poisoned"), "{line}")
+                            .map_err(manifest_err)?;
+                        shards.lock().expect("not poisoned").push(shard);
                     }
-                    let i = next_episode.fetch_add(1, Ordering::Relaxed);
-                    if cfg.episodes.is_some_and(|n| i >= n) {
-                        return Ok(());
-                    }
-                    if skip.contains(&i) {
-                        continue;
-                    }
-                    if !taken(i) {
-                        return Ok(());
-                    }
-                    let mut world = cfg.world.clone();
-                    world.task.enabled = true;
-                    world.task.peg = cfg.pegs[i as usize % cfg.pegs.len()];
-                    if env.is_none() {
-                        env = Some(FastEnv::new(world.clone(), cfg.controller.clone())?);
-                    }
-                    let env = env.as_mut().expect("built");
-                    let path = cfg.out_dir.join(format!("episode-{i:06}.mcap"));
-                    let shard = run_episode(
-                        env,
-                        world,
-                        &cfg.controller,
-                        &cfg.mix,
-                        i,
-                        cfg.seed + i,
-                        cfg.episode_actions,
-                        &path,
-                        &cfg.log,
-                        || {
-                            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                            progress.update(
-                                n,
-                                format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
-                            );
-                            !stop.load(Ordering::Relaxed)
-                        },
-                    )
-                    .map_err(|e| CollectError::Episode {
-                        episode: i,
-                        path: path.clone(),
-                        source: Box::new(e),
-                    })?;
-                    episodes_done.fetch_add(1, Ordering::Relaxed);
-                    if !shard.interrupted {
-                        budget.lock().expect("not poisoned").finish(i, shard.states);
-                    }
-                    // Fails only on a path that is not UTF-8.
-                    let line = serde_json::to_string(&shard)
-                        .map_err(|e| manifest_err(std::io::Error::other(e)))?;
-                    writeln!(manifest.lock().expect("not poisoned"), "{line}")
-                        .map_err(manifest_err)?;
-                    shards.lock().expect("not poisoned").push(shard);
+                })();
+                if r.is_err() {
+                    failed.store(true, Ordering::Relaxed);
                 }
+                r
             }));
         }
+        let mut first = Ok(());
         for h in handles {
-            h.join().expect("collection worker panicked")?;
+            let r = h.join().expect("collection worker panicked");
+            if first.is_ok() {
+                first = r;
+            }
         }
-        Ok(())
-    })?;
+        first
+    });
     let states = done.load(Ordering::Relaxed);
     progress.update(
         states,
@@ -741,26 +755,30 @@ pub fn collect_fast(
     progress.finish();
     let mut shards = shards.into_inner().expect("not poisoned");
     shards.sort_by_key(|s| s.episode);
-    // Episodes this run started past the budget's cut (another worker's
-    // episode reached it first) are dropped, file and record, so that a
-    // budget's episodes do not depend on the worker count. Episodes kept
-    // from an earlier run are recorded data and stay.
+    // Episodes this run started past the budget's cut (before the episodes
+    // ahead of them were known to reach it) are dropped, file and record,
+    // so that a budget's episodes do not depend on the worker count; also
+    // when a worker failed, so that a resume does not keep them. Files go
+    // first: a manifest line without its file is run again on resume, a
+    // file without its line would enter the dataset. Episodes kept from an
+    // earlier run are recorded data and stay.
     if let Some(last) = budget.into_inner().expect("not poisoned").last {
         let (surplus, keep): (Vec<_>, Vec<_>) = shards
             .into_iter()
             .partition(|s| s.episode > last && !skip.contains(&s.episode));
         shards = keep;
         if !surplus.is_empty() {
-            drop(manifest);
-            write_manifest(&manifest_path, &shards).map_err(manifest_err)?;
             for s in &surplus {
                 std::fs::remove_file(&s.file).map_err(|source| CollectError::Io {
                     path: s.file.clone(),
                     source,
                 })?;
             }
+            drop(manifest);
+            write_manifest(&manifest_path, &shards).map_err(manifest_err)?;
         }
     }
+    ran?;
     Ok(CollectSummary {
         states: shards.iter().map(|s| s.states).sum(),
         shards,

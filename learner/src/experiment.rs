@@ -372,6 +372,7 @@ fn ensure_dataset(
         // Before hours of training: a representation of another camera's
         // images would be refused by the policy's environment. (Only a
         // variant with a representation uses the dataset.)
+        env.world.camera.validate()?;
         if uses_representation {
             match crate::rl::observe::check_calibration(&env.world.camera, ds.meta.camera) {
                 Ok(()) => {}
