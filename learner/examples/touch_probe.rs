@@ -15,7 +15,8 @@
 //!   error of SIGMA_MM per axis (`observe::HoleError`, the same draw as
 //!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
 //!   `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N` override its settings,
-//!   `TOUCH_TRACE` prints the steps near the box. Prints each episode and
+//!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
+//!   triangle, semicircle, hexagon) picks the peg. Prints each episode and
 //!   the outcomes.
 //! - `touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT TEST`: the search told
 //!   where the opening is by a linear probe of a representation's z means
@@ -72,6 +73,14 @@ fn config() -> RlEnvConfig {
     let mut cfg = RlEnvConfig::default();
     // gt-trpo-stiff-ft's wrist (configs/rt-controller/stiff-tilts.toml).
     cfg.controller.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
+    if let Ok(name) = std::env::var("TOUCH_PEG") {
+        cfg.world.task.peg = hw_sim::PegShape::ALL
+            .into_iter()
+            .find(|p| p.name() == name)
+            .unwrap_or_else(|| {
+                panic!("TOUCH_PEG={name}: not square, triangle, semicircle or hexagon")
+            });
+    }
     cfg
 }
 
@@ -220,7 +229,8 @@ fn search(sigma_mm: f64, episodes: u64) {
         );
     }
     println!(
-        "σ {sigma_mm} mm: outcomes {:?} over {episodes}",
+        "{} peg, σ {sigma_mm} mm: outcomes {:?} over {episodes}",
+        cfg.world.task.peg.name(),
         Outcome::ALL
             .iter()
             .zip(counts)
