@@ -15,6 +15,7 @@
 //!   error of SIGMA_MM per axis (`observe::HoleError`, the same draw as
 //!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
 //!   `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N` override its settings,
+//!   `TOUCH_STICK_N` sets `stick_n`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
 //!   triangle, semicircle, hexagon) picks the peg. Prints each episode and
 //!   the outcomes.
@@ -174,6 +175,9 @@ fn search(sigma_mm: f64, episodes: u64) {
     var("TOUCH_PRESS_N", &mut sc.press_n, 1.0);
     var("TOUCH_LEAD_MM_PER_N", &mut sc.lead_m_per_n, 1e-3);
     var("TOUCH_ROLL_GAIN", &mut sc.roll_gain, 1.0);
+    if let Ok(v) = std::env::var("TOUCH_STICK_N") {
+        sc.stick_n = Some(v.parse().expect("TOUCH_STICK_N"));
+    }
     sc.validate().unwrap_or_else(|e| panic!("{e}"));
     let view = SearchView {
         std_m: sc.hole_error_m,

@@ -131,6 +131,25 @@ fn the_search_step_follows_its_spiral() {
     }
     .means(&o)[3];
     assert!((quarter - 0.25 * whole).abs() < 1e-12, "{quarter} {whole}");
+    // Stuck (the lateral force above stick_n): the slide length along the
+    // box's push; below it, or with stick_n unset, the spiral's step.
+    let sticky = TouchSearch {
+        cfg: TouchSearchConfig {
+            stick_n: Some(2.0),
+            ..cfg.clone()
+        },
+        scale: Default::default(),
+    };
+    let stuck = obs([r, 0.0], 0.0, [-1.8, 2.4, cfg.press_n * 1.5]);
+    let d = sticky.step(&stuck);
+    assert!(
+        (d.x + 0.6 * cfg.slide_m).abs() < 1e-12 && (d.y - 0.8 * cfg.slide_m).abs() < 1e-12,
+        "{d}"
+    );
+    assert_eq!(d.z, 0.0);
+    assert_ne!(s.step(&stuck), d);
+    let sliding = obs([r, 0.0], 0.0, [0.0, 1.0, cfg.press_n * 1.5]);
+    assert_eq!(sticky.step(&sliding), s.step(&sliding));
 }
 
 #[test]
@@ -175,6 +194,13 @@ fn bad_search_settings_are_named() {
             "search_teacher.lead_m_per_n",
             TouchSearchConfig {
                 lead_m_per_n: -1.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.stick_n",
+            TouchSearchConfig {
+                stick_n: Some(0.0),
                 ..Default::default()
             },
         ),

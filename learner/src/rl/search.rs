@@ -59,6 +59,14 @@ pub struct TouchSearchConfig {
     /// Told the roll by a probe of z, 0.1 kept it closer to the hole's than
     /// 1 (docs/experiments.md, "A policy that searches by touch").
     pub roll_gain: f64,
+    /// Lateral force, N, above which the tip is taken to be stuck: the step
+    /// then goes the slide length along the box's lateral push instead of
+    /// along the spiral, unwinding the trajectory target's lead instead of
+    /// winding it further (a stuck tip that slips throws a memoryless spiral
+    /// out by the lead it stored: docs/experiments.md, "The touch search on
+    /// the four pegs"). None (the default): always the spiral. Sliding
+    /// freely the lateral force is about 1 N.
+    pub stick_n: Option<f64>,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
     /// `hole_error_m` must then be 0.
@@ -121,6 +129,7 @@ impl Default for TouchSearchConfig {
             press_n: 2.0,
             lead_m_per_n: 0.002,
             roll_gain: 1.0,
+            stick_n: None,
             probe: None,
         }
     }
@@ -155,6 +164,15 @@ impl TouchSearchConfig {
                     "must be finite and not negative",
                 ));
             }
+        }
+        if let Some(v) = self.stick_n
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(FieldError::new(
+                f("stick_n"),
+                v,
+                "must be positive and finite",
+            ));
         }
         if !(self.roll_gain.is_finite() && self.roll_gain > 0.0 && self.roll_gain <= 1.0) {
             return Err(FieldError::new(
@@ -306,6 +324,12 @@ impl TouchSearch {
             } else {
                 -c.step_m
             };
+            if let Some(stick) = c.stick_n
+                && fxy > stick
+            {
+                // Stuck: step with the box's push, unwinding the lead.
+                return Vector3::new(f.x / fxy * c.slide_m, f.y / fxy * c.slide_m, dz);
+            }
             return Vector3::new((-ry + k * rx) * c.slide_m, (rx + k * ry) * c.slide_m, dz);
         }
         // Above the box: towards the believed opening and down at once.
