@@ -75,12 +75,9 @@ fn config() -> RlEnvConfig {
     // gt-trpo-stiff-ft's wrist (configs/rt-controller/stiff-tilts.toml).
     cfg.controller.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
     if let Ok(name) = std::env::var("TOUCH_PEG") {
-        cfg.world.task.peg = hw_sim::PegShape::ALL
-            .into_iter()
-            .find(|p| p.name() == name)
-            .unwrap_or_else(|| {
-                panic!("TOUCH_PEG={name}: not square, triangle, semicircle or hexagon")
-            });
+        // The parser behind the CLI's `--peg`.
+        cfg.world.task.peg = <hw_sim::PegShape as clap::ValueEnum>::from_str(&name, false)
+            .unwrap_or_else(|e| panic!("TOUCH_PEG={name}: {e}"));
     }
     cfg
 }

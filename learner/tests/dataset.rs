@@ -516,17 +516,20 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     );
 }
 
-#[test]
-fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
-    use learner::collect::{CollectError, read_manifest};
-    let dir = test_support::scratch_dir("collect-resume");
-    let cfg = |episodes: u64, resume: bool| CollectConfig {
-        out_dir: dir.path().to_path_buf(),
+/// A collection of six-action episodes (four to six states each) into
+/// `out`, no state budget or episode cap, two workers, no Foxglove views.
+fn six_action_collection(
+    out: &std::path::Path,
+    pegs: Vec<hw_sim::PegShape>,
+    seed: u64,
+) -> CollectConfig {
+    CollectConfig {
+        out_dir: out.to_path_buf(),
         states: u64::MAX,
-        episodes: Some(episodes),
+        episodes: None,
         episode_actions: 6,
-        pegs: vec![hw_sim::PegShape::Square],
-        seed: 21,
+        pegs,
+        seed,
         workers: 2,
         world: world(),
         controller: rt_controller::ControllerConfig::default(),
@@ -535,7 +538,18 @@ fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
             foxglove: false,
             ..LogOptions::default()
         },
+        resume: false,
+    }
+}
+
+#[test]
+fn an_interrupted_collection_resumes_without_running_its_episodes_again() {
+    use learner::collect::{CollectError, read_manifest};
+    let dir = test_support::scratch_dir("collect-resume");
+    let cfg = |episodes: u64, resume: bool| CollectConfig {
+        episodes: Some(episodes),
         resume,
+        ..six_action_collection(dir.path(), vec![hw_sim::PegShape::Square], 21)
     };
     let first = collect_fast(&cfg(3, false), &AtomicBool::new(false)).unwrap();
     assert_eq!(first.shards.len(), 3);
@@ -626,23 +640,15 @@ fn a_state_budget_takes_the_same_episodes_whatever_the_worker_count() {
     let run = |workers: usize, tag: &str| {
         let dir = test_support::scratch_dir(tag);
         let cfg = CollectConfig {
-            out_dir: dir.path().to_path_buf(),
-            // Six actions give each episode four to six states: a budget of
-            // seven is reached by the first two episodes.
+            // Four to six states an episode: a budget of seven is reached
+            // by the first two episodes.
             states: 7,
-            episodes: None,
-            episode_actions: 6,
-            pegs: vec![hw_sim::PegShape::Square, hw_sim::PegShape::Triangle],
-            seed: 31,
             workers,
-            world: world(),
-            controller: rt_controller::ControllerConfig::default(),
-            mix: Mix::default(),
-            log: LogOptions {
-                foxglove: false,
-                ..LogOptions::default()
-            },
-            resume: false,
+            ..six_action_collection(
+                dir.path(),
+                vec![hw_sim::PegShape::Square, hw_sim::PegShape::Triangle],
+                31,
+            )
         };
         let s = collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
         let files: Vec<String> = dataset::find_logs(&[dir.path().to_path_buf()])
