@@ -563,11 +563,12 @@ struct RunCollectArgs {
 
 #[derive(Debug, clap::Args)]
 struct CollectArgs {
-    /// 20 Hz states to collect.
+    /// 20 Hz states to collect: in fast mode the first episodes whose
+    /// states reach this many, the same whatever the worker count.
     #[arg(long, default_value_t = 1000)]
     states: u64,
     /// Stop after this many episodes even if fewer states were written
-    /// (fast mode; a fixed episode count whatever the thread scheduling).
+    /// (fast mode).
     #[arg(long)]
     episodes: Option<u64>,
     /// Output directory.
