@@ -679,3 +679,56 @@ fn a_state_budget_takes_the_same_episodes_whatever_the_worker_count() {
     assert_eq!(three_files, one_files);
     assert_eq!(three_listed, one_listed);
 }
+
+#[test]
+fn an_episode_cut_short_by_a_stop_is_left_out_of_the_dataset() {
+    use learner::collect::run_episode;
+    let dir = test_support::scratch_dir("cut-short");
+    let controller = rt_controller::ControllerConfig::default();
+    let mut env = FastEnv::new(world(), controller.clone()).unwrap();
+    let log = LogOptions {
+        foxglove: false,
+        ..LogOptions::default()
+    };
+    let mut episode = |i: u64, stop_after: u64| {
+        let mut states = 0;
+        run_episode(
+            &mut env,
+            world(),
+            &controller,
+            &Mix::default(),
+            i,
+            40 + i,
+            6,
+            &dir.path().join(format!("episode-{i:06}.mcap")),
+            &log,
+            || {
+                states += 1;
+                states < stop_after
+            },
+        )
+        .unwrap()
+    };
+    let whole = episode(0, u64::MAX);
+    let cut = episode(1, 2);
+    assert!(!whole.interrupted && cut.interrupted);
+    assert_eq!(cut.states, 2);
+    let out = test_support::scratch_dir("cut-short-ds");
+    let files = dataset::find_logs(&[dir.path().to_path_buf()]).unwrap();
+    let mut reported = Vec::new();
+    let meta = dataset::build(&files, &out, &BuildConfig::default(), 2, |p, r| {
+        reported.push((p.to_path_buf(), r));
+    })
+    .unwrap();
+    // The whole episode builds; the cut one is skipped, named and listed.
+    assert_eq!(meta.episodes.len(), 1, "{:?}", meta.episodes);
+    assert_eq!(meta.samples, whole.states);
+    assert_eq!(meta.skipped.len(), 1, "{:?}", meta.skipped);
+    assert!(meta.skipped[0].0.ends_with("episode-000001.mcap"));
+    assert!(
+        meta.skipped[0].1.contains("cut short"),
+        "{}",
+        meta.skipped[0].1
+    );
+    assert!(reported[1].1.as_ref().is_err_and(|e| e.contains("resume")));
+}

@@ -177,6 +177,15 @@ pub enum DatasetError {
     /// A log has no sensor frames.
     #[error("{}: no sensor frames", .0.display())]
     NoSensorFrames(PathBuf),
+    /// A collection episode cut short by a stop (its outcome says
+    /// interrupted): a resumed collection runs it again, or, past its state
+    /// budget, leaves it out, so it is not one of the collection's episodes.
+    #[error(
+        "{}: cut short by a stop (its outcome says interrupted); a resumed collection \
+         (`learner collect --resume`) runs it again or leaves it out",
+        .0.display()
+    )]
+    Interrupted(PathBuf),
     /// The robot a log names does not load.
     #[error("{}: robot {robot}: {source}", log.display())]
     Robot {
