@@ -732,3 +732,25 @@ fn an_episode_cut_short_by_a_stop_is_left_out_of_the_dataset() {
     );
     assert!(reported[1].1.as_ref().is_err_and(|e| e.contains("resume")));
 }
+
+#[test]
+fn a_failed_episode_stops_the_other_workers() {
+    use learner::collect::{CollectError, read_manifest};
+    let dir = test_support::scratch_dir("collect-fails");
+    // Episode 1's log cannot be written: its path is a directory.
+    std::fs::create_dir(dir.path().join("episode-000001.mcap")).unwrap();
+    let cfg = CollectConfig {
+        // Without the failure the workers would run all 40 episodes.
+        episodes: Some(40),
+        resume: true,
+        ..six_action_collection(dir.path(), vec![hw_sim::PegShape::Square], 51)
+    };
+    let e = collect_fast(&cfg, &AtomicBool::new(false)).unwrap_err();
+    assert!(matches!(e, CollectError::Episode { episode: 1, .. }), "{e}");
+    assert!(e.to_string().contains("episode-000001.mcap"), "{e}");
+    // The other worker stops after its episode in progress; what it had
+    // finished is recorded with its file.
+    let listed = read_manifest(&dir.path().join("manifest.jsonl")).unwrap();
+    assert!(listed.len() <= 3, "{listed:?}");
+    assert!(listed.iter().all(|s| s.episode != 1 && s.file.exists()));
+}
