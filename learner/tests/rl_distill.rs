@@ -311,4 +311,21 @@ fn the_touch_search_teaches_in_the_students_environment() {
         let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
         assert!(e.to_string().contains("search_teacher.slide_m"), "{e}");
     }
+    // A search told by a representation reads it through the environment's
+    // camera, which the student shares: a separate [camera] is refused
+    // before the probe is fitted (its model is not even looked for).
+    let mut probed = cfg;
+    let search = probed.search_teacher.as_mut().unwrap();
+    search.hole_error_m = 0.0;
+    search.probe = Some(learner::rl::search::BeliefProbeConfig {
+        representation: dir.path().join("no-model"),
+        fit_episodes: 1,
+        fit_hole_error_m: 0.01,
+        fit_roll_error_rad: 0.0,
+        below_m: 0.03,
+    });
+    probed.camera = Some(hw_sim::config::CameraConfig::default());
+    let e = distill(probed, &dir.path().join("v"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("[student.env.world.camera]"), "{e}");
+    assert!(!dir.path().join("v").join("rounds").exists());
 }
