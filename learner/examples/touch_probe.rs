@@ -23,7 +23,9 @@
 //!   where the opening is by a linear probe of a representation's z means
 //!   (`search::ProbedSearchView`), fitted on FIT episodes (seeds from
 //!   3 000 000), run on TEST episodes; `TOUCH_TRUE_ROLL` gives it the true
-//!   roll instead of the probe's, `TOUCH_ROLL_GAIN` sets the search's
+//!   roll instead of the probe's, `TOUCH_FIT_ROUNDS` sets the probe's
+//!   `fit_rounds` (each further round FIT more episodes of the search told
+//!   by the probe so far), `TOUCH_ROLL_GAIN` sets the search's
 //!   `roll_gain` (also in `search`), `TOUCH_TRACE` prints each step's height
 //!   and roll.
 //!
@@ -268,6 +270,9 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         fit_roll_error_rad: std::env::var("TOUCH_FIT_ROLL_ERROR_RAD")
             .map_or(0.0, |v| v.parse().expect("rad")),
         below_m: 0.03,
+        // TOUCH_FIT_ROUNDS: rounds of fitting, the later ones on the search
+        // told by the probe so far.
+        fit_rounds: std::env::var("TOUCH_FIT_ROUNDS").map_or(1, |v| v.parse().expect("rounds")),
     };
     // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
     let search = TouchSearchConfig {
@@ -281,7 +286,12 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         &search,
         &pc,
         3_000_000,
-        &mut |ep, rows| eprint!("\rfit: {ep}/{fit} episodes, {rows} states"),
+        &mut |ep, rows| {
+            eprint!(
+                "\rfit: {ep}/{} episodes, {rows} states",
+                fit * u64::from(pc.fit_rounds)
+            )
+        },
     )
     .unwrap_or_else(|e| panic!("{e}"));
     eprintln!();

@@ -216,6 +216,7 @@ fn bad_search_settings_are_named() {
         fit_hole_error_m: 0.01,
         fit_roll_error_rad: 0.1,
         below_m: 0.03,
+        fit_rounds: 1,
     };
     let with = |p: BeliefProbeConfig, hole_error_m: f64| TouchSearchConfig {
         hole_error_m,
@@ -259,4 +260,72 @@ fn bad_search_settings_are_named() {
         let e = cfg.validate().unwrap_err().to_string();
         assert!(e.contains(name), "{e}");
     }
+}
+
+/// A stand-in for a representation whose "z" is the tip's true offset from
+/// the hole and the peg's roll relative to it: a probe of it is exact.
+struct TrueOffset;
+
+impl Observer for TrueOffset {
+    fn dim(&self) -> usize {
+        3
+    }
+
+    fn observe(&self, views: &[learner::rl::observe::ObsView<'_>], out: &mut [f64]) {
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(3)) {
+            o.copy_from_slice(&[v.task.s_m.x, v.task.s_m.y, v.task.s_psi_rad]);
+        }
+    }
+}
+
+#[test]
+fn a_belief_probe_fits_over_rounds_of_its_own_search() {
+    use learner::rl::search::fit_belief_probe;
+    let cfg = config();
+    let probe = |rounds: u32| BeliefProbeConfig {
+        representation: "unused".into(),
+        fit_episodes: 2,
+        fit_hole_error_m: 0.01,
+        fit_roll_error_rad: 0.0,
+        below_m: 0.03,
+        fit_rounds: rounds,
+    };
+    let search = TouchSearchConfig {
+        probe: Some(probe(2)),
+        ..Default::default()
+    };
+    search.validate().unwrap();
+    let mut calls = Vec::new();
+    let fit = |pc: &BeliefProbeConfig, calls: &mut Vec<(u64, usize)>| {
+        fit_belief_probe(
+            &cfg,
+            &TrueOffset,
+            &search,
+            pc,
+            7_000_000,
+            &mut |ep, rows| calls.push((ep, rows)),
+        )
+        .unwrap()
+    };
+    let one = fit(&probe(1), &mut Vec::new());
+    let two = fit(&probe(2), &mut calls);
+    // Two rounds of two episodes each; the second round's episodes (the
+    // search told by the first round's probe) add states of their own.
+    assert_eq!(calls.iter().map(|c| c.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
+    let first_round = calls[1].1;
+    assert!(calls[3].1 > first_round, "{calls:?}");
+    // The stand-in's probe is exact, from one round or two.
+    for p in [&one, &two] {
+        let got = p.predict(&[0.004, -0.003, 0.05]);
+        for (g, w) in got.iter().zip([0.004, -0.003, 0.05]) {
+            assert!((g - w).abs() < 1e-4, "{got:?}");
+        }
+    }
+    // No rounds is refused by name.
+    let bad = TouchSearchConfig {
+        probe: Some(probe(0)),
+        ..Default::default()
+    };
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("search_teacher.probe.fit_rounds"), "{e}");
 }

@@ -99,6 +99,15 @@ pub struct BeliefProbeConfig {
     /// the box, m; higher up the search is told the truth.
     #[serde(default = "default_below")]
     pub below_m: f64,
+    /// Rounds of fitting (at least 1). The first fits on the search told
+    /// the truth with the errors above; each further round runs
+    /// `fit_episodes` more episodes of the search told by the probe fitted
+    /// so far (the teacher itself) and refits on all states. The probe then
+    /// also sees the states its own errors lead the search to, which the
+    /// first round's never visit (DAgger for the probe). 1 by default, as
+    /// before this setting existed.
+    #[serde(default = "default_fit_rounds")]
+    pub fit_rounds: u32,
 }
 
 fn default_fit_episodes() -> u64 {
@@ -115,6 +124,10 @@ fn default_fit_roll_error() -> f64 {
 
 fn default_below() -> f64 {
     0.03
+}
+
+fn default_fit_rounds() -> u32 {
+    1
 }
 
 impl Default for TouchSearchConfig {
@@ -199,6 +212,13 @@ impl TouchSearchConfig {
             if p.fit_episodes == 0 {
                 return Err(FieldError::new(
                     f("probe.fit_episodes"),
+                    0,
+                    "must be at least 1",
+                ));
+            }
+            if p.fit_rounds == 0 {
+                return Err(FieldError::new(
+                    f("probe.fit_rounds"),
                     0,
                     "must be at least 1",
                 ));
@@ -422,15 +442,17 @@ impl Observer for ProbedSearchView {
     }
 }
 
-/// Fits a [`ProbedSearchView`]'s probe: `cfg.fit_episodes` episodes (seeds
-/// from `first_seed`) of the search `search` (its settings, told the truth
-/// with a `cfg.fit_hole_error_m` error and the roll with a per-episode
-/// `cfg.fit_roll_error_rad` one instead of by a probe), in
+/// Fits a [`ProbedSearchView`]'s probe. The first round: `cfg.fit_episodes`
+/// episodes (seeds from `first_seed`) of the search `search` (its settings,
+/// told the truth with a `cfg.fit_hole_error_m` error and the roll with a
+/// per-episode `cfg.fit_roll_error_rad` one instead of by a probe), in
 /// `env_cfg`'s world, each state where the probe is read (below
 /// `cfg.below_m` above the box and not in the opening) giving a row: the z
 /// means; the tip's true x, y relative to the hole and the peg's roll
-/// relative to it. `progress` is called after each episode with the rows
-/// so far.
+/// relative to it. Each further round (`cfg.fit_rounds`) runs as many
+/// episodes (the next seeds) of the search told by the probe fitted on the
+/// rows so far, as the teacher is, and adds their rows. `progress` is called
+/// after each episode with the episodes and rows so far.
 pub fn fit_belief_probe(
     env_cfg: &super::RlEnvConfig,
     repr: &dyn Observer,
@@ -449,44 +471,67 @@ pub fn fit_belief_probe(
         },
         scale: env_cfg.action.clone(),
     };
-    let view = SearchView {
-        std_m: cfg.fit_hole_error_m,
-    };
     let camera = repr.needs_camera();
-    let (mut xs, mut ys) = (Vec::new(), Vec::new());
-    for ep in 0..cfg.fit_episodes {
-        env.reset(first_seed + ep, camera)?;
-        let roll_error = cfg.fit_roll_error_rad
-            * hw_sim::rng::normal(&mut hw_sim::rng::seeded(first_seed + ep, 0x7011));
-        loop {
-            let v = env.view().expect("reset gives a view");
-            let s = v.task.s_m;
-            // Where the search reads the belief: above the opening (in it,
-            // it goes straight down whatever it believes).
-            if s.z < cfg.below_m && s.z >= IN_OPENING_M {
-                let mut z = vec![0.0; repr.dim()];
-                repr.observe(std::slice::from_ref(&v), &mut z);
-                xs.push(z);
-                ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
-            }
-            let mut o = [0.0; SEARCH_VIEW_DIM];
-            view.observe(&[v], &mut o);
-            o[3] += roll_error;
-            if env.step(&search.means(&o), camera)?.done() {
-                break;
-            }
+    let fit = |xs: &[Vec<f64>], ys: &[Vec<f64>]| {
+        if xs.is_empty() {
+            return Err(super::RlEnvError::from(FieldError::new(
+                "search_teacher.probe.below_m",
+                cfg.below_m,
+                "no state of the fitting episodes came below it",
+            )));
         }
-        progress(ep + 1, xs.len());
+        LinearProbe::fit(xs, ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
+    };
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let mut probe: Option<LinearProbe> = None;
+    let mut z = vec![0.0; repr.dim()];
+    for round in 0..u64::from(cfg.fit_rounds.max(1)) {
+        if round > 0 {
+            probe = Some(fit(&xs, &ys)?);
+        }
+        // The first round's search is told the truth with its errors; the
+        // later rounds' by the probe, as the teacher is.
+        let view = SearchView {
+            std_m: if round == 0 {
+                cfg.fit_hole_error_m
+            } else {
+                0.0
+            },
+        };
+        for ep in 0..cfg.fit_episodes {
+            let seed = first_seed + round * cfg.fit_episodes + ep;
+            env.reset(seed, camera)?;
+            let roll_error = if round == 0 {
+                cfg.fit_roll_error_rad * hw_sim::rng::normal(&mut hw_sim::rng::seeded(seed, 0x7011))
+            } else {
+                0.0
+            };
+            loop {
+                let v = env.view().expect("reset gives a view");
+                let s = v.task.s_m;
+                let mut o = [0.0; SEARCH_VIEW_DIM];
+                view.observe(std::slice::from_ref(&v), &mut o);
+                o[3] += roll_error;
+                // Where the search reads the belief: above the opening (in
+                // it, it goes straight down whatever it believes).
+                if s.z < cfg.below_m && s.z >= IN_OPENING_M {
+                    repr.observe(std::slice::from_ref(&v), &mut z);
+                    xs.push(z.clone());
+                    ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
+                    if let Some(p) = &probe {
+                        let mut b = [0.0; 3];
+                        p.predict_into(&z, &mut b);
+                        (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+                    }
+                }
+                if env.step(&search.means(&o), camera)?.done() {
+                    break;
+                }
+            }
+            progress(round * cfg.fit_episodes + ep + 1, xs.len());
+        }
     }
-    if xs.is_empty() {
-        return Err(FieldError::new(
-            "search_teacher.probe.below_m",
-            cfg.below_m,
-            "no state of the fitting episodes came below it",
-        )
-        .into());
-    }
-    LinearProbe::fit(&xs, &ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
+    fit(&xs, &ys)
 }
 
 /// The length of the horizontal vector (x, y).
