@@ -311,6 +311,9 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     let zs_trace = std::env::var_os("TOUCH_TRACE").is_some();
     let mut counts = [0u32; 4];
     let (mut se, mut n, mut psi_se, mut roll_se, mut read_ss) = (0.0, 0usize, 0.0, 0.0, 0.0);
+    // The probe's squared error and count where the tip is within 10 mm of
+    // the hole's axis, and farther.
+    let (mut near, mut far) = ((0.0, 0usize), (0.0, 0usize));
     for ep in 0..test {
         env.reset(1_000_000 + ep, true).expect("reset");
         let (mut ep_se, mut ep_n) = (0.0, 0usize);
@@ -337,8 +340,16 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             }
             // The probe's error where it is read, above the opening.
             if s.z < pc.below_m && s.z > -0.002 {
-                ep_se += (o[0] - s.x).powi(2) + (o[1] - s.y).powi(2);
+                let e = (o[0] - s.x).powi(2) + (o[1] - s.y).powi(2);
+                ep_se += e;
                 ep_n += 1;
+                let band = if s.x.hypot(s.y) < 0.01 {
+                    &mut near
+                } else {
+                    &mut far
+                };
+                band.0 += e;
+                band.1 += 1;
             }
             let out = env.step(&policy.means(&o), true).expect("step");
             if out.done() {
@@ -357,6 +368,14 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
             env.task().s_m.z * 1e3,
         );
     }
+    let rms = |(se, n): (f64, usize)| 1e3 * (se / n.max(1) as f64).sqrt();
+    println!(
+        "probe RMS (x, y together) with the tip within 10 mm of the hole's axis {:.1} mm over {} states, farther {:.1} mm over {} states",
+        rms(near),
+        near.1,
+        rms(far),
+        far.1
+    );
     println!(
         "z-told search: probe RMS {:.1} mm, roll {:.3} rad; the peg's roll off the hole's {:.3} rad RMS, the probe's reading of it {:.3} rad RMS; rejected frames {}; outcomes {:?} over {test}",
         1e3 * (se / n.max(1) as f64).sqrt(),
