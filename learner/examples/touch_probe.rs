@@ -274,6 +274,7 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         // told by the probe so far.
         fit_rounds: std::env::var("TOUCH_FIT_ROUNDS").map_or(1, |v| v.parse().expect("rounds")),
     };
+    assert!(pc.fit_rounds >= 1, "TOUCH_FIT_ROUNDS must be at least 1");
     // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
     let search = TouchSearchConfig {
         roll_gain: std::env::var("TOUCH_ROLL_GAIN").map_or(1.0, |v| v.parse().expect("gain")),

@@ -313,7 +313,8 @@ fn the_touch_search_teaches_in_the_students_environment() {
     }
     // A search told by a representation reads it through the environment's
     // camera, which the student shares: a separate [camera] is refused
-    // before the probe is fitted (its model is not even looked for).
+    // before the probe is fitted (its model, missing here, is not even
+    // looked for).
     let mut probed = cfg;
     let search = probed.search_teacher.as_mut().unwrap();
     search.hole_error_m = 0.0;
@@ -328,5 +329,4 @@ fn the_touch_search_teaches_in_the_students_environment() {
     probed.camera = Some(hw_sim::config::CameraConfig::default());
     let e = distill(probed, &dir.path().join("v"), false, &|| false).unwrap_err();
     assert!(e.to_string().contains("[student.env.world.camera]"), "{e}");
-    assert!(!dir.path().join("v").join("rounds").exists());
 }

@@ -262,25 +262,27 @@ fn bad_search_settings_are_named() {
     }
 }
 
-/// A stand-in for a representation whose "z" is the tip's true offset from
-/// the hole and the peg's roll relative to it: a probe of it is exact.
-struct TrueOffset;
+/// A stand-in for a representation whose "z" is the tip's true x offset
+/// from the hole and the peg's roll relative to it, but not the y offset: a
+/// probe of it reads x and the roll exactly and y not at all, so a search
+/// told by the probe goes elsewhere than one told the truth.
+struct NoY;
 
-impl Observer for TrueOffset {
+impl Observer for NoY {
     fn dim(&self) -> usize {
-        3
+        2
     }
 
     fn observe(&self, views: &[learner::rl::observe::ObsView<'_>], out: &mut [f64]) {
-        for (v, o) in views.iter().zip(out.chunks_exact_mut(3)) {
-            o.copy_from_slice(&[v.task.s_m.x, v.task.s_m.y, v.task.s_psi_rad]);
+        for (v, o) in views.iter().zip(out.chunks_exact_mut(2)) {
+            o.copy_from_slice(&[v.task.s_m.x, v.task.s_psi_rad]);
         }
     }
 }
 
 #[test]
 fn a_belief_probe_fits_over_rounds_of_its_own_search() {
-    use learner::rl::search::fit_belief_probe;
+    use learner::rl::search::{IN_OPENING_M, ProbedSearchView, fit_belief_probe};
     let cfg = config();
     let probe = |rounds: u32| BeliefProbeConfig {
         representation: "unused".into(),
@@ -295,37 +297,65 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
         ..Default::default()
     };
     search.validate().unwrap();
-    let mut calls = Vec::new();
-    let fit = |pc: &BeliefProbeConfig, calls: &mut Vec<(u64, usize)>| {
-        fit_belief_probe(
-            &cfg,
-            &TrueOffset,
-            &search,
-            pc,
-            7_000_000,
-            &mut |ep, rows| calls.push((ep, rows)),
-        )
-        .unwrap()
+    let fit = |pc: &BeliefProbeConfig| {
+        let mut calls = Vec::new();
+        let p = fit_belief_probe(&cfg, &NoY, &search, pc, 7_000_000, &mut |ep, rows| {
+            calls.push((ep, rows))
+        })
+        .unwrap();
+        (p, calls)
     };
-    let one = fit(&probe(1), &mut Vec::new());
-    let two = fit(&probe(2), &mut calls);
-    // Two rounds of two episodes each; the second round's episodes (the
-    // search told by the first round's probe) add states of their own.
+    let (one, one_calls) = fit(&probe(1));
+    let (two, calls) = fit(&probe(2));
+    // Two rounds of two episodes each, the first as a one-round fit.
     assert_eq!(calls.iter().map(|c| c.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
-    let first_round = calls[1].1;
-    assert!(calls[3].1 > first_round, "{calls:?}");
-    // The stand-in's probe is exact, from one round or two.
-    for p in [&one, &two] {
-        let got = p.predict(&[0.004, -0.003, 0.05]);
-        for (g, w) in got.iter().zip([0.004, -0.003, 0.05]) {
-            assert!((g - w).abs() < 1e-4, "{got:?}");
+    assert_eq!(one_calls, calls[..2]);
+    // The second round is the search told by the first round's probe, as
+    // the teacher is, on the next two seeds: its states where the probe is
+    // read are the rows it added.
+    let teacher = TouchSearch {
+        cfg: search.clone(),
+        scale: cfg.action.clone(),
+    };
+    let view = ProbedSearchView {
+        repr: std::sync::Arc::new(NoY),
+        probe: one.clone(),
+        below_m: 0.03,
+    };
+    let mut env = RlEnv::new(&cfg).unwrap();
+    let mut read = 0;
+    for seed in [7_000_002, 7_000_003] {
+        env.reset(seed, false).unwrap();
+        loop {
+            let v = env.view().unwrap();
+            let h = v.task.s_m.z;
+            read += usize::from((IN_OPENING_M..0.03).contains(&h));
+            let mut o = [0.0; SEARCH_VIEW_DIM];
+            view.observe(&[v], &mut o);
+            if env.step(&teacher.means(&o), false).unwrap().done() {
+                break;
+            }
         }
     }
-    // No rounds is refused by name.
-    let bad = TouchSearchConfig {
-        probe: Some(probe(0)),
-        ..Default::default()
-    };
-    let e = bad.validate().unwrap_err().to_string();
-    assert!(e.contains("search_teacher.probe.fit_rounds"), "{e}");
+    assert!(read > 0);
+    assert_eq!(calls[3].1 - calls[1].1, read, "{calls:?}");
+    // Both probes read x and the roll exactly.
+    for p in [&one, &two] {
+        let got = p.predict(&[0.004, 0.05]);
+        assert!((got[0] - 0.004).abs() < 1e-4, "{got:?}");
+        assert!((got[2] - 0.05).abs() < 1e-4, "{got:?}");
+    }
+    // No rounds, or more fitting episodes than the seeds set apart, are
+    // refused by name.
+    for (rounds, episodes) in [(0, 2), (1_000, 2_000)] {
+        let bad = TouchSearchConfig {
+            probe: Some(BeliefProbeConfig {
+                fit_episodes: episodes,
+                ..probe(rounds)
+            }),
+            ..Default::default()
+        };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("search_teacher.probe.fit_rounds"), "{e}");
+    }
 }

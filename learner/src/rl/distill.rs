@@ -755,12 +755,16 @@ fn probed_view(
         probe
     } else {
         eprintln!(
-            "learner: fitting the search teacher's probe of {} on {} episodes, {} round(s)",
+            "learner: fitting the search teacher's probe of {} on {} episodes per round, {} \
+             round(s)",
             p.representation.display(),
             p.fit_episodes,
             p.fit_rounds
         );
-        let progress = Progress::new(p.fit_episodes * u64::from(p.fit_rounds), "episodes");
+        let progress = Progress::new(
+            p.fit_episodes.saturating_mul(u64::from(p.fit_rounds)),
+            "episodes",
+        );
         let probe = fit_belief_probe(
             &student_cfg.env,
             repr.as_ref(),

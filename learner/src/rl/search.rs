@@ -80,15 +80,16 @@ pub struct BeliefProbeConfig {
     /// The representation (an exported model directory) whose z means the
     /// probe reads.
     pub representation: std::path::PathBuf,
-    /// Episodes of the truth-told search the probe is fitted on.
+    /// Episodes per round of fitting (`fit_rounds`); the first round's
+    /// search is told the truth.
     #[serde(default = "default_fit_episodes")]
     pub fit_episodes: u64,
-    /// The hole error of those episodes' search, m: it spreads their states
+    /// The hole error of the first round's search, m: it spreads its states
     /// over the top face around the opening.
     #[serde(default = "default_fit_error")]
     pub fit_hole_error_m: f64,
-    /// Standard deviation of a per-episode error of the roll the fitting
-    /// episodes' search is told, rad: it leaves the peg rolled off the hole
+    /// Standard deviation of a per-episode error of the roll the first
+    /// round's search is told, rad: it leaves the peg rolled off the hole
     /// in those episodes, so that the probe sees roll errors to read (a
     /// search told the true roll keeps it aligned). 0 by default: with 0.1
     /// rad the probe of full-near read the roll worse (docs/experiments.md,
@@ -223,6 +224,14 @@ impl TouchSearchConfig {
                     "must be at least 1",
                 ));
             }
+            if p.fit_episodes.saturating_mul(u64::from(p.fit_rounds)) > 1_000_000 {
+                return Err(FieldError::new(
+                    f("probe.fit_rounds"),
+                    p.fit_rounds,
+                    "fit_episodes × fit_rounds must be at most 1 000 000 (the fitting \
+                     episodes' seeds stay apart from DAgger's and evaluation's)",
+                ));
+            }
             if !(p.fit_roll_error_rad.is_finite() && p.fit_roll_error_rad >= 0.0) {
                 return Err(FieldError::new(
                     f("probe.fit_roll_error_rad"),
@@ -260,7 +269,7 @@ pub const SEARCH_VIEW_DIM: usize = 8;
 
 /// Height above the box below which the tip is in the opening and the
 /// search goes straight down, m.
-const IN_OPENING_M: f64 = -0.002;
+pub const IN_OPENING_M: f64 = -0.002;
 
 /// Readings averaged for the force (as the ground truth does).
 const FORCE_MEAN_READINGS: usize = 8;
