@@ -434,10 +434,8 @@ impl Observer for ProbedSearchView {
             .chunks_exact_mut(SEARCH_VIEW_DIM)
             .zip(z.chunks_exact(zd))
         {
-            if o[2] < self.below_m && o[2] >= IN_OPENING_M {
-                let mut b = [0.0; 3];
-                self.probe.predict_into(z, &mut b);
-                (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+            if reads_belief(o[2], self.below_m) {
+                tell_by_probe(&self.probe, z, o);
             }
         }
     }
@@ -449,6 +447,21 @@ impl Observer for ProbedSearchView {
     fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
         self.repr.camera()
     }
+}
+
+/// Whether the search's belief is read from a probe at this height above
+/// the box: below `below_m` and above the opening (in it, the search goes
+/// straight down whatever it believes).
+fn reads_belief(height_m: f64, below_m: f64) -> bool {
+    (IN_OPENING_M..below_m).contains(&height_m)
+}
+
+/// Replaces a [`SearchView`] observation's believed offset and roll with
+/// the probe's reading of `z`.
+fn tell_by_probe(probe: &LinearProbe, z: &[f64], o: &mut [f64]) {
+    let mut b = [0.0; 3];
+    probe.predict_into(z, &mut b);
+    (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
 }
 
 /// Fits a [`ProbedSearchView`]'s probe. The first round: `cfg.fit_episodes`
@@ -521,16 +534,12 @@ pub fn fit_belief_probe(
                 let mut o = [0.0; SEARCH_VIEW_DIM];
                 view.observe(std::slice::from_ref(&v), &mut o);
                 o[3] += roll_error;
-                // Where the search reads the belief: above the opening (in
-                // it, it goes straight down whatever it believes).
-                if s.z < cfg.below_m && s.z >= IN_OPENING_M {
+                if reads_belief(s.z, cfg.below_m) {
                     repr.observe(std::slice::from_ref(&v), &mut z);
                     xs.push(z.clone());
                     ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
                     if let Some(p) = &probe {
-                        let mut b = [0.0; 3];
-                        p.predict_into(&z, &mut b);
-                        (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+                        tell_by_probe(p, &z, &mut o);
                     }
                 }
                 if env.step(&search.means(&o), camera)?.done() {
