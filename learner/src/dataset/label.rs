@@ -122,18 +122,19 @@ pub fn episode_samples(
             robot: world.robot.clone(),
             source: Box::new(source),
         })?;
-    let frames: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None)?;
-    let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None)?;
-    let cams: Vec<CameraImage> = r.read_camera(None)?;
     let events = r.read_events(None)?;
     // A collection episode that a stop cut short is run again by a resumed
-    // collection, or left out of it; its partial log is not data.
+    // collection, or left out of it; its partial log is not data (checked
+    // before its frames and images are decoded).
     if events
         .iter()
         .any(|(_, e)| matches!(e, Event::Outcome(o) if o.interrupted == Some(true)))
     {
         return Err(DatasetError::Interrupted(path.to_path_buf()));
     }
+    let frames: Vec<SensorFrame> = r.read_raw(topics::SENSOR, None)?;
+    let actions: Vec<PolicyAction> = r.read_raw(topics::ACTION, None)?;
+    let cams: Vec<CameraImage> = r.read_camera(None)?;
     // When each better stage was reached (log time = hardware time).
     let stage_times: Vec<(u64, Stage)> = events
         .into_iter()
