@@ -446,6 +446,51 @@ fn the_frozen_representation_observes_the_rl_environment() {
 }
 
 #[test]
+fn distill_keeps_a_camera_observing_teachers_camera() {
+    use learner::rl::distill::{DistillConfig, distill};
+    use learner::rl::{GaussianPolicy, ObservationKind};
+    let out = test_support::scratch_dir("repr-distill-camera");
+    let mut cfg = small(ModelKind::Full, 1);
+    cfg.train.max_batches_per_epoch = 2;
+    let s = train::train(&cfg, dataset(), &out, &TrainOptions::default(), &|| false).unwrap();
+    // A teacher on the representation: a short ground-truth run whose
+    // checkpoint is then said to observe z, with a policy of z's size.
+    let teacher_cfg: learner::rl::run::TrainConfig = toml::from_str(
+        "seed = 3\nnum_envs = 1\nthreads = 1\nenv_steps = 20\n\
+         [env]\nmax_steps = 20\n[policy]\nbatch_steps = 20\nhidden = [8]\n",
+    )
+    .unwrap();
+    let run = out.join("teacher");
+    let mut c = learner::rl::run::train(teacher_cfg, &run, false, &|| false).unwrap();
+    c.config.observation = ObservationKind::Representation(s.model_dir.clone());
+    c.config.env.world.camera.width = SIDE;
+    c.config.env.world.camera.height = SIDE;
+    c.state.policy = GaussianPolicy::new(16, &[8], 4, -1.0, &mut hw_sim::rng::seeded(1, 0));
+    c.best = None;
+    c.best_validated = None;
+    let path = run.join("on-z.json");
+    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+    let text = format!(
+        "teacher = \"{}\"\n[student]\nnum_envs = 1\nthreads = 1\n\
+         [student.validation]\nepisodes = 1\n[dagger]\nrounds = 1\nsteps_per_round = 20\n\
+         [camera]\nvertical_fov_deg = 40.0\n",
+        path.display()
+    );
+    let dc: DistillConfig = toml::from_str(&text).unwrap();
+    // The teacher sees through its own environment's camera: another one
+    // for the student would change the teacher's inputs, so it is refused
+    // before any step.
+    let e = distill(dc, &out.join("student"), false, &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("camera") && e.contains("the teacher observes through"),
+        "{e}"
+    );
+    assert!(!out.join("student/checkpoint.json").exists());
+}
+
+#[test]
 fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
     use std::process::{Command, Stdio};
     let dir = test_support::scratch_dir("repr-kill");
