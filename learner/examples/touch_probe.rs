@@ -26,8 +26,9 @@
 //!   roll instead of the probe's, `TOUCH_FIT_ROUNDS` sets the probe's
 //!   `fit_rounds` (each further round FIT more episodes of the search told
 //!   by the probe so far), `TOUCH_ROLL_GAIN` sets the search's
-//!   `roll_gain` (also in `search`), `TOUCH_TRACE` prints each step's height
-//!   and roll.
+//!   `roll_gain` (also in `search`), `TOUCH_PROBE_BELOW_MM` the height
+//!   below which the probe is fitted and read (30), `TOUCH_TRACE` prints
+//!   each step's height and roll.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -247,7 +248,7 @@ fn search(sigma_mm: f64, episodes: u64) {
 /// tip's offset from the hole and the peg's roll relative to it, fitted on
 /// `fit` episodes of the search told the truth with a 10 mm error
 /// (`TOUCH_FIT_ERROR_MM`), replaces the believed offset and roll below 30
-/// mm above the box on `test` other episodes (`TOUCH_TRUE_ROLL`: the roll
+/// mm (`TOUCH_PROBE_BELOW_MM`) above the box on `test` other episodes (`TOUCH_TRUE_ROLL`: the roll
 /// stays the truth's). Height, force and the hole's yaw stay the truth's:
 /// this asks whether z places the opening well enough for the search.
 fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
@@ -269,7 +270,11 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         // TOUCH_FIT_ROLL_ERROR_RAD: the fitting episodes' roll error.
         fit_roll_error_rad: std::env::var("TOUCH_FIT_ROLL_ERROR_RAD")
             .map_or(0.0, |v| v.parse().expect("rad")),
-        below_m: 0.03,
+        // TOUCH_PROBE_BELOW_MM: the height below which the probe is fitted
+        // and read (30 mm, the default, otherwise).
+        below_m: std::env::var("TOUCH_PROBE_BELOW_MM").map_or(0.03, |v| {
+            v.parse::<f64>().expect("TOUCH_PROBE_BELOW_MM: mm") * 1e-3
+        }),
         // TOUCH_FIT_ROUNDS: rounds of fitting, the later ones on the search
         // told by the probe so far.
         fit_rounds: std::env::var("TOUCH_FIT_ROUNDS").map_or(1, |v| v.parse().expect("rounds")),
