@@ -345,6 +345,15 @@ impl PolicyNode {
         Ok(())
     }
 
+    /// Takes the sensor frames [`Self::reset`] drained while it waited for
+    /// its answer, oldest first: the old episode's last ones, then the new
+    /// episode's first (in lockstep up to its first action request). A
+    /// caller that drains [`Self::sensor`] itself takes these first; the
+    /// node's own episode loop logs them with its next pump.
+    pub fn take_early_frames(&mut self) -> Vec<SensorFrame> {
+        self.early.drain(..).collect()
+    }
+
     /// Queues a frame taken off the stream for the next pump to log.
     pub(crate) fn push_early(&mut self, f: SensorFrame) {
         self.early.push_back(f);
@@ -469,7 +478,8 @@ impl PolicyNode {
 
     /// Resets the simulator with `world` (TOML) and `seed` and waits for
     /// its answer; returns the report of the new episode. In lockstep it
-    /// answers pending action requests with zero actions meanwhile.
+    /// answers the old episode's pending action requests with zero actions
+    /// meanwhile; the new episode's first request is the caller's.
     pub fn reset(
         &mut self,
         seed: u64,
@@ -504,23 +514,17 @@ impl PolicyNode {
                 send(&self.command)?;
                 resend_at += 500_000_000;
             }
-            let mut answer = None;
-            transport::drain(&self.report, |r| {
-                if r.command_seq == seq {
-                    answer = Some(*r);
-                }
-            })?;
-            if let Some(r) = answer {
-                if r.command_result != EpisodeReport::OK {
-                    return Err(StackError::ResetRefused(r.message_text()));
-                }
-                return Ok(r);
-            }
             // The frames keep coming meanwhile, the new episode's first
             // among them: kept for the log rather than left to overflow
             // the subscriber's buffer. A lockstep stack may be waiting on us
-            // for an action: answer any pending request with a zero action
-            // so it can move on to the reset.
+            // for an action: a pending request of the old episode gets a
+            // zero action so that the simulator can move on to the reset.
+            // Frames are drained before reports: the simulator answers the
+            // reset before it steps the new episode, so when no answer
+            // follows the frames, every request among them is the old
+            // episode's; one of the new episode is left to the caller's
+            // policy (answered with zeros, the episode's first action would
+            // not be the policy's).
             let mut pending = None;
             let early = &mut self.early;
             transport::drain(&self.sensor, |f| {
@@ -532,8 +536,22 @@ impl PolicyNode {
                 }
                 early.push_back(*f);
             })?;
-            if let Some((ep, t, step)) = pending {
+            let mut answer = None;
+            transport::drain(&self.report, |r| {
+                if r.command_seq == seq {
+                    answer = Some(*r);
+                }
+            })?;
+            if let Some((ep, t, step)) = pending
+                && answer.is_none_or(|r| r.header.episode != ep)
+            {
                 self.send_action(ep, t, step, [0.0; 4])?;
+            }
+            if let Some(r) = answer {
+                if r.command_result != EpisodeReport::OK {
+                    return Err(StackError::ResetRefused(r.message_text()));
+                }
+                return Ok(r);
             }
             if termination_requested() {
                 return Err(StackError::Interrupted);

@@ -595,12 +595,18 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     // received of the episode.
     let mut roll_ref = None;
     let start = Instant::now();
+    // The frames the reset drained while it waited for its answer come
+    // first: the episode's first frames, up to its first action request.
+    let mut early = node.take_early_frames();
     while stack_obs.len() < actions {
         assert!(
             start.elapsed() < Duration::from_secs(60),
             "lockstep stalled"
         );
-        let mut frames = Vec::new();
+        let mut frames: Vec<_> = std::mem::take(&mut early)
+            .into_iter()
+            .filter(|f| f.header.episode == episode)
+            .collect();
         transport::drain(&node.sensor, |f| {
             if f.header.episode == episode {
                 frames.push(*f)
@@ -622,23 +628,21 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
     }
 
     // In one process. The fast path's roll reference is its first cycle's
-    // frame; this test's is the first frame of the episode it received.
-    // `PolicyNode::reset` keeps the frames that arrive before the reset's
-    // answer for its own pump, which this test does not run, so on a busy
-    // machine the test's first frame can be a later one (2026-11-26: the
-    // roll 1e-13 rad off at action 0, every other value equal). Both sides'
-    // observations take this test's reference, so the comparison is of the
-    // frames themselves; when the test did get the first frame, the fast
-    // path's own reference must be the same.
+    // frame; this test's is the first frame of the episode it received,
+    // which, with the reset's early frames, is the episode's first.
+    // (2026-11-26: without them, on a busy machine, the roll was 1e-13 rad
+    // off at action 0, every other value equal; had the reset drained the
+    // first action request too, it answered it with zeros itself.) Both
+    // sides' observations take this test's reference, so that a failure
+    // here is one of the frames themselves.
     let (roll_ref, first_step) = roll_ref.expect("a frame");
+    assert_eq!(first_step, 0, "the episode's first frame was not received");
     let mut env = FastEnv::new(world.clone(), rt_controller::ControllerConfig::default()).unwrap();
     env.reset(seed).unwrap();
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
     let own = env.step(None).unwrap();
     let mut obs = Observation::from_frame(env.sensor_frame(), roll_ref);
-    if first_step == 0 {
-        assert_eq!(own.proprio, obs.proprio, "the fast path's roll reference");
-    }
+    assert_eq!(own.proprio, obs.proprio, "the fast path's roll reference");
     for (k, (step, ee, proprio, a_stack)) in stack_obs.iter().enumerate() {
         assert_eq!(
             obs.step, *step,
