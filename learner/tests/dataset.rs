@@ -754,3 +754,91 @@ fn a_failed_episode_stops_the_other_workers() {
     assert!(listed.len() <= 3, "{listed:?}");
     assert!(listed.iter().all(|s| s.episode != 1 && s.file.exists()));
 }
+
+/// A copy of the log at `from`, written to `to` message by message, with the
+/// focal length of the camera frames from the third on scaled by `focal`.
+fn copy_log(from: &std::path::Path, to: &std::path::Path, focal: f64) {
+    use learner::log::{LogReader, LogWriter, topics};
+    use shared_mem_schema::{CameraFrame, Message, PolicyAction, SensorFrame};
+    let r = LogReader::open(from).unwrap();
+    let opts = LogOptions {
+        foxglove: false,
+        ..LogOptions::default()
+    };
+    let mut w = LogWriter::create_with(to, opts).unwrap();
+    for (t, c) in r.read_config(None).unwrap() {
+        w.config(t, &c).unwrap();
+    }
+    for (t, e) in r.read_events(None).unwrap() {
+        w.event(t, &e).unwrap();
+    }
+    for f in r.read_raw::<SensorFrame>(topics::SENSOR, None).unwrap() {
+        w.sensor(&f).unwrap();
+    }
+    for a in r.read_raw::<PolicyAction>(topics::ACTION, None).unwrap() {
+        w.action(&a).unwrap();
+    }
+    let mut cam = CameraFrame::boxed_zeroed();
+    for (k, c) in r.read_camera(None).unwrap().into_iter().enumerate() {
+        cam.header = c.header;
+        cam.index = c.index;
+        cam.calibration = c.calibration;
+        if k >= 2 {
+            cam.calibration.focal_px *= focal;
+        }
+        cam.rgb[..c.rgb.len()].copy_from_slice(&c.rgb);
+        cam.depth_m[..c.depth_m.len()].copy_from_slice(&c.depth_m);
+        w.camera(&cam).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn a_log_whose_camera_changes_within_the_episode_is_skipped_and_named() {
+    use learner::collect::run_episode;
+    let dir = test_support::scratch_dir("camera-changes");
+    let controller = rt_controller::ControllerConfig::default();
+    let mut env = FastEnv::new(world(), controller.clone()).unwrap();
+    let log = LogOptions {
+        foxglove: false,
+        ..LogOptions::default()
+    };
+    let original = dir.path().join("original.mcap");
+    let shard = run_episode(
+        &mut env,
+        world(),
+        &controller,
+        &Mix::default(),
+        0,
+        40,
+        8,
+        &original,
+        &log,
+        || true,
+    )
+    .unwrap();
+    assert!(shard.states >= 4, "{} states", shard.states);
+    // The copy itself builds as the original does: what the second copy
+    // changes is the camera alone.
+    for (focal, tag) in [(1.0, "same"), (1.01, "changed")] {
+        let logs = dir.path().join(tag);
+        std::fs::create_dir_all(&logs).unwrap();
+        copy_log(&original, &logs.join("episode-000000.mcap"), focal);
+        let out = test_support::scratch_dir(&format!("camera-changes-{tag}"));
+        let files = dataset::find_logs(&[logs]).unwrap();
+        let meta = dataset::build(&files, &out, &BuildConfig::default(), 1, |_, _| {}).unwrap();
+        if focal == 1.0 {
+            assert_eq!(meta.episodes.len(), 1, "{:?}", meta.skipped);
+            assert_eq!(meta.samples, shard.states);
+        } else {
+            assert!(meta.episodes.is_empty(), "{:?}", meta.episodes);
+            assert_eq!(meta.skipped.len(), 1, "{:?}", meta.skipped);
+            let (path, why) = &meta.skipped[0];
+            assert!(path.ends_with("episode-000000.mcap"), "{path}");
+            assert!(
+                why.contains("calibration changes within the episode"),
+                "{why}"
+            );
+        }
+    }
+}
