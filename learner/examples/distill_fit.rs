@@ -7,6 +7,9 @@
 //!
 //! Usage: `distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]` (HIDDEN like
 //! `64,64`, or `linear`; the last TEST_ROUNDS rounds, default 2, are the test split).
+//! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
+//! observation (a `search-probe.json`) to it: the same information, made
+//! explicit, to tell what the student cannot fit from what it cannot find.
 
 use learner::rl::GaussianPolicy;
 use learner::rl::distill::Samples;
@@ -25,6 +28,23 @@ fn merge(parts: &[Samples]) -> Samples {
         all.actions.extend_from_slice(&p.actions);
     }
     all
+}
+
+/// `s` with `probe`'s readings of each observation appended to it.
+fn with_probe(s: &Samples, probe: &learner::rl::probe::LinearProbe) -> Samples {
+    let d = s.obs_dim;
+    let mut out = Samples {
+        obs_dim: d + probe.targets,
+        act_dim: s.act_dim,
+        actions: s.actions.clone(),
+        ..Default::default()
+    };
+    for o in s.obs.chunks_exact(d) {
+        let z: Vec<f64> = o.iter().map(|&v| v as f64).collect();
+        out.obs.extend_from_slice(o);
+        out.obs.extend(probe.predict(&z).iter().map(|&v| v as f32));
+    }
+    out
 }
 
 /// Mean squared error per component over all samples and over the reach
@@ -76,6 +96,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if rounds.len() <= test_rounds {
         return Err(format!("{} rounds in {}: too few", rounds.len(), dir.display()).into());
+    }
+    if let Ok(path) = std::env::var("DISTILL_FIT_PROBE") {
+        let probe: learner::rl::probe::LinearProbe =
+            serde_json::from_slice(&std::fs::read(&path)?)?;
+        for r in &mut rounds {
+            *r = with_probe(r, &probe);
+        }
     }
     let split = rounds.len() - test_rounds;
     let (train, test) = (merge(&rounds[..split]), merge(&rounds[split..]));

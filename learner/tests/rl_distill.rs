@@ -291,6 +291,30 @@ fn the_touch_search_teaches_in_the_students_environment() {
             .all(|a| (a[2] + 2.0 / 3.0).abs() < 1e-6),
         "it descends at every step of the approach"
     );
+    // Beside it, the same samples as the teacher saw them: its labels are
+    // its actions on those observations (a search view: believed offset,
+    // height, roll, force, the hole's yaw).
+    let t = learner::rl::distill::Samples::read(&learner::rl::distill::teacher_round_path(&out, 0))
+        .unwrap();
+    assert_eq!(t.obs_dim, learner::rl::search::SEARCH_VIEW_DIM);
+    assert_eq!(t.actions, s.actions);
+    let search = learner::rl::search::TouchSearch {
+        cfg: cfg.search_teacher.clone().unwrap(),
+        scale: cfg.student.env.action.clone(),
+    };
+    let obs: Vec<f64> = t.obs.iter().map(|&v| v as f64).collect();
+    let again: Vec<f32> = search
+        .means(&obs)
+        .iter()
+        .map(|&v| v.clamp(-1.0, 1.0) as f32)
+        .collect();
+    let worst = again
+        .iter()
+        .zip(&t.actions)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    // The observations went through f32 too.
+    assert!(worst < 1e-3, "{worst}");
     // Both teachers, or neither, are refused by name.
     for text in [
         text.clone().replace(

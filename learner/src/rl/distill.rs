@@ -335,9 +335,18 @@ fn round_path(out: &Path, round: u64) -> PathBuf {
     out.join("rounds").join(format!("round-{round:03}.bin"))
 }
 
+/// Where round `round`'s teacher observations are kept: the same samples
+/// as [`round_path`]'s, each with what the teacher observed in place of
+/// what the student did (for diagnosis; a resume does not read them).
+pub fn teacher_round_path(out: &Path, round: u64) -> PathBuf {
+    out.join("rounds")
+        .join(format!("round-{round:03}.teacher.bin"))
+}
+
 /// Runs (or, with `resume`, continues in `out`) a distillation, writing
 /// `checkpoint.json`, `rounds/round-NNN.bin` (each round's samples),
-/// `distill.csv` and `distill.png` into `out`. Ctrl-C (`stop`) drops the
+/// `rounds/round-NNN.teacher.bin` (their teacher observations, see
+/// [`teacher_round_path`]), `distill.csv` and `distill.png` into `out`. Ctrl-C (`stop`) drops the
 /// round in progress; the finished ones are kept.
 pub fn distill(
     cfg: DistillConfig,
@@ -594,7 +603,7 @@ pub fn distill(
         let before = state.clone();
         let student = state.policy.clone();
         let beta = d.teacher_share_decay.powi(r as i32);
-        let Some((new, student_steps)) = collect(
+        let Some((new, seen_by_teacher, student_steps)) = collect(
             &mut env, &teacher, &student, td, beta, &cfg, &mut state, stop,
         )?
         else {
@@ -602,6 +611,9 @@ pub fn distill(
             eprintln!("learner: stopped in round {r}; --resume collects it again");
             break;
         };
+        // The teacher's file first: a round file without it is a round
+        // recorded before this file existed, never one half written.
+        seen_by_teacher.write(&teacher_round_path(out, r))?;
         new.write(&round_path(out, r))?;
         let error_before_parts = action_error(&student, &new);
         data.obs.extend_from_slice(&new.obs);
@@ -827,13 +839,18 @@ fn collect(
     cfg: &DistillConfig,
     state: &mut TrainerState,
     stop: &(dyn Fn() -> bool + Sync),
-) -> Result<Option<(Samples, usize)>, RunError> {
+) -> Result<Option<(Samples, Samples, usize)>, RunError> {
     let n = env.num_envs();
     let (od, ad) = (env.obs_dim(), env.act_dim());
     let sd = od - td;
     let mut pick = rng::seeded(cfg.student.seed, (5 << 32) + state.iteration);
     let mut s = Samples {
         obs_dim: sd,
+        act_dim: ad,
+        ..Default::default()
+    };
+    let mut seen_by_teacher = Samples {
+        obs_dim: td,
         act_dim: ad,
         ..Default::default()
     };
@@ -872,6 +889,10 @@ fn collect(
         }
         s.obs.extend(sobs.iter().map(|&v| v as f32));
         s.actions.extend(target.iter().map(|&v| v as f32));
+        seen_by_teacher.obs.extend(tobs.iter().map(|&v| v as f32));
+        seen_by_teacher
+            .actions
+            .extend(target.iter().map(|&v| v as f32));
         let outcomes = env.step(&act)?.to_vec();
         collected += n;
         state.env_steps += n as u64;
@@ -885,7 +906,7 @@ fn collect(
             env.reset(&which)?;
         }
     }
-    Ok(Some((s, by_student)))
+    Ok(Some((s, seen_by_teacher, by_student)))
 }
 
 /// The rounds recorded in `out`'s `distill.json` (none when it is absent).
