@@ -7,6 +7,13 @@
 //!
 //! Usage: `distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]` (HIDDEN like
 //! `64,64`, or `linear`; the last TEST_ROUNDS rounds, default 2, are the test split).
+//!
+//! `distill_fit phases RUN_DIR ROUND [CHECKPOINT]`: a touch-search
+//! distillation's student (the run's checkpoint, or CHECKPOINT: for
+//! example a copy taken before ROUND was fitted) scored on ROUND's samples,
+//! split by where the teacher was (its view in `round-NNN.teacher.bin`:
+//! in the opening, on the box, above it below 30 mm, higher up).
+//!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made
 //! explicit, to tell what the student cannot fit from what it cannot find.
@@ -73,8 +80,89 @@ fn score(policy: &GaussianPolicy, s: &Samples) -> (Vec<f64>, Vec<f64>, usize) {
     )
 }
 
+/// The student's squared error on one round by the teacher's phase.
+fn phases(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
+    use learner::rl::distill::{round_path, teacher_round_path};
+    use learner::rl::search::{IN_OPENING_M, SEARCH_VIEW_DIM, TouchSearchConfig};
+    let usage = "usage: distill_fit phases RUN_DIR ROUND [CHECKPOINT]";
+    let dir = std::path::PathBuf::from(args.get(2).ok_or(usage)?);
+    let round: u64 = args.get(3).ok_or(usage)?.parse()?;
+    let ckpt = args
+        .get(4)
+        .map_or_else(|| dir.join("checkpoint.json"), std::path::PathBuf::from);
+    let policy = learner::rl::run::read_checkpoint(&ckpt)?.state.policy;
+    let s = Samples::read(&round_path(&dir, round))?;
+    let t = Samples::read(&teacher_round_path(&dir, round))?;
+    if t.obs_dim != SEARCH_VIEW_DIM || t.actions != s.actions {
+        return Err("the teacher file is not a touch search's view of the same samples".into());
+    }
+    let press = TouchSearchConfig::default().press_n;
+    let below = 0.03;
+    let names = [
+        "in the opening",
+        "on the box (below 1 mm, or carried)",
+        "above the box, below 30 mm",
+        "above 30 mm",
+    ];
+    let k = s.act_dim;
+    let obs: Vec<f64> = s.obs.iter().map(|&v| v as f64).collect();
+    let m = policy.means(&obs);
+    // Per phase: count, squared error per component, label sum and square.
+    let mut acc = vec![(0usize, vec![0.0; k], vec![0.0; k], vec![0.0; k]); 4];
+    for ((p, y), o) in m
+        .chunks_exact(k)
+        .zip(s.actions.chunks_exact(k))
+        .zip(t.obs.chunks_exact(SEARCH_VIEW_DIM))
+    {
+        let (h, carried) = (o[2] as f64, o[6] as f64 > 0.5 * press);
+        let phase = if h < IN_OPENING_M {
+            0
+        } else if carried || h < 0.001 {
+            1
+        } else if h < below {
+            2
+        } else {
+            3
+        };
+        let a = &mut acc[phase];
+        a.0 += 1;
+        for c in 0..k {
+            a.1[c] += (p[c] - y[c] as f64).powi(2);
+            a.2[c] += y[c] as f64;
+            a.3[c] += (y[c] as f64).powi(2);
+        }
+    }
+    let total: f64 = acc.iter().map(|a| a.1.iter().sum::<f64>()).sum();
+    println!(
+        "round {round}: {} samples, the student of {}",
+        s.len(),
+        ckpt.display()
+    );
+    println!(
+        "phase | share of samples | error Δx Δy Δz | share of the error | label variance Δx Δy"
+    );
+    for (name, (n, e, sum, sq)) in names.iter().zip(&acc) {
+        let n1 = (*n).max(1) as f64;
+        let var = |c: usize| sq[c] / n1 - (sum[c] / n1).powi(2);
+        println!(
+            "{name} | {:.2} | {:.3} {:.3} {:.3} | {:.2} | {:.3} {:.3}",
+            *n as f64 / s.len().max(1) as f64,
+            e[0] / n1,
+            e[1] / n1,
+            e[2] / n1,
+            e.iter().sum::<f64>() / total.max(1e-300),
+            var(0),
+            var(1)
+        );
+    }
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("phases") {
+        return phases(&args);
+    }
     let usage = "usage: distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]";
     let dir = std::path::PathBuf::from(args.get(1).ok_or(usage)?);
     let epochs: usize = args.get(2).ok_or(usage)?.parse()?;

@@ -27,7 +27,8 @@
 //!   `fit_rounds` (each further round FIT more episodes of the search told
 //!   by the probe so far), `TOUCH_ROLL_GAIN` sets the search's
 //!   `roll_gain` (also in `search`), `TOUCH_PROBE_BELOW_MM` the height
-//!   below which the probe is fitted and read (30), `TOUCH_TRACE` prints
+//!   below which the probe is fitted and read (30), `TOUCH_APPROACH_PROBE`
+//!   adds the approach probe above it (`approach`), `TOUCH_TRACE` prints
 //!   each step's height and roll.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
@@ -278,6 +279,8 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         // TOUCH_FIT_ROUNDS: rounds of fitting, the later ones on the search
         // told by the probe so far.
         fit_rounds: std::env::var("TOUCH_FIT_ROUNDS").map_or(1, |v| v.parse().expect("rounds")),
+        // TOUCH_APPROACH_PROBE: a second probe tells the way down too.
+        approach: std::env::var_os("TOUCH_APPROACH_PROBE").is_some(),
     };
     assert!(pc.fit_rounds >= 1, "TOUCH_FIT_ROUNDS must be at least 1");
     // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
@@ -286,7 +289,7 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         ..Default::default()
     };
     search.validate().unwrap_or_else(|e| panic!("{e}"));
-    let probe = fit_belief_probe(
+    let probes = fit_belief_probe(
         &cfg,
         repr.as_ref(),
         &search,
@@ -303,7 +306,7 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     eprintln!();
     let view = ProbedSearchView {
         repr,
-        probe,
+        probes,
         below_m: pc.below_m,
     };
     let policy = TouchSearch {
@@ -320,6 +323,8 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     // The probe's squared error and count where the tip is within 10 mm of
     // the hole's axis, and farther.
     let (mut near, mut far) = ((0.0, 0usize), (0.0, 0usize));
+    // The approach probe's, above `below_m`.
+    let mut up = (0.0, 0usize);
     for ep in 0..test {
         env.reset(1_000_000 + ep, true).expect("reset");
         let (mut ep_se, mut ep_n) = (0.0, 0usize);
@@ -357,6 +362,10 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
                 band.0 += e;
                 band.1 += 1;
             }
+            if pc.approach && s.z >= pc.below_m {
+                up.0 += (o[0] - s.x).powi(2) + (o[1] - s.y).powi(2);
+                up.1 += 1;
+            }
             let out = env.step(&policy.means(&o), true).expect("step");
             if out.done() {
                 break out;
@@ -382,6 +391,14 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         rms(far),
         far.1
     );
+    if pc.approach {
+        println!(
+            "approach probe RMS (x, y together) above {:.0} mm: {:.1} mm over {} states",
+            pc.below_m * 1e3,
+            rms(up),
+            up.1
+        );
+    }
     println!(
         "z-told search: probe RMS {:.1} mm, roll {:.3} rad; the peg's roll off the hole's {:.3} rad RMS, the probe's reading of it {:.3} rad RMS; rejected frames {}; outcomes {:?} over {test}",
         1e3 * (se / n.max(1) as f64).sqrt(),

@@ -349,6 +349,7 @@ fn the_touch_search_teaches_in_the_students_environment() {
         fit_roll_error_rad: 0.0,
         below_m: 0.03,
         fit_rounds: 1,
+        approach: false,
     });
     probed.camera = Some(hw_sim::config::CameraConfig::default());
     let e = distill(probed, &dir.path().join("v"), false, &|| false).unwrap_err();

@@ -217,6 +217,7 @@ fn bad_search_settings_are_named() {
         fit_roll_error_rad: 0.1,
         below_m: 0.03,
         fit_rounds: 1,
+        approach: false,
     };
     let with = |p: BeliefProbeConfig, hole_error_m: f64| TouchSearchConfig {
         hole_error_m,
@@ -291,6 +292,7 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
         fit_roll_error_rad: 0.0,
         below_m: 0.03,
         fit_rounds: rounds,
+        approach: false,
     };
     let search = TouchSearchConfig {
         probe: Some(probe(2)),
@@ -319,7 +321,7 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
     };
     let view = ProbedSearchView {
         repr: std::sync::Arc::new(NoY),
-        probe: one.clone(),
+        probes: one.clone(),
         below_m: 0.03,
     };
     let mut env = RlEnv::new(&cfg).unwrap();
@@ -340,7 +342,7 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
     assert!(read > 0);
     assert_eq!(calls[3].1 - calls[1].1, read, "{calls:?}");
     // Both probes read x and the roll exactly.
-    for p in [&one, &two] {
+    for p in [&one.near, &two.near] {
         let got = p.predict(&[0.004, 0.05]);
         assert!((got[0] - 0.004).abs() < 1e-4, "{got:?}");
         assert!((got[2] - 0.05).abs() < 1e-4, "{got:?}");
@@ -358,4 +360,83 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("search_teacher.probe.fit_rounds"), "{e}");
     }
+}
+
+#[test]
+fn an_approach_probe_tells_the_way_down() {
+    use learner::rl::search::{IN_OPENING_M, ProbedSearchView, fit_belief_probe};
+    let cfg = config();
+    let probe = |approach: bool, rounds: u32| BeliefProbeConfig {
+        representation: "unused".into(),
+        fit_episodes: 2,
+        fit_hole_error_m: 0.01,
+        fit_roll_error_rad: 0.0,
+        below_m: 0.03,
+        fit_rounds: rounds,
+        approach,
+    };
+    let search = TouchSearchConfig {
+        probe: Some(probe(true, 2)),
+        ..Default::default()
+    };
+    let fit = |pc: &BeliefProbeConfig| {
+        let mut calls = Vec::new();
+        let p = fit_belief_probe(&cfg, &NoY, &search, pc, 7_000_000, &mut |ep, rows| {
+            calls.push((ep, rows))
+        })
+        .unwrap();
+        (p, calls)
+    };
+    let (without, without_calls) = fit(&probe(false, 1));
+    let (with, with_calls) = fit(&probe(true, 1));
+    assert!(without.approach.is_none());
+    // The first round's search is told the truth either way: the same near
+    // rows and probe, and the states above the band as the approach's rows.
+    assert_eq!(with.near, without.near);
+    assert!(with_calls[1].1 > without_calls[1].1, "{with_calls:?}");
+    let approach = with.approach.clone().expect("fitted");
+    assert_eq!(approach.targets, 2);
+    // NoY's "z" holds x and the roll, not y: x is read exactly.
+    let a = approach.predict(&[0.004, 0.05]);
+    assert!((a[0] - 0.004).abs() < 1e-4, "{a:?}");
+    // The view: above the band the approach probe's offset and the true
+    // roll; in the band the near probe's offset and roll.
+    let view = ProbedSearchView {
+        repr: std::sync::Arc::new(NoY),
+        probes: with.clone(),
+        below_m: 0.03,
+    };
+    let mut env = RlEnv::new(&cfg).unwrap();
+    env.reset(7_000_010, false).unwrap();
+    let v = env.view().unwrap();
+    let t = v.task;
+    assert!(t.s_m.z > 0.03, "the episode starts above the band");
+    let mut o = [0.0; SEARCH_VIEW_DIM];
+    view.observe(&[v], &mut o);
+    let truth = approach.predict(&[t.s_m.x, t.s_psi_rad]);
+    assert_eq!((o[0], o[1]), (truth[0], truth[1]));
+    assert!((o[0] - t.s_m.x).abs() < 1e-4);
+    assert_eq!(o[3], t.s_psi_rad);
+    // A second round is the search told by both probes, on the next
+    // seeds: every state of it above the opening gives a row.
+    let (_, calls) = fit(&probe(true, 2));
+    assert_eq!(calls[..2], with_calls[..]);
+    let teacher = TouchSearch {
+        cfg: search.clone(),
+        scale: cfg.action.clone(),
+    };
+    let mut rows = 0;
+    for seed in [7_000_002, 7_000_003] {
+        env.reset(seed, false).unwrap();
+        loop {
+            let v = env.view().unwrap();
+            rows += usize::from(v.task.s_m.z >= IN_OPENING_M);
+            let mut o = [0.0; SEARCH_VIEW_DIM];
+            view.observe(&[v], &mut o);
+            if env.step(&teacher.means(&o), false).unwrap().done() {
+                break;
+            }
+        }
+    }
+    assert_eq!(calls[3].1 - calls[1].1, rows, "{calls:?}");
 }

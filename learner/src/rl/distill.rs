@@ -26,7 +26,7 @@ use super::run::{
     read_checkpoint, read_json, read_toml, write_json,
 };
 use super::search::{
-    BeliefProbeConfig, ProbedSearchView, SearchView, TouchSearch, TouchSearchConfig,
+    BeliefProbeConfig, BeliefProbes, ProbedSearchView, SearchView, TouchSearch, TouchSearchConfig,
     fit_belief_probe,
 };
 use super::train::TrainerState;
@@ -331,7 +331,8 @@ fn refuse(detail: String, path: &Path) -> RunError {
     }
 }
 
-fn round_path(out: &Path, round: u64) -> PathBuf {
+/// Where round `round`'s samples are kept.
+pub fn round_path(out: &Path, round: u64) -> PathBuf {
     out.join("rounds").join(format!("round-{round:03}.bin"))
 }
 
@@ -734,6 +735,11 @@ fn probe_path(out: &Path) -> PathBuf {
     out.join("search-probe.json")
 }
 
+/// Where the search teacher's approach probe (`approach`) is kept.
+fn approach_probe_path(out: &Path) -> PathBuf {
+    out.join("search-approach-probe.json")
+}
+
 /// Seed of the first episode a search teacher's probe is fitted on: apart
 /// from DAgger's (from `dagger.episode_seed`, 5 000 000 by default),
 /// validation's and evaluation's (from 1 000 000) episodes.
@@ -749,26 +755,44 @@ fn probed_view(
     fresh: bool,
 ) -> Result<Arc<dyn Observer>, RunError> {
     let path = probe_path(out);
-    // A resumed run's rounds were labelled through its probe: a refit one
+    let approach_path = approach_probe_path(out);
+    // A resumed run's rounds were labelled through its probes: refit ones
     // could label the next rounds differently.
-    if !fresh && !path.exists() {
-        return Err(refuse(
-            "resuming: the search teacher's probe is missing; its rounds were labelled \
-             through it (start afresh without --resume)"
-                .into(),
-            &path,
-        ));
+    for (needed, path) in [(true, &path), (p.approach, &approach_path)] {
+        if needed && !fresh && !path.exists() {
+            return Err(refuse(
+                "resuming: a probe of the search teacher is missing; its rounds were labelled \
+                 through it (start afresh without --resume)"
+                    .into(),
+                path,
+            ));
+        }
     }
     let repr = super::ObservationKind::Representation(p.representation.clone())
         .observer_on(student_cfg.threads)?;
-    let probe: LinearProbe = if !fresh {
-        let probe: LinearProbe = read_json(&path)?;
-        probe.check().map_err(|e| refuse(e.to_string(), &path))?;
-        probe
+    let probes = if !fresh {
+        let read = |path: &Path| -> Result<LinearProbe, RunError> {
+            let probe: LinearProbe = read_json(path)?;
+            probe.check().map_err(|e| refuse(e.to_string(), path))?;
+            Ok(probe)
+        };
+        BeliefProbes {
+            near: read(&path)?,
+            approach: if p.approach {
+                Some(read(&approach_path)?)
+            } else {
+                None
+            },
+        }
     } else {
         eprintln!(
-            "learner: fitting the search teacher's probe of {} on {} episodes per round, {} \
+            "learner: fitting the search teacher's probe{} of {} on {} episodes per round, {} \
              round(s)",
+            if p.approach {
+                "s (near and approach)"
+            } else {
+                ""
+            },
             p.representation.display(),
             p.fit_episodes,
             p.fit_rounds
@@ -777,7 +801,7 @@ fn probed_view(
             p.fit_episodes.saturating_mul(u64::from(p.fit_rounds)),
             "episodes",
         );
-        let probe = fit_belief_probe(
+        let probes = fit_belief_probe(
             &student_cfg.env,
             repr.as_ref(),
             search,
@@ -786,24 +810,34 @@ fn probed_view(
             &mut |ep, rows| progress.update(ep, format!("{rows} states")),
         )?;
         progress.finish();
-        write_json(&path, &probe)?;
-        probe
+        write_json(&path, &probes.near)?;
+        if let Some(a) = &probes.approach {
+            write_json(&approach_path, a)?;
+        }
+        probes
     };
-    if probe.features() != repr.dim() || probe.targets != 3 {
-        return Err(refuse(
-            format!(
-                "a probe of {} features to {} targets; the representation gives {} and the \
-                 search needs 3",
-                probe.features(),
-                probe.targets,
-                repr.dim()
-            ),
-            &path,
-        ));
+    for (probe, path, targets) in [
+        (Some(&probes.near), &path, 3),
+        (probes.approach.as_ref(), &approach_path, 2),
+    ] {
+        if let Some(probe) = probe
+            && (probe.features() != repr.dim() || probe.targets != targets)
+        {
+            return Err(refuse(
+                format!(
+                    "a probe of {} features to {} targets; the representation gives {} and the \
+                     search needs {targets}",
+                    probe.features(),
+                    probe.targets,
+                    repr.dim()
+                ),
+                path,
+            ));
+        }
     }
     Ok(Arc::new(ProbedSearchView {
         repr,
-        probe,
+        probes,
         below_m: p.below_m,
     }))
 }

@@ -109,6 +109,25 @@ pub struct BeliefProbeConfig {
     /// before this setting existed.
     #[serde(default = "default_fit_rounds")]
     pub fit_rounds: u32,
+    /// Also tell the search where the hole is on the way down, above
+    /// `below_m`, by a second linear probe of z (to the tip's x, y relative
+    /// to the hole only; the roll stays the truth's there), fitted on the
+    /// same episodes' states above `below_m`, instead of by the truth. A
+    /// student on z cannot read the true offset far above the box as
+    /// precisely as the direction towards it needs: most of its error was
+    /// there (docs/experiments.md, "Where the z student misses"). false by
+    /// default, as before this setting existed.
+    #[serde(default)]
+    pub approach: bool,
+}
+
+/// The probes that tell a [`ProbedSearchView`] where the hole is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BeliefProbes {
+    /// Below `below_m` (and above the opening): z → x, y, roll.
+    pub near: LinearProbe,
+    /// Above `below_m`, when configured (`approach`): z → x, y.
+    pub approach: Option<LinearProbe>,
 }
 
 fn default_fit_episodes() -> u64 {
@@ -410,9 +429,10 @@ pub struct ProbedSearchView {
     pub repr: std::sync::Arc<dyn Observer>,
     /// z means → (x, y) of the tip relative to the hole (hole frame, m)
     /// and the peg's roll relative to the hole (rad, wrapped by the
-    /// symmetry).
-    pub probe: LinearProbe,
-    /// Height above the box below which the probe is read, m.
+    /// symmetry) near the box; z means → (x, y) above it, if given.
+    pub probes: BeliefProbes,
+    /// Height above the box below which the near probe is read (and above
+    /// which the approach probe is), m.
     pub below_m: f64,
 }
 
@@ -434,9 +454,7 @@ impl Observer for ProbedSearchView {
             .chunks_exact_mut(SEARCH_VIEW_DIM)
             .zip(z.chunks_exact(zd))
         {
-            if reads_belief(o[2], self.below_m) {
-                tell_by_probe(&self.probe, z, o);
-            }
+            tell_by_probes(&self.probes, self.below_m, z, o);
         }
     }
 
@@ -456,12 +474,22 @@ fn reads_belief(height_m: f64, below_m: f64) -> bool {
     (IN_OPENING_M..below_m).contains(&height_m)
 }
 
-/// Replaces a [`SearchView`] observation's believed offset and roll with
-/// the probe's reading of `z`.
-fn tell_by_probe(probe: &LinearProbe, z: &[f64], o: &mut [f64]) {
+/// Replaces a [`SearchView`] observation's belief with the probes'
+/// reading of `z` where they are read: near the box the offset and roll
+/// (the near probe), above `below_m` the offset (the approach probe, if
+/// any); in the opening, and above without an approach probe, the
+/// observation is left as it is.
+fn tell_by_probes(probes: &BeliefProbes, below_m: f64, z: &[f64], o: &mut [f64]) {
     let mut b = [0.0; 3];
-    probe.predict_into(z, &mut b);
-    (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+    if reads_belief(o[2], below_m) {
+        probes.near.predict_into(z, &mut b);
+        (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
+    } else if let Some(a) = &probes.approach
+        && o[2] >= below_m
+    {
+        a.predict_into(z, &mut b[..2]);
+        (o[0], o[1]) = (b[0], b[1]);
+    }
 }
 
 /// Fits a [`ProbedSearchView`]'s probe. The first round: `cfg.fit_episodes`
@@ -471,10 +499,12 @@ fn tell_by_probe(probe: &LinearProbe, z: &[f64], o: &mut [f64]) {
 /// `env_cfg`'s world, each state where the probe is read (below
 /// `cfg.below_m` above the box and not in the opening) giving a row: the z
 /// means; the tip's true x, y relative to the hole and the peg's roll
-/// relative to it. Each further round (`cfg.fit_rounds`) runs as many
-/// episodes (the next seeds) of the search told by the probe fitted on the
-/// rows so far, as the teacher is, and adds their rows. `progress` is called
-/// after each episode with the episodes and rows so far.
+/// relative to it; with `cfg.approach`, each state above `cfg.below_m`
+/// gives a row of the approach probe (the z means; x, y). Each further
+/// round (`cfg.fit_rounds`) runs as many episodes (the next seeds) of the
+/// search told by the probes fitted on the rows so far, as the teacher is,
+/// and adds their rows. `progress` is called after each episode with the
+/// episodes and rows (both probes') so far.
 pub fn fit_belief_probe(
     env_cfg: &super::RlEnvConfig,
     repr: &dyn Observer,
@@ -482,7 +512,7 @@ pub fn fit_belief_probe(
     cfg: &BeliefProbeConfig,
     first_seed: u64,
     progress: &mut dyn FnMut(u64, usize),
-) -> Result<LinearProbe, super::RlEnvError> {
+) -> Result<BeliefProbes, super::RlEnvError> {
     let mut env = super::RlEnv::new(env_cfg)?;
     super::observe::check_camera(&env_cfg.world.camera, repr)?;
     let search = TouchSearch {
@@ -494,25 +524,37 @@ pub fn fit_belief_probe(
         scale: env_cfg.action.clone(),
     };
     let camera = repr.needs_camera();
-    let fit = |xs: &[Vec<f64>], ys: &[Vec<f64>]| {
+    let fit = |xs: &[Vec<f64>], ys: &[Vec<f64>], field: &str, where_: &str| {
         if xs.is_empty() {
             return Err(super::RlEnvError::from(FieldError::new(
-                "search_teacher.probe.below_m",
+                field,
                 cfg.below_m,
-                "no state of the fitting episodes came below it",
+                format!("no state of the fitting episodes came {where_} it"),
             )));
         }
         LinearProbe::fit(xs, ys, 1e-3).map_err(|e| super::RlEnvError::Representation(e.to_string()))
     };
+    // Near the box: z → x, y, roll; on the way down (`approach`): z → x, y.
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
-    let mut probe: Option<LinearProbe> = None;
+    let (mut xa, mut ya) = (Vec::new(), Vec::new());
+    let fit_all = |xs: &[Vec<f64>], ys: &[Vec<f64>], xa: &[Vec<f64>], ya: &[Vec<f64>]| {
+        Ok::<_, super::RlEnvError>(BeliefProbes {
+            near: fit(xs, ys, "search_teacher.probe.below_m", "below")?,
+            approach: if cfg.approach {
+                Some(fit(xa, ya, "search_teacher.probe.approach", "above")?)
+            } else {
+                None
+            },
+        })
+    };
+    let mut probes: Option<BeliefProbes> = None;
     let mut z = vec![0.0; repr.dim()];
     for round in 0..u64::from(cfg.fit_rounds.max(1)) {
         if round > 0 {
-            probe = Some(fit(&xs, &ys)?);
+            probes = Some(fit_all(&xs, &ys, &xa, &ya)?);
         }
         // The first round's search is told the truth with its errors; the
-        // later rounds' by the probe, as the teacher is.
+        // later rounds' by the probes, as the teacher is.
         let view = SearchView {
             std_m: if round == 0 {
                 cfg.fit_hole_error_m
@@ -534,22 +576,29 @@ pub fn fit_belief_probe(
                 let mut o = [0.0; SEARCH_VIEW_DIM];
                 view.observe(std::slice::from_ref(&v), &mut o);
                 o[3] += roll_error;
-                if reads_belief(s.z, cfg.below_m) {
+                let near = reads_belief(s.z, cfg.below_m);
+                let above = cfg.approach && s.z >= cfg.below_m;
+                if near || above {
                     repr.observe(std::slice::from_ref(&v), &mut z);
-                    xs.push(z.clone());
-                    ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
-                    if let Some(p) = &probe {
-                        tell_by_probe(p, &z, &mut o);
+                    if near {
+                        xs.push(z.clone());
+                        ys.push(vec![s.x, s.y, v.task.s_psi_rad]);
+                    } else {
+                        xa.push(z.clone());
+                        ya.push(vec![s.x, s.y]);
+                    }
+                    if let Some(p) = &probes {
+                        tell_by_probes(p, cfg.below_m, &z, &mut o);
                     }
                 }
                 if env.step(&search.means(&o), camera)?.done() {
                     break;
                 }
             }
-            progress(round * cfg.fit_episodes + ep + 1, xs.len());
+            progress(round * cfg.fit_episodes + ep + 1, xs.len() + xa.len());
         }
     }
-    fit(&xs, &ys)
+    fit_all(&xs, &ys, &xa, &ya)
 }
 
 /// The length of the horizontal vector (x, y).
