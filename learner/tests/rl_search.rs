@@ -150,6 +150,37 @@ fn the_search_step_follows_its_spiral() {
     assert_ne!(s.step(&stuck), d);
     let sliding = obs([r, 0.0], 0.0, [0.0, 1.0, cfg.press_n * 1.5]);
     assert_eq!(sticky.step(&sliding), s.step(&sliding));
+    // Above the box, towards the believed opening: a full step whenever
+    // the offset exceeds one; with an approach radius of 10 mm, the offset
+    // times step/radius within it and a full step beyond.
+    let proportional = TouchSearch {
+        cfg: TouchSearchConfig {
+            approach_radius_m: Some(0.01),
+            ..cfg.clone()
+        },
+        scale: Default::default(),
+    };
+    let high = |b: [f64; 2]| obs(b, 0.1, [0.0; 3]);
+    let near = high([0.004, -0.003]);
+    let d = s.step(&near);
+    assert!(
+        (d.x + 0.8 * cfg.step_m).abs() < 1e-12 && (d.y - 0.6 * cfg.step_m).abs() < 1e-12,
+        "{d}"
+    );
+    assert_eq!(d.z, -cfg.step_m);
+    let d = proportional.step(&near);
+    assert!(
+        (d.x + 0.4 * cfg.step_m).abs() < 1e-12 && (d.y - 0.3 * cfg.step_m).abs() < 1e-12,
+        "{d}"
+    );
+    assert_eq!(d.z, -cfg.step_m);
+    let far = high([0.03, 0.04]);
+    assert_eq!(proportional.step(&far), s.step(&far));
+    // Within a step of the belief: the offset itself, or its step/radius
+    // share.
+    let close = high([0.0004, 0.0003]);
+    assert_eq!(s.step(&close).x, -0.0004);
+    assert!((proportional.step(&close).x + 0.0004 * cfg.step_m / 0.01).abs() < 1e-15);
 }
 
 #[test]
@@ -166,6 +197,13 @@ fn bad_search_settings_are_named() {
             "search_teacher.hole_error_m",
             TouchSearchConfig {
                 hole_error_m: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.approach_radius_m",
+            TouchSearchConfig {
+                approach_radius_m: Some(0.0005),
                 ..Default::default()
             },
         ),

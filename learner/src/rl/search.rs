@@ -67,6 +67,16 @@ pub struct TouchSearchConfig {
     /// the four pegs"). None (the default): always the spiral. Sliding
     /// freely the lateral force is about 1 N.
     pub stick_n: Option<f64>,
+    /// Above the box the search steps towards the believed opening by the
+    /// believed offset times `step_m / approach_radius_m` within this
+    /// radius of it, and by `step_m` towards it farther out, m. None (the
+    /// default): `step_m`, a full step whenever the offset is larger than
+    /// one. Why a wider one: a belief read from z jitters by about 3 mm from
+    /// frame to frame near the opening, and a step of full length along
+    /// that jitter's direction is a label no student on z fits; a
+    /// proportional one is a linear function of the belief
+    /// (docs/experiments.md, "Where the z student misses").
+    pub approach_radius_m: Option<f64>,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
     /// `hole_error_m` must then be 0.
@@ -163,6 +173,7 @@ impl Default for TouchSearchConfig {
             lead_m_per_n: 0.002,
             roll_gain: 1.0,
             stick_n: None,
+            approach_radius_m: None,
             probe: None,
         }
     }
@@ -205,6 +216,15 @@ impl TouchSearchConfig {
                 f("stick_n"),
                 v,
                 "must be positive and finite",
+            ));
+        }
+        if let Some(r) = self.approach_radius_m
+            && !(r.is_finite() && r >= self.step_m)
+        {
+            return Err(FieldError::new(
+                f("approach_radius_m"),
+                r,
+                "must be finite and at least step_m",
             ));
         }
         if !(self.roll_gain.is_finite() && self.roll_gain > 0.0 && self.roll_gain <= 1.0) {
@@ -388,9 +408,8 @@ impl TouchSearch {
         // so the tip is over the opening long before it reaches the top.
         let lateral = r2(bx, by);
         let mut d = Vector3::new(-bx, -by, 0.0);
-        if lateral > c.step_m {
-            d *= c.step_m / lateral;
-        }
+        let radius = c.approach_radius_m.unwrap_or(c.step_m);
+        d *= c.step_m / lateral.max(radius);
         d.z = -c.step_m;
         d
     }
