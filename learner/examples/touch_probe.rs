@@ -28,8 +28,9 @@
 //!   by the probe so far), `TOUCH_ROLL_GAIN` sets the search's
 //!   `roll_gain` (also in `search`), `TOUCH_PROBE_BELOW_MM` the height
 //!   below which the probe is fitted and read (30), `TOUCH_APPROACH_PROBE`
-//!   adds the approach probe above it (`approach`), `TOUCH_TRACE` prints
-//!   each step's height and roll.
+//!   adds the approach probe above it (`approach`),
+//!   `TOUCH_APPROACH_RADIUS_MM` sets `approach_radius_m`, `TOUCH_TRACE`
+//!   prints each step's height and roll.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -284,8 +285,12 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     };
     assert!(pc.fit_rounds >= 1, "TOUCH_FIT_ROUNDS must be at least 1");
     // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
+    // TOUCH_APPROACH_RADIUS_MM: the search's `approach_radius_m`.
     let search = TouchSearchConfig {
         roll_gain: std::env::var("TOUCH_ROLL_GAIN").map_or(1.0, |v| v.parse().expect("gain")),
+        approach_radius_m: std::env::var("TOUCH_APPROACH_RADIUS_MM")
+            .ok()
+            .map(|v| v.parse::<f64>().expect("TOUCH_APPROACH_RADIUS_MM: mm") * 1e-3),
         ..Default::default()
     };
     search.validate().unwrap_or_else(|e| panic!("{e}"));
