@@ -11,8 +11,9 @@
 //! `distill_fit phases RUN_DIR ROUND [CHECKPOINT]`: a touch-search
 //! distillation's student (the run's checkpoint, or CHECKPOINT: for
 //! example a copy taken before ROUND was fitted) scored on ROUND's samples,
-//! split by where the teacher was (its view in `round-NNN.teacher.bin`:
-//! in the opening, on the box, above it below 30 mm, higher up).
+//! split by where the teacher was (its view in `round-NNN.teacher.bin`,
+//! phased by the run's own search settings: in the opening, on the box,
+//! above it below the probe's band, higher up).
 //!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made
@@ -83,7 +84,7 @@ fn score(policy: &GaussianPolicy, s: &Samples) -> (Vec<f64>, Vec<f64>, usize) {
 /// The student's squared error on one round by the teacher's phase.
 fn phases(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     use learner::rl::distill::{round_path, teacher_round_path};
-    use learner::rl::search::{IN_OPENING_M, SEARCH_VIEW_DIM, TouchSearchConfig};
+    use learner::rl::search::{SEARCH_VIEW_DIM, SearchPhase};
     let usage = "usage: distill_fit phases RUN_DIR ROUND [CHECKPOINT]";
     let dir = std::path::PathBuf::from(args.get(2).ok_or(usage)?);
     let round: u64 = args.get(3).ok_or(usage)?.parse()?;
@@ -96,13 +97,19 @@ fn phases(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     if t.obs_dim != SEARCH_VIEW_DIM || t.actions != s.actions {
         return Err("the teacher file is not a touch search's view of the same samples".into());
     }
-    let press = TouchSearchConfig::default().press_n;
-    let below = 0.03;
+    // The run's own search settings: its phases, and the probe's band
+    // (30 mm, the probe's default, for a search told the truth).
+    let cfg: learner::rl::distill::DistillConfig =
+        serde_json::from_slice(&std::fs::read(dir.join("distill-config.json"))?)?;
+    let search = cfg
+        .search_teacher
+        .ok_or("not a distillation from the touch search")?;
+    let below = search.probe.as_ref().map_or(0.03, |p| p.below_m);
     let names = [
-        "in the opening",
-        "on the box (below 1 mm, or carried)",
-        "above the box, below 30 mm",
-        "above 30 mm",
+        "in the opening".to_string(),
+        "on the box (below 1 mm, or carried)".to_string(),
+        format!("above the box, below {:.0} mm", below * 1e3),
+        format!("above {:.0} mm", below * 1e3),
     ];
     let k = s.act_dim;
     let obs: Vec<f64> = s.obs.iter().map(|&v| v as f64).collect();
@@ -114,15 +121,12 @@ fn phases(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
         .zip(s.actions.chunks_exact(k))
         .zip(t.obs.chunks_exact(SEARCH_VIEW_DIM))
     {
-        let (h, carried) = (o[2] as f64, o[6] as f64 > 0.5 * press);
-        let phase = if h < IN_OPENING_M {
-            0
-        } else if carried || h < 0.001 {
-            1
-        } else if h < below {
-            2
-        } else {
-            3
+        let o: Vec<f64> = o.iter().map(|&v| v as f64).collect();
+        let phase = match search.phase(&o) {
+            SearchPhase::InOpening => 0,
+            SearchPhase::OnBox => 1,
+            SearchPhase::Above if o[2] < below => 2,
+            SearchPhase::Above => 3,
         };
         let a = &mut acc[phase];
         a.0 += 1;

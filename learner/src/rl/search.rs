@@ -180,6 +180,19 @@ impl Default for TouchSearchConfig {
 }
 
 impl TouchSearchConfig {
+    /// The phase of a [`SearchView`] observation: from its height and the
+    /// force along the hole's axis.
+    pub fn phase(&self, o: &[f64]) -> SearchPhase {
+        let z = o[2];
+        if z < IN_OPENING_M {
+            SearchPhase::InOpening
+        } else if o[6] > 0.5 * self.press_n || z < 0.001 {
+            SearchPhase::OnBox
+        } else {
+            SearchPhase::Above
+        }
+    }
+
     /// Refuses settings the search cannot run with, naming the field.
     pub fn validate(&self) -> Result<(), FieldError> {
         let f = |name: &str| format!("search_teacher.{name}");
@@ -358,18 +371,29 @@ pub struct TouchSearch {
     pub scale: ActionScale,
 }
 
+/// Which of its three behaviours the search is in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SearchPhase {
+    /// In the opening: straight down.
+    InOpening,
+    /// On the top face (the box carries the peg, or the tip is within
+    /// 1 mm of it): the spiral.
+    OnBox,
+    /// Above the box: towards the believed opening and down.
+    Above,
+}
+
 impl TouchSearch {
     /// The step (hole frame x, y, z, m) for one observation.
     pub fn step(&self, o: &[f64]) -> Vector3<f64> {
         let c = &self.cfg;
-        let (bx, by, z) = (o[0], o[1], o[2]);
+        let (bx, by) = (o[0], o[1]);
         let f = Vector3::new(o[4], o[5], o[6]);
-        if z < IN_OPENING_M {
-            // In the opening: straight down.
+        let phase = c.phase(o);
+        if phase == SearchPhase::InOpening {
             return Vector3::new(0.0, 0.0, -c.step_m);
         }
-        let carried = f.z > 0.5 * c.press_n;
-        if carried || z < 0.001 {
+        if phase == SearchPhase::OnBox {
             let r = r2(bx, by);
             let (rx, ry) = if r > 1e-4 {
                 (bx / r, by / r)
@@ -493,6 +517,12 @@ fn reads_belief(height_m: f64, below_m: f64) -> bool {
     (IN_OPENING_M..below_m).contains(&height_m)
 }
 
+/// Whether an approach probe, where there is one, is read at this height
+/// above the box: from `below_m` up.
+fn reads_approach(height_m: f64, below_m: f64) -> bool {
+    height_m >= below_m
+}
+
 /// Replaces a [`SearchView`] observation's belief with the probes'
 /// reading of `z` where they are read: near the box the offset and roll
 /// (the near probe), above `below_m` the offset (the approach probe, if
@@ -504,7 +534,7 @@ fn tell_by_probes(probes: &BeliefProbes, below_m: f64, z: &[f64], o: &mut [f64])
         probes.near.predict_into(z, &mut b);
         (o[0], o[1], o[3]) = (b[0], b[1], b[2]);
     } else if let Some(a) = &probes.approach
-        && o[2] >= below_m
+        && reads_approach(o[2], below_m)
     {
         a.predict_into(z, &mut b[..2]);
         (o[0], o[1]) = (b[0], b[1]);
@@ -596,7 +626,7 @@ pub fn fit_belief_probe(
                 view.observe(std::slice::from_ref(&v), &mut o);
                 o[3] += roll_error;
                 let near = reads_belief(s.z, cfg.below_m);
-                let above = cfg.approach && s.z >= cfg.below_m;
+                let above = cfg.approach && reads_approach(s.z, cfg.below_m);
                 if near || above {
                     repr.observe(std::slice::from_ref(&v), &mut z);
                     if near {
