@@ -319,57 +319,54 @@ impl Observer for NoY {
     }
 }
 
-#[test]
-fn a_belief_probe_fits_over_rounds_of_its_own_search() {
-    use learner::rl::search::{IN_OPENING_M, ProbedSearchView, fit_belief_probe};
-    let cfg = config();
-    let probe = |rounds: u32| BeliefProbeConfig {
+/// A probe of [`NoY`] fitted on two episodes per round, 30 mm band.
+fn noy_probe(rounds: u32, approach: bool) -> BeliefProbeConfig {
+    BeliefProbeConfig {
         representation: "unused".into(),
         fit_episodes: 2,
         fit_hole_error_m: 0.01,
         fit_roll_error_rad: 0.0,
         below_m: 0.03,
         fit_rounds: rounds,
-        approach: false,
-    };
-    let search = TouchSearchConfig {
-        probe: Some(probe(2)),
-        ..Default::default()
-    };
-    search.validate().unwrap();
-    let fit = |pc: &BeliefProbeConfig| {
-        let mut calls = Vec::new();
-        let p = fit_belief_probe(&cfg, &NoY, &search, pc, 7_000_000, &mut |ep, rows| {
+        approach,
+    }
+}
+
+/// The probes fitted on [`NoY`] from seed 7 000 000, and the progress
+/// calls (episodes, rows so far).
+fn fit_noy(
+    cfg: &RlEnvConfig,
+    search: &TouchSearchConfig,
+    pc: &BeliefProbeConfig,
+) -> (learner::rl::search::BeliefProbes, Vec<(u64, usize)>) {
+    let mut calls = Vec::new();
+    let p =
+        learner::rl::search::fit_belief_probe(cfg, &NoY, search, pc, 7_000_000, &mut |ep, rows| {
             calls.push((ep, rows))
         })
         .unwrap();
-        (p, calls)
-    };
-    let (one, one_calls) = fit(&probe(1));
-    let (two, calls) = fit(&probe(2));
-    // Two rounds of two episodes each, the first as a one-round fit.
-    assert_eq!(calls.iter().map(|c| c.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
-    assert_eq!(one_calls, calls[..2]);
-    // The second round is the search told by the first round's probe, as
-    // the teacher is, on the next two seeds: its states where the probe is
-    // read are the rows it added.
+    (p, calls)
+}
+
+/// The states, at heights `counted` takes, of the search `search` told by
+/// `view` on the seeds of a two-episode fit's second round.
+fn states_of_told_search(
+    cfg: &RlEnvConfig,
+    search: &TouchSearchConfig,
+    view: &dyn Observer,
+    counted: impl Fn(f64) -> bool,
+) -> usize {
     let teacher = TouchSearch {
         cfg: search.clone(),
         scale: cfg.action.clone(),
     };
-    let view = ProbedSearchView {
-        repr: std::sync::Arc::new(NoY),
-        probes: one.clone(),
-        below_m: 0.03,
-    };
-    let mut env = RlEnv::new(&cfg).unwrap();
-    let mut read = 0;
+    let mut env = RlEnv::new(cfg).unwrap();
+    let mut n = 0;
     for seed in [7_000_002, 7_000_003] {
         env.reset(seed, false).unwrap();
         loop {
             let v = env.view().unwrap();
-            let h = v.task.s_m.z;
-            read += usize::from((IN_OPENING_M..0.03).contains(&h));
+            n += usize::from(counted(v.task.s_m.z));
             let mut o = [0.0; SEARCH_VIEW_DIM];
             view.observe(&[v], &mut o);
             if env.step(&teacher.means(&o), false).unwrap().done() {
@@ -377,6 +374,33 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
             }
         }
     }
+    n
+}
+
+#[test]
+fn a_belief_probe_fits_over_rounds_of_its_own_search() {
+    use learner::rl::search::{IN_OPENING_M, ProbedSearchView};
+    let cfg = config();
+    let probe = |rounds: u32| noy_probe(rounds, false);
+    let search = TouchSearchConfig {
+        probe: Some(probe(2)),
+        ..Default::default()
+    };
+    search.validate().unwrap();
+    let (one, one_calls) = fit_noy(&cfg, &search, &probe(1));
+    let (two, calls) = fit_noy(&cfg, &search, &probe(2));
+    // Two rounds of two episodes each, the first as a one-round fit.
+    assert_eq!(calls.iter().map(|c| c.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
+    assert_eq!(one_calls, calls[..2]);
+    // The second round is the search told by the first round's probe, as
+    // the teacher is, on the next two seeds: its states where the probe is
+    // read are the rows it added.
+    let view = ProbedSearchView {
+        repr: std::sync::Arc::new(NoY),
+        probes: one.clone(),
+        below_m: 0.03,
+    };
+    let read = states_of_told_search(&cfg, &search, &view, |h| (IN_OPENING_M..0.03).contains(&h));
     assert!(read > 0);
     assert_eq!(calls[3].1 - calls[1].1, read, "{calls:?}");
     // Both probes read x and the roll exactly.
@@ -402,31 +426,14 @@ fn a_belief_probe_fits_over_rounds_of_its_own_search() {
 
 #[test]
 fn an_approach_probe_tells_the_way_down() {
-    use learner::rl::search::{IN_OPENING_M, ProbedSearchView, fit_belief_probe};
+    use learner::rl::search::{IN_OPENING_M, ProbedSearchView};
     let cfg = config();
-    let probe = |approach: bool, rounds: u32| BeliefProbeConfig {
-        representation: "unused".into(),
-        fit_episodes: 2,
-        fit_hole_error_m: 0.01,
-        fit_roll_error_rad: 0.0,
-        below_m: 0.03,
-        fit_rounds: rounds,
-        approach,
-    };
     let search = TouchSearchConfig {
-        probe: Some(probe(true, 2)),
+        probe: Some(noy_probe(2, true)),
         ..Default::default()
     };
-    let fit = |pc: &BeliefProbeConfig| {
-        let mut calls = Vec::new();
-        let p = fit_belief_probe(&cfg, &NoY, &search, pc, 7_000_000, &mut |ep, rows| {
-            calls.push((ep, rows))
-        })
-        .unwrap();
-        (p, calls)
-    };
-    let (without, without_calls) = fit(&probe(false, 1));
-    let (with, with_calls) = fit(&probe(true, 1));
+    let (without, without_calls) = fit_noy(&cfg, &search, &noy_probe(1, false));
+    let (with, with_calls) = fit_noy(&cfg, &search, &noy_probe(1, true));
     assert!(without.approach.is_none());
     // The first round's search is told the truth either way: the same near
     // rows and probe, and the states above the band as the approach's rows.
@@ -457,24 +464,8 @@ fn an_approach_probe_tells_the_way_down() {
     assert_eq!(o[3], t.s_psi_rad);
     // A second round is the search told by both probes, on the next
     // seeds: every state of it above the opening gives a row.
-    let (_, calls) = fit(&probe(true, 2));
+    let (_, calls) = fit_noy(&cfg, &search, &noy_probe(2, true));
     assert_eq!(calls[..2], with_calls[..]);
-    let teacher = TouchSearch {
-        cfg: search.clone(),
-        scale: cfg.action.clone(),
-    };
-    let mut rows = 0;
-    for seed in [7_000_002, 7_000_003] {
-        env.reset(seed, false).unwrap();
-        loop {
-            let v = env.view().unwrap();
-            rows += usize::from(v.task.s_m.z >= IN_OPENING_M);
-            let mut o = [0.0; SEARCH_VIEW_DIM];
-            view.observe(&[v], &mut o);
-            if env.step(&teacher.means(&o), false).unwrap().done() {
-                break;
-            }
-        }
-    }
+    let rows = states_of_told_search(&cfg, &search, &view, |h| h >= IN_OPENING_M);
     assert_eq!(calls[3].1 - calls[1].1, rows, "{calls:?}");
 }
