@@ -335,6 +335,10 @@ fn the_touch_search_teaches_in_the_students_environment() {
         let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
         assert!(e.to_string().contains("search_teacher.slide_m"), "{e}");
     }
+    let mut bad = cfg.clone();
+    bad.search_teacher.as_mut().unwrap().descent_m = Some(0.002);
+    let e = distill(bad, &dir.path().join("u"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("search_teacher.descent_m"), "{e}");
     // A search told by a representation reads it through the environment's
     // camera, which the student shares: a separate [camera] is refused
     // before the probe is fitted (its model, missing here, is not even

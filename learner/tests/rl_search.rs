@@ -181,6 +181,28 @@ fn the_search_step_follows_its_spiral() {
     let close = high([0.0004, 0.0003]);
     assert_eq!(s.step(&close).x, -0.0004);
     assert!((proportional.step(&close).x + 0.0004 * cfg.step_m / 0.01).abs() < 1e-15);
+    // A fast descent: 1.5 mm down above descent_until_m (20 mm), step_m
+    // at and below it; the lateral step and the search on the box are
+    // unchanged.
+    let fast = TouchSearch {
+        cfg: TouchSearchConfig {
+            descent_m: Some(0.0015),
+            ..cfg.clone()
+        },
+        scale: Default::default(),
+    };
+    for (b, z, down) in [
+        ([0.004, -0.003], 0.1, 0.0015),
+        ([0.0004, 0.0003], 0.021, 0.0015),
+        ([0.004, -0.003], 0.02, cfg.step_m),
+        ([0.004, -0.003], 0.005, cfg.step_m),
+    ] {
+        let o = obs(b, z, [0.0; 3]);
+        let (d, slow) = (fast.step(&o), s.step(&o));
+        assert_eq!((d.x, d.y, d.z), (slow.x, slow.y, -down), "at {z} m");
+    }
+    let on_box = obs([0.004, 0.0], 0.0, [0.0, 0.0, cfg.press_n * 1.5]);
+    assert_eq!(fast.step(&on_box), s.step(&on_box));
 }
 
 #[test]
@@ -204,6 +226,20 @@ fn bad_search_settings_are_named() {
             "search_teacher.approach_radius_m",
             TouchSearchConfig {
                 approach_radius_m: Some(0.0005),
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.descent_m",
+            TouchSearchConfig {
+                descent_m: Some(-0.001),
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.descent_until_m",
+            TouchSearchConfig {
+                descent_until_m: f64::NAN,
                 ..Default::default()
             },
         ),

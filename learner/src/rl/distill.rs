@@ -396,7 +396,11 @@ pub fn distill(
             // A step the action scale would clip per component would turn
             // the spiral, not just shorten it.
             let max = student_cfg.env.action.max_step_m;
-            for (name, v) in [("slide_m", search.slide_m), ("step_m", search.step_m)] {
+            for (name, v) in [
+                ("slide_m", search.slide_m),
+                ("step_m", search.step_m),
+                ("descent_m", search.descent_m.unwrap_or(0.0)),
+            ] {
                 if v > max {
                     return Err(field(
                         &format!("search_teacher.{name}"),
@@ -747,6 +751,30 @@ const PROBE_FIT_SEED: u64 = 7_000_000;
 
 /// The representation-told search teacher's view: its probe fitted in the
 /// student's environment (a fresh run) or read back (a resumed one).
+/// The touch-search teacher of the distillation run in `out` as it
+/// labelled the run's rounds: its search and its view, through the run's
+/// saved probes when a representation tells it. For comparing a student
+/// with its teacher on the same episodes (`distill_fit shadow`).
+pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>), RunError> {
+    let cfg_path = out.join("distill-config.json");
+    let cfg: DistillConfig = read_json(&cfg_path)?;
+    let search = cfg
+        .search_teacher
+        .as_ref()
+        .ok_or_else(|| refuse("not a distillation from the touch search".into(), &cfg_path))?;
+    let view: Arc<dyn Observer> = match &search.probe {
+        Some(p) => probed_view(search, p, &cfg.student, out, false)?,
+        None => Arc::new(SearchView {
+            std_m: search.hole_error_m,
+        }),
+    };
+    let teacher = TouchSearch {
+        cfg: search.clone(),
+        scale: cfg.student.env.action.clone(),
+    };
+    Ok((teacher, view))
+}
+
 fn probed_view(
     search: &TouchSearchConfig,
     p: &BeliefProbeConfig,

@@ -77,6 +77,17 @@ pub struct TouchSearchConfig {
     /// proportional one is a linear function of the belief
     /// (docs/experiments.md, "Where the z student misses").
     pub approach_radius_m: Option<f64>,
+    /// Step down above the box while the tip is more than
+    /// `descent_until_m` above it, m: a faster descent than `step_m`, which
+    /// the box is still met at. None (the default): `step_m` all the way.
+    /// Why: from the start pose the descent takes about 250 of the
+    /// episode's 500 steps, and the search on the box needs the time; at
+    /// 1.5 mm per step all the way the peg met the box hard enough to stop
+    /// the episode with a controller fault (docs/experiments.md, "Where the
+    /// student on z lands").
+    pub descent_m: Option<f64>,
+    /// Height above the box below which the descent slows to `step_m`, m.
+    pub descent_until_m: f64,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
     /// `hole_error_m` must then be 0.
@@ -174,6 +185,8 @@ impl Default for TouchSearchConfig {
             roll_gain: 1.0,
             stick_n: None,
             approach_radius_m: None,
+            descent_m: None,
+            descent_until_m: 0.02,
             probe: None,
         }
     }
@@ -213,7 +226,10 @@ impl TouchSearchConfig {
                 return Err(FieldError::new(f(name), v, "must be positive and finite"));
             }
         }
-        for (name, v) in [("lead_m_per_n", self.lead_m_per_n)] {
+        for (name, v) in [
+            ("lead_m_per_n", self.lead_m_per_n),
+            ("descent_until_m", self.descent_until_m),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(FieldError::new(
                     f(name),
@@ -227,6 +243,15 @@ impl TouchSearchConfig {
         {
             return Err(FieldError::new(
                 f("stick_n"),
+                v,
+                "must be positive and finite",
+            ));
+        }
+        if let Some(v) = self.descent_m
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(FieldError::new(
+                f("descent_m"),
                 v,
                 "must be positive and finite",
             ));
@@ -434,7 +459,10 @@ impl TouchSearch {
         let mut d = Vector3::new(-bx, -by, 0.0);
         let radius = c.approach_radius_m.unwrap_or(c.step_m);
         d *= c.step_m / lateral.max(radius);
-        d.z = -c.step_m;
+        d.z = match c.descent_m {
+            Some(fast) if o[2] > c.descent_until_m => -fast,
+            _ => -c.step_m,
+        };
         d
     }
 
