@@ -15,6 +15,15 @@
 //! phased by the run's own search settings: in the opening, on the box,
 //! above it below the probe's band, higher up).
 //!
+//! `distill_fit shadow RUN_DIR EPISODES student|teacher [last]`: a
+//! touch-search distillation's student (its best validated policy, or its
+//! last) or its teacher (as it labelled the run's rounds) driven over the
+//! evaluation's episodes (seeds 1 000 000 on), with the teacher's action
+//! and phase read at every state: per episode, where the tip first met
+//! the box against where the teacher believed the opening, how long it
+//! searched there, how close it came to the opening's axis, and how the
+//! student's lateral step agreed with the teacher's on the box.
+//!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made
 //! explicit, to tell what the student cannot fit from what it cannot find.
@@ -162,10 +171,144 @@ fn phases(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
+/// Per-episode record of [`shadow`].
+#[derive(Default)]
+struct Shadowed {
+    outcome: usize,
+    /// First step on the box: its index, the tip's true distance from the
+    /// hole's axis, the teacher's belief's error there (mm).
+    land: Option<(u32, f64, f64)>,
+    on_box: u32,
+    /// Nearest the tip came to the axis on the box after landing, mm.
+    min_r: f64,
+    /// Farthest, mm.
+    max_r: f64,
+    /// First step in the opening.
+    opening: Option<u32>,
+    /// Sum of cosines between the student's and the teacher's lateral steps
+    /// on the box, and their count.
+    cos: (f64, u32),
+}
+
+fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
+    use learner::rl::RlEnv;
+    use learner::rl::search::{SEARCH_VIEW_DIM, SearchPhase};
+    let usage = "usage: distill_fit shadow RUN_DIR EPISODES student|teacher [last]";
+    let dir = std::path::PathBuf::from(args.get(2).ok_or(usage)?);
+    let episodes: u64 = args.get(3).ok_or(usage)?.parse()?;
+    let student_drives = match args.get(4).map(String::as_str) {
+        Some("student") => true,
+        Some("teacher") => false,
+        _ => return Err(usage.into()),
+    };
+    let last = args.get(5).map(String::as_str) == Some("last");
+    let (teacher, t_view) = learner::rl::distill::search_teacher_of(&dir)?;
+    let ckpt = learner::rl::run::read_checkpoint(&dir.join("checkpoint.json"))?;
+    let chosen = ckpt.chosen_policy(last);
+    eprintln!("student: {chosen}");
+    let policy = chosen.policy.clone();
+    let s_view = ckpt.config.observation.observer_on(1)?;
+    let mut env = RlEnv::new(&ckpt.config.env)?;
+    let (mut to, mut so) = (vec![0.0; SEARCH_VIEW_DIM], vec![0.0; s_view.dim()]);
+    let mut all = Vec::new();
+    for ep in 0..episodes {
+        env.reset(1_000_000 + ep, true)?;
+        let mut r = Shadowed {
+            min_r: f64::INFINITY,
+            ..Default::default()
+        };
+        let mut step = 0u32;
+        let out = loop {
+            let v = env.view().ok_or("no view after reset")?;
+            t_view.observe(&[v], &mut to);
+            s_view.observe(&[env.view().ok_or("no view")?], &mut so);
+            let (at, st) = (teacher.means(&to), policy.means(&so));
+            let s = env.task().s_m;
+            let rad = 1e3 * s.x.hypot(s.y);
+            match teacher.cfg.phase(&to) {
+                SearchPhase::OnBox => {
+                    if r.land.is_none() {
+                        let e = 1e3 * (to[0] - s.x).hypot(to[1] - s.y);
+                        r.land = Some((step, rad, e));
+                    }
+                    r.on_box += 1;
+                    r.min_r = r.min_r.min(rad);
+                    r.max_r = r.max_r.max(rad);
+                    let (nt, ns) = (at[0].hypot(at[1]), st[0].hypot(st[1]));
+                    if nt > 1e-9 && ns > 1e-9 {
+                        r.cos.0 += (at[0] * st[0] + at[1] * st[1]) / (nt * ns);
+                        r.cos.1 += 1;
+                    }
+                }
+                SearchPhase::InOpening => {
+                    r.opening.get_or_insert(step);
+                }
+                SearchPhase::Above => {}
+            }
+            let o = env.step(if student_drives { &st } else { &at }, true)?;
+            step += 1;
+            if o.done() {
+                break o;
+            }
+        };
+        r.outcome = out.outcome.index();
+        let f = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
+        println!(
+            "ep {ep}: {} | landed at step {} {} mm from the axis, belief {} mm off | {} steps on the box, nearest {} mm, farthest {} mm | opening at step {} | cos {}",
+            out.outcome.name(),
+            r.land.map_or("-".into(), |l| l.0.to_string()),
+            f(r.land.map(|l| l.1)),
+            f(r.land.map(|l| l.2)),
+            r.on_box,
+            f(r.min_r.is_finite().then_some(r.min_r)),
+            f((r.on_box > 0).then_some(r.max_r)),
+            r.opening.map_or("-".into(), |s| s.to_string()),
+            f((r.cos.1 > 0).then(|| r.cos.0 / r.cos.1 as f64)),
+        );
+        all.push(r);
+    }
+    println!(
+        "outcome | episodes | landed (mean step, mm from the axis, belief mm off) | steps on the box | nearest, farthest mm | reached the opening | cos"
+    );
+    for (i, o) in learner::rl::Outcome::ALL.iter().enumerate() {
+        let g: Vec<&Shadowed> = all.iter().filter(|r| r.outcome == i).collect();
+        if g.is_empty() {
+            continue;
+        }
+        // Means over the episodes that have the value ("-" for none).
+        let mean = |f: &dyn Fn(&Shadowed) -> Option<f64>, digits: usize| {
+            let v: Vec<f64> = g.iter().filter_map(|r| f(r)).collect();
+            if v.is_empty() {
+                "-".to_string()
+            } else {
+                format!("{:.*}", digits, v.iter().sum::<f64>() / v.len() as f64)
+            }
+        };
+        println!(
+            "{} | {} | {} ({}, {}, {}) | {} | {}, {} | {} | {}",
+            o.name(),
+            g.len(),
+            g.iter().filter(|r| r.land.is_some()).count(),
+            mean(&|r| r.land.map(|l| f64::from(l.0)), 0),
+            mean(&|r| r.land.map(|l| l.1), 1),
+            mean(&|r| r.land.map(|l| l.2), 1),
+            mean(&|r| Some(f64::from(r.on_box)), 0),
+            mean(&|r| r.min_r.is_finite().then_some(r.min_r), 1),
+            mean(&|r| (r.on_box > 0).then_some(r.max_r), 1),
+            g.iter().filter(|r| r.opening.is_some()).count(),
+            mean(&|r| (r.cos.1 > 0).then(|| r.cos.0 / f64::from(r.cos.1)), 2),
+        );
+    }
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("phases") {
         return phases(&args);
+    }
+    if args.get(1).map(String::as_str) == Some("shadow") {
+        return shadow(&args);
     }
     let usage = "usage: distill_fit RUN_DIR EPOCHS HIDDEN [TEST_ROUNDS]";
     let dir = std::path::PathBuf::from(args.get(1).ok_or(usage)?);

@@ -14,7 +14,9 @@
 //!   (`learner::rl::search::TouchSearch`) told the hole with a per-episode
 //!   error of SIGMA_MM per axis (`observe::HoleError`, the same draw as
 //!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
-//!   `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N` override its settings,
+//!   `TOUCH_STEP_MM`, `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N`,
+//!   `TOUCH_DESCENT_UNTIL_MM` override its settings (in `zsearch` too),
+//!   `TOUCH_DESCENT_MM` sets `descent_m`,
 //!   `TOUCH_STICK_N` sets `stick_n`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
 //!   triangle, semicircle, hexagon) picks the peg. Prints each episode and
@@ -31,6 +33,13 @@
 //!   adds the approach probe above it (`approach`),
 //!   `TOUCH_APPROACH_RADIUS_MM` sets `approach_radius_m`, `TOUCH_TRACE`
 //!   prints each step's height and roll.
+//! - `touch_probe zfit MODEL_DIR WORLD_TOML|- FIT TEST`: how well z places
+//!   the tip relative to the hole near the box (below 30 mm, above the
+//!   opening): the states of the search told the truth with a 10 mm error
+//!   (`TOUCH_FIT_ERROR_MM`), FIT episodes (seeds from 3 000 000) to fit and
+//!   TEST others (seeds from 1 000 000) to score; a linear probe (the
+//!   search's) against MLPs of z means fitted for `TOUCH_ZFIT_EPOCHS` (200)
+//!   epochs. Prints the test RMS of (x, y) together, in mm.
 //!
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
@@ -159,6 +168,29 @@ fn press() {
     }
 }
 
+/// The search's settings from the environment, for tuning (see the
+/// module's doc).
+fn overrides(sc: &mut TouchSearchConfig) {
+    let var = |name: &str, v: &mut f64, unit: f64| {
+        if let Ok(s) = std::env::var(name) {
+            *v = s.parse::<f64>().expect(name) * unit;
+        }
+    };
+    var("TOUCH_PITCH_MM", &mut sc.pitch_m, 1e-3);
+    var("TOUCH_SLIDE_MM", &mut sc.slide_m, 1e-3);
+    var("TOUCH_STEP_MM", &mut sc.step_m, 1e-3);
+    var("TOUCH_PRESS_N", &mut sc.press_n, 1.0);
+    var("TOUCH_LEAD_MM_PER_N", &mut sc.lead_m_per_n, 1e-3);
+    var("TOUCH_ROLL_GAIN", &mut sc.roll_gain, 1.0);
+    if let Ok(v) = std::env::var("TOUCH_STICK_N") {
+        sc.stick_n = Some(v.parse().expect("TOUCH_STICK_N"));
+    }
+    if let Ok(v) = std::env::var("TOUCH_DESCENT_MM") {
+        sc.descent_m = Some(v.parse::<f64>().expect("TOUCH_DESCENT_MM") * 1e-3);
+    }
+    var("TOUCH_DESCENT_UNTIL_MM", &mut sc.descent_until_m, 1e-3);
+}
+
 fn search(sigma_mm: f64, episodes: u64) {
     let cfg = config();
     let mut env = RlEnv::new(&cfg).expect("env");
@@ -167,19 +199,7 @@ fn search(sigma_mm: f64, episodes: u64) {
         hole_error_m: sigma_mm * 1e-3,
         ..Default::default()
     };
-    let var = |name: &str, v: &mut f64, unit: f64| {
-        if let Ok(s) = std::env::var(name) {
-            *v = s.parse::<f64>().expect(name) * unit;
-        }
-    };
-    var("TOUCH_PITCH_MM", &mut sc.pitch_m, 1e-3);
-    var("TOUCH_SLIDE_MM", &mut sc.slide_m, 1e-3);
-    var("TOUCH_PRESS_N", &mut sc.press_n, 1.0);
-    var("TOUCH_LEAD_MM_PER_N", &mut sc.lead_m_per_n, 1e-3);
-    var("TOUCH_ROLL_GAIN", &mut sc.roll_gain, 1.0);
-    if let Ok(v) = std::env::var("TOUCH_STICK_N") {
-        sc.stick_n = Some(v.parse().expect("TOUCH_STICK_N"));
-    }
+    overrides(&mut sc);
     sc.validate().unwrap_or_else(|e| panic!("{e}"));
     let view = SearchView {
         std_m: sc.hole_error_m,
@@ -286,13 +306,14 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     assert!(pc.fit_rounds >= 1, "TOUCH_FIT_ROUNDS must be at least 1");
     // TOUCH_ROLL_GAIN: the search's roll gain (its fitting episodes' too).
     // TOUCH_APPROACH_RADIUS_MM: the search's `approach_radius_m`.
-    let search = TouchSearchConfig {
-        roll_gain: std::env::var("TOUCH_ROLL_GAIN").map_or(1.0, |v| v.parse().expect("gain")),
+    let mut search = TouchSearchConfig {
+        roll_gain: 1.0,
         approach_radius_m: std::env::var("TOUCH_APPROACH_RADIUS_MM")
             .ok()
             .map(|v| v.parse::<f64>().expect("TOUCH_APPROACH_RADIUS_MM: mm") * 1e-3),
         ..Default::default()
     };
+    overrides(&mut search);
     search.validate().unwrap_or_else(|e| panic!("{e}"));
     let probes = fit_belief_probe(
         &cfg,
@@ -419,9 +440,182 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
     );
 }
 
+/// [`near_rows`]' rows: inputs, targets, (episode, on the box).
+type Rows = (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<(u64, bool)>);
+
+/// Near-box rows (z means; tip x, y relative to the hole, mm; the episode
+/// and whether the tip is on the box, below 1 mm) of `episodes` episodes from `first_seed` of the search told the truth
+/// with a per-episode error of `err_m`.
+fn near_rows(
+    cfg: &RlEnvConfig,
+    repr: &dyn Observer,
+    err_m: f64,
+    first_seed: u64,
+    episodes: u64,
+) -> Rows {
+    let mut env = RlEnv::new(cfg).expect("env");
+    let view = SearchView { std_m: err_m };
+    let policy = TouchSearch {
+        cfg: TouchSearchConfig {
+            hole_error_m: err_m,
+            roll_gain: 0.01,
+            ..Default::default()
+        },
+        scale: cfg.action.clone(),
+    };
+    let (mut xs, mut ys, mut eps) = (Vec::new(), Vec::new(), Vec::new());
+    let mut z = vec![0.0; repr.dim()];
+    for ep in 0..episodes {
+        env.reset(first_seed + ep, true).expect("reset");
+        loop {
+            let v = env.view().expect("view");
+            let s = v.task.s_m;
+            let mut o = [0.0; SEARCH_VIEW_DIM];
+            view.observe(std::slice::from_ref(&v), &mut o);
+            if s.z < 0.03 && s.z > -0.002 {
+                repr.observe(std::slice::from_ref(&v), &mut z);
+                xs.push(z.clone());
+                ys.push(vec![s.x * 1e3, s.y * 1e3]);
+                eps.push((ep, s.z < 0.001));
+            }
+            if env.step(&policy.means(&o), true).expect("step").done() {
+                break;
+            }
+        }
+        eprint!(
+            "\rrows: {ep} episodes from {first_seed}, {} states",
+            xs.len()
+        );
+    }
+    eprintln!();
+    (xs, ys, eps)
+}
+
+/// Prints the RMS error of (x, y) together over the rows: all, within
+/// 10 mm of the axis, on the box, 1–30 mm above it, and the whole split
+/// into each episode's mean error (bias) and the rest (jitter about it), mm.
+fn report(name: &str, pred: &[Vec<f64>], ys: &[Vec<f64>], eps: &[(u64, bool)]) {
+    // Sums of squares and counts: all, near the axis, on the box, above.
+    let mut acc = [(0.0, 0usize); 4];
+    let mut by_ep: std::collections::BTreeMap<u64, Vec<[f64; 2]>> = Default::default();
+    for ((p, y), &(ep, on_box)) in pred.iter().zip(ys).zip(eps) {
+        let e = [p[0] - y[0], p[1] - y[1]];
+        let sq = e[0] * e[0] + e[1] * e[1];
+        let near = y[0].hypot(y[1]) < 10.0;
+        for (i, yes) in [true, near, on_box, !on_box].into_iter().enumerate() {
+            if yes {
+                acc[i].0 += sq;
+                acc[i].1 += 1;
+            }
+        }
+        by_ep.entry(ep).or_default().push(e);
+    }
+    let (mut bias, mut jitter) = (0.0, 0.0);
+    for errs in by_ep.values() {
+        let m = errs.len() as f64;
+        let mean = [
+            errs.iter().map(|e| e[0]).sum::<f64>() / m,
+            errs.iter().map(|e| e[1]).sum::<f64>() / m,
+        ];
+        for e in errs {
+            bias += mean[0].powi(2) + mean[1].powi(2);
+            jitter += (e[0] - mean[0]).powi(2) + (e[1] - mean[1]).powi(2);
+        }
+    }
+    let rms = |(sq, n): (f64, usize)| (sq / n.max(1) as f64).sqrt();
+    let n = acc[0].1.max(1) as f64;
+    println!(
+        "{name} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1}",
+        rms(acc[0]),
+        rms(acc[1]),
+        rms(acc[2]),
+        rms(acc[3]),
+        (bias / n).sqrt(),
+        (jitter / n).sqrt()
+    );
+}
+
+/// RMS error of (x, y) together over the rows, mm.
+fn report_fit(pred: &[Vec<f64>], ys: &[Vec<f64>]) -> f64 {
+    let sq: f64 = pred
+        .iter()
+        .zip(ys)
+        .map(|(p, y)| (p[0] - y[0]).powi(2) + (p[1] - y[1]).powi(2))
+        .sum();
+    (sq / ys.len().max(1) as f64).sqrt()
+}
+
+fn zfit(model: &str, world: &str, fit: u64, test: u64) {
+    use learner::rl::GaussianPolicy;
+    use learner::rl::mlp::MseFit;
+    use learner::rl::obs_norm::ObsNorm;
+    use learner::rl::ppo::Adam;
+    use learner::rl::probe::LinearProbe;
+    let mut cfg = config();
+    if world != "-" {
+        cfg.world = hw_sim::WorldConfig::from_file(std::path::Path::new(world)).expect("world");
+        cfg.world.task.enabled = true;
+    }
+    let repr = learner::rl::ObservationKind::Representation(model.into())
+        .observer_on(0)
+        .expect("model");
+    let err = std::env::var("TOUCH_FIT_ERROR_MM").map_or(10.0, |v| v.parse().expect("mm")) * 1e-3;
+    let epochs: usize =
+        std::env::var("TOUCH_ZFIT_EPOCHS").map_or(200, |v| v.parse().expect("epochs"));
+    let (xs, ys, _) = near_rows(&cfg, repr.as_ref(), err, 3_000_000, fit);
+    let (xt, yt, et) = near_rows(&cfg, repr.as_ref(), err, 1_000_000, test);
+    let on_box = et.iter().filter(|e| e.1).count();
+    println!(
+        "{} fitting states, {} test states ({on_box} on the box); test RMS of (x, y) together, mm",
+        xs.len(),
+        xt.len()
+    );
+    println!(
+        "reading | all | within 10 mm of the axis | on the box | 1-30 mm above | per-episode bias | jitter about it"
+    );
+    report("zero", &vec![vec![0.0, 0.0]; yt.len()], &yt, &et);
+    let linear = LinearProbe::fit(&xs, &ys, 1e-3).expect("fit");
+    let lp: Vec<Vec<f64>> = xt.iter().map(|z| linear.predict(z)).collect();
+    report("linear probe (ridge 1e-3)", &lp, &yt, &et);
+    let d = xs[0].len();
+    let flat = |v: &[Vec<f64>]| v.iter().flatten().copied().collect::<Vec<f64>>();
+    let (x_fit, y_fit, x_test) = (flat(&xs), flat(&ys), flat(&xt));
+    for hidden in [vec![64, 64], vec![256, 256]] {
+        let mut rng = hw_sim::rng::seeded(1, 0);
+        let mut net = GaussianPolicy::new(d, &hidden, 2, 0.0, &mut rng);
+        let mut norm = ObsNorm::new(d, 5.0);
+        norm.update(&x_fit);
+        net.obs_norm = Some(norm);
+        let inputs = net.inputs(&x_fit);
+        let mlp = net.mlp();
+        let mut adam = Adam::default();
+        let step = MseFit {
+            epochs: 1,
+            minibatch: 256,
+            learning_rate: 1e-3,
+            l2: 0.0,
+        };
+        for e in 1..=epochs {
+            step.run(&mlp, &mut net.net, &mut adam, &inputs, &y_fit, &mut rng);
+            if e % 50 == 0 || e == epochs {
+                let p = net.means(&x_test);
+                let p: Vec<Vec<f64>> = p.chunks_exact(2).map(<[f64]>::to_vec).collect();
+                let f: Vec<Vec<f64>> = net
+                    .means(&x_fit)
+                    .chunks_exact(2)
+                    .map(<[f64]>::to_vec)
+                    .collect();
+                let (fa, fitted) = (report_fit(&f, &ys), format!("MLP {hidden:?}, epoch {e}"));
+                report(&format!("{fitted} (fitting states {fa:.1})"), &p, &yt, &et);
+            }
+        }
+    }
+}
+
 fn main() {
     let usage = "usage: touch_probe press | touch_probe search SIGMA_MM EPISODES | \
-                 touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT_EPISODES TEST_EPISODES";
+                 touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT_EPISODES TEST_EPISODES | \
+                 touch_probe zfit MODEL_DIR WORLD_TOML|- FIT_EPISODES TEST_EPISODES";
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
         Some("press") => press(),
@@ -436,6 +630,13 @@ fn main() {
             let fit: u64 = args.get(4).expect(usage).parse().expect(usage);
             let test: u64 = args.get(5).expect(usage).parse().expect(usage);
             zsearch(model, world, fit, test)
+        }
+        Some("zfit") => {
+            let model = args.get(2).expect(usage);
+            let world = args.get(3).expect(usage);
+            let fit: u64 = args.get(4).expect(usage).parse().expect(usage);
+            let test: u64 = args.get(5).expect(usage).parse().expect(usage);
+            zfit(model, world, fit, test)
         }
         _ => panic!("{usage}"),
     }
