@@ -206,6 +206,10 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     let ckpt = learner::rl::run::read_checkpoint(&dir.join("checkpoint.json"))?;
     let chosen = ckpt.chosen_policy(last);
     eprintln!("student: {chosen}");
+    eprintln!(
+        "driven by the {}",
+        if student_drives { "student" } else { "teacher" }
+    );
     let policy = chosen.policy.clone();
     let s_view = ckpt.config.observation.observer_on(1)?;
     let mut env = RlEnv::new(&ckpt.config.env)?;
@@ -240,9 +244,12 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
                         r.cos.1 += 1;
                     }
                 }
-                SearchPhase::InOpening => {
+                // Below the top face within the opening's reach of the
+                // axis (a tip beside the box is below it too).
+                SearchPhase::InOpening if rad < 25.0 => {
                     r.opening.get_or_insert(step);
                 }
+                SearchPhase::InOpening => {}
                 SearchPhase::Above => {}
             }
             let o = env.step(if student_drives { &st } else { &at }, true)?;

@@ -444,8 +444,9 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
 type Rows = (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<(u64, bool)>);
 
 /// Near-box rows (z means; tip x, y relative to the hole, mm; the episode
-/// and whether the tip is on the box, below 1 mm) of `episodes` episodes from `first_seed` of the search told the truth
-/// with a per-episode error of `err_m`.
+/// and whether the tip is on the box, below 1 mm) of `episodes` episodes
+/// from `first_seed` of the search told the truth with a per-episode error
+/// of `err_m`.
 fn near_rows(
     cfg: &RlEnvConfig,
     repr: &dyn Observer,

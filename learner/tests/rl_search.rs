@@ -237,9 +237,23 @@ fn bad_search_settings_are_named() {
             },
         ),
         (
+            "search_teacher.descent_m",
+            TouchSearchConfig {
+                descent_m: Some(0.0),
+                ..Default::default()
+            },
+        ),
+        (
             "search_teacher.descent_until_m",
             TouchSearchConfig {
                 descent_until_m: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.descent_until_m",
+            TouchSearchConfig {
+                descent_until_m: -0.01,
                 ..Default::default()
             },
         ),

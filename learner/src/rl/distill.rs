@@ -749,8 +749,6 @@ fn approach_probe_path(out: &Path) -> PathBuf {
 /// validation's and evaluation's (from 1 000 000) episodes.
 const PROBE_FIT_SEED: u64 = 7_000_000;
 
-/// The representation-told search teacher's view: its probe fitted in the
-/// student's environment (a fresh run) or read back (a resumed one).
 /// The touch-search teacher of the distillation run in `out` as it
 /// labelled the run's rounds: its search and its view, through the run's
 /// saved probes when a representation tells it. For comparing a student
@@ -775,6 +773,8 @@ pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>),
     Ok((teacher, view))
 }
 
+/// The representation-told search teacher's view: its probe fitted in the
+/// student's environment (a fresh run) or read back (a resumed one).
 fn probed_view(
     search: &TouchSearchConfig,
     p: &BeliefProbeConfig,

@@ -78,13 +78,14 @@ pub struct TouchSearchConfig {
     /// (docs/experiments.md, "Where the z student misses").
     pub approach_radius_m: Option<f64>,
     /// Step down above the box while the tip is more than
-    /// `descent_until_m` above it, m: a faster descent than `step_m`, which
-    /// the box is still met at. None (the default): `step_m` all the way.
-    /// Why: from the start pose the descent takes about 250 of the
-    /// episode's 500 steps, and the search on the box needs the time; at
-    /// 1.5 mm per step all the way the peg met the box hard enough to stop
-    /// the episode with a controller fault (docs/experiments.md, "Where the
-    /// student on z lands").
+    /// `descent_until_m` above it, m; `step_m` below that height, so the
+    /// box is met at `step_m` (a last fast step may pass the height by up
+    /// to `descent_m`). None (the default): `step_m` all the way. Why: from
+    /// the start pose the descent takes about 250 of the episode's 500
+    /// steps, and the search on the box needs the time; at 1.5 mm per step
+    /// all the way the peg met the box hard enough to end most episodes
+    /// early with a controller fault (docs/experiments.md, "Where the
+    /// student on z lands"). Told by z, the faster descent completed fewer.
     pub descent_m: Option<f64>,
     /// Height above the box below which the descent slows to `step_m`, m.
     pub descent_until_m: f64,
