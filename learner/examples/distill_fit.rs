@@ -21,8 +21,9 @@
 //! evaluation's episodes (seeds 1 000 000 on), with the teacher's action
 //! and phase read at every state: per episode, where the tip first met
 //! the box against where the teacher believed the opening, how long it
-//! searched there, how close it came to the opening's axis, and how the
-//! student's lateral step agreed with the teacher's on the box.
+//! searched there, how close it came to the opening's axis, how the
+//! student's lateral step agreed with the teacher's on the box, and how far
+//! the teacher's belief was off on the way down (above the probe's band).
 //!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made
@@ -188,6 +189,14 @@ struct Shadowed {
     /// Sum of cosines between the student's and the teacher's lateral steps
     /// on the box, and their count.
     cos: (f64, u32),
+    /// Squared error of the teacher's belief (x, y together, mm²) summed
+    /// over the way down above the probe's band, and its count.
+    way_down: (f64, u32),
+}
+
+/// The teacher's belief's RMS error on an episode's way down, mm.
+fn way_down_rms(r: &Shadowed) -> Option<f64> {
+    (r.way_down.1 > 0).then(|| (r.way_down.0 / f64::from(r.way_down.1)).sqrt())
 }
 
 fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
@@ -213,6 +222,9 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
     let policy = chosen.policy.clone();
     let s_view = ckpt.config.observation.observer_on(1)?;
     let mut env = RlEnv::new(&ckpt.config.env)?;
+    // The probe's band: above it the belief is the approach probe's (or
+    // the truth's), below it the near probe's.
+    let band = teacher.cfg.probe.as_ref().map_or(0.03, |p| p.below_m);
     let (mut to, mut so) = (vec![0.0; SEARCH_VIEW_DIM], vec![0.0; s_view.dim()]);
     let mut all = Vec::new();
     for ep in 0..episodes {
@@ -250,6 +262,10 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
                     r.opening.get_or_insert(step);
                 }
                 SearchPhase::InOpening => {}
+                SearchPhase::Above if s.z >= band => {
+                    r.way_down.0 += 1e6 * ((to[0] - s.x).powi(2) + (to[1] - s.y).powi(2));
+                    r.way_down.1 += 1;
+                }
                 SearchPhase::Above => {}
             }
             let o = env.step(if student_drives { &st } else { &at }, true)?;
@@ -261,7 +277,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
         r.outcome = out.outcome.index();
         let f = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
         println!(
-            "ep {ep}: {} | landed at step {} {} mm from the axis, belief {} mm off | {} steps on the box, nearest {} mm, farthest {} mm | opening at step {} | cos {}",
+            "ep {ep}: {} | landed at step {} {} mm from the axis, belief {} mm off | {} steps on the box, nearest {} mm, farthest {} mm | opening at step {} | cos {} | belief RMS on the way down {} mm",
             out.outcome.name(),
             r.land.map_or("-".into(), |l| l.0.to_string()),
             f(r.land.map(|l| l.1)),
@@ -271,11 +287,12 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             f((r.on_box > 0).then_some(r.max_r)),
             r.opening.map_or("-".into(), |s| s.to_string()),
             f((r.cos.1 > 0).then(|| r.cos.0 / r.cos.1 as f64)),
+            f(way_down_rms(&r)),
         );
         all.push(r);
     }
     println!(
-        "outcome | episodes | landed (mean step, mm from the axis, belief mm off) | steps on the box | nearest, farthest mm | reached the opening | cos"
+        "outcome | episodes | landed (mean step, mm from the axis, belief mm off) | steps on the box | nearest, farthest mm | reached the opening | cos | belief RMS on the way down, mm"
     );
     for (i, o) in learner::rl::Outcome::ALL.iter().enumerate() {
         let g: Vec<&Shadowed> = all.iter().filter(|r| r.outcome == i).collect();
@@ -292,7 +309,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             }
         };
         println!(
-            "{} | {} | {} ({}, {}, {}) | {} | {}, {} | {} | {}",
+            "{} | {} | {} ({}, {}, {}) | {} | {}, {} | {} | {} | {}",
             o.name(),
             g.len(),
             g.iter().filter(|r| r.land.is_some()).count(),
@@ -304,6 +321,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             mean(&|r| (r.on_box > 0).then_some(r.max_r), 1),
             g.iter().filter(|r| r.opening.is_some()).count(),
             mean(&|r| (r.cos.1 > 0).then(|| r.cos.0 / f64::from(r.cos.1)), 2),
+            mean(&way_down_rms, 1),
         );
     }
     Ok(())
