@@ -44,7 +44,9 @@
 //! Episodes use seeds from 1 000 000, as `learner policy eval` does.
 
 use learner::rl::observe::{HoleError, Observer};
-use learner::rl::search::{SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig};
+use learner::rl::search::{
+    IN_OPENING_M, SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig,
+};
 use learner::rl::{Outcome, RlEnv, RlEnvConfig};
 use nalgebra::{Point3, Vector3};
 
@@ -265,6 +267,25 @@ fn search(sigma_mm: f64, episodes: u64) {
     );
 }
 
+/// The environment (in `world`'s world, task on, unless `-`) and the
+/// representation exported at `model`, for `zsearch` and `zfit`.
+fn on_representation(model: &str, world: &str) -> (RlEnvConfig, std::sync::Arc<dyn Observer>) {
+    let mut cfg = config();
+    if world != "-" {
+        cfg.world = hw_sim::WorldConfig::from_file(std::path::Path::new(world)).expect("world");
+        cfg.world.task.enabled = true;
+    }
+    let repr = learner::rl::ObservationKind::Representation(model.into())
+        .observer_on(0)
+        .expect("model");
+    (cfg, repr)
+}
+
+/// The fitting episodes' hole error, m: `TOUCH_FIT_ERROR_MM`, or 10 mm.
+fn fit_error_m() -> f64 {
+    std::env::var("TOUCH_FIT_ERROR_MM").map_or(10.0, |v| v.parse::<f64>().expect("mm")) * 1e-3
+}
+
 /// The search told where the hole is by a representation
 /// (`search::ProbedSearchView`): a linear probe from its z means to the
 /// tip's offset from the hole and the peg's roll relative to it, fitted on
@@ -274,21 +295,12 @@ fn search(sigma_mm: f64, episodes: u64) {
 /// stays the truth's). Height, force and the hole's yaw stay the truth's:
 /// this asks whether z places the opening well enough for the search.
 fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
-    use learner::rl::ObservationKind;
     use learner::rl::search::{BeliefProbeConfig, ProbedSearchView, fit_belief_probe};
-    let mut cfg = config();
-    if world != "-" {
-        cfg.world = hw_sim::WorldConfig::from_file(std::path::Path::new(world)).expect("world");
-        cfg.world.task.enabled = true;
-    }
-    let repr = ObservationKind::Representation(model.into())
-        .observer_on(0)
-        .expect("model");
-    let fit_err: f64 = std::env::var("TOUCH_FIT_ERROR_MM").map_or(10.0, |v| v.parse().expect("mm"));
+    let (cfg, repr) = on_representation(model, world);
     let pc = BeliefProbeConfig {
         representation: model.into(),
         fit_episodes: fit,
-        fit_hole_error_m: fit_err * 1e-3,
+        fit_hole_error_m: fit_error_m(),
         // TOUCH_FIT_ROLL_ERROR_RAD: the fitting episodes' roll error.
         fit_roll_error_rad: std::env::var("TOUCH_FIT_ROLL_ERROR_RAD")
             .map_or(0.0, |v| v.parse().expect("rad")),
@@ -473,7 +485,7 @@ fn near_rows(
             let s = v.task.s_m;
             let mut o = [0.0; SEARCH_VIEW_DIM];
             view.observe(std::slice::from_ref(&v), &mut o);
-            if s.z < 0.03 && s.z > -0.002 {
+            if s.z < 0.03 && s.z > IN_OPENING_M {
                 repr.observe(std::slice::from_ref(&v), &mut z);
                 xs.push(z.clone());
                 ys.push(vec![s.x * 1e3, s.y * 1e3]);
@@ -552,15 +564,8 @@ fn zfit(model: &str, world: &str, fit: u64, test: u64) {
     use learner::rl::obs_norm::ObsNorm;
     use learner::rl::ppo::Adam;
     use learner::rl::probe::LinearProbe;
-    let mut cfg = config();
-    if world != "-" {
-        cfg.world = hw_sim::WorldConfig::from_file(std::path::Path::new(world)).expect("world");
-        cfg.world.task.enabled = true;
-    }
-    let repr = learner::rl::ObservationKind::Representation(model.into())
-        .observer_on(0)
-        .expect("model");
-    let err = std::env::var("TOUCH_FIT_ERROR_MM").map_or(10.0, |v| v.parse().expect("mm")) * 1e-3;
+    let (cfg, repr) = on_representation(model, world);
+    let err = fit_error_m();
     let epochs: usize =
         std::env::var("TOUCH_ZFIT_EPOCHS").map_or(200, |v| v.parse().expect("epochs"));
     let (xs, ys, _) = near_rows(&cfg, repr.as_ref(), err, 3_000_000, fit);
@@ -625,19 +630,16 @@ fn main() {
             let n: u64 = args.get(3).expect(usage).parse().expect(usage);
             search(sigma, n)
         }
-        Some("zsearch") => {
+        Some(mode @ ("zsearch" | "zfit")) => {
             let model = args.get(2).expect(usage);
             let world = args.get(3).expect(usage);
             let fit: u64 = args.get(4).expect(usage).parse().expect(usage);
             let test: u64 = args.get(5).expect(usage).parse().expect(usage);
-            zsearch(model, world, fit, test)
-        }
-        Some("zfit") => {
-            let model = args.get(2).expect(usage);
-            let world = args.get(3).expect(usage);
-            let fit: u64 = args.get(4).expect(usage).parse().expect(usage);
-            let test: u64 = args.get(5).expect(usage).parse().expect(usage);
-            zfit(model, world, fit, test)
+            if mode == "zsearch" {
+                zsearch(model, world, fit, test)
+            } else {
+                zfit(model, world, fit, test)
+            }
         }
         _ => panic!("{usage}"),
     }
