@@ -16,7 +16,7 @@
 //!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
 //!   `TOUCH_STEP_MM`, `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N`,
 //!   `TOUCH_DESCENT_UNTIL_MM` override its settings (in `zsearch` too),
-//!   `TOUCH_DESCENT_MM` sets `descent_m`,
+//!   `TOUCH_DESCENT_MM` sets `descent_m`, `TOUCH_BOUND_MM` `bound_m`,
 //!   `TOUCH_STICK_N` sets `stick_n`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
 //!   triangle, semicircle, hexagon) picks the peg. Prints each episode and
@@ -191,6 +191,9 @@ fn overrides(sc: &mut TouchSearchConfig) {
         sc.descent_m = Some(v.parse::<f64>().expect("TOUCH_DESCENT_MM") * 1e-3);
     }
     var("TOUCH_DESCENT_UNTIL_MM", &mut sc.descent_until_m, 1e-3);
+    if let Ok(v) = std::env::var("TOUCH_BOUND_MM") {
+        sc.bound_m = Some(v.parse::<f64>().expect("TOUCH_BOUND_MM") * 1e-3);
+    }
 }
 
 fn search(sigma_mm: f64, episodes: u64) {

@@ -5,7 +5,7 @@
 
 use learner::rl::observe::{HoleError, Observer};
 use learner::rl::search::{
-    BeliefProbeConfig, SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig,
+    BOUND_RAMP_M, BeliefProbeConfig, SEARCH_VIEW_DIM, SearchView, TouchSearch, TouchSearchConfig,
 };
 use learner::rl::{Outcome, RlEnv, RlEnvConfig};
 
@@ -203,6 +203,33 @@ fn the_search_step_follows_its_spiral() {
     }
     let on_box = obs([0.004, 0.0], 0.0, [0.0, 0.0, cfg.press_n * 1.5]);
     assert_eq!(fast.step(&on_box), s.step(&on_box));
+    // Bounded at 15 mm: within it the spiral; halfway through the ramp
+    // beyond it half the spiral's step and half a slide straight in;
+    // past the ramp a slide straight in; above the box, unchanged.
+    let bounded = TouchSearch {
+        cfg: TouchSearchConfig {
+            bound_m: Some(0.015),
+            ..cfg.clone()
+        },
+        scale: Default::default(),
+    };
+    let pressed = |b: [f64; 2]| obs(b, 0.0, [0.0, 0.0, cfg.press_n * 1.5]);
+    for inside in [pressed([0.004, 0.0]), pressed([0.0, -0.015]), far] {
+        assert_eq!(bounded.step(&inside), s.step(&inside));
+    }
+    let mid = pressed([0.0, -(0.015 + 0.5 * BOUND_RAMP_M)]);
+    let (d, spiral) = (bounded.step(&mid), s.step(&mid));
+    assert!((d.x - 0.5 * spiral.x).abs() < 1e-12, "{d} {spiral}");
+    assert!(
+        (d.y - (0.5 * spiral.y + 0.5 * cfg.slide_m)).abs() < 1e-12,
+        "{d}"
+    );
+    assert_eq!(d.z, spiral.z);
+    let d = bounded.step(&pressed([-0.018, 0.024]));
+    assert!(
+        (d.x - 0.6 * cfg.slide_m).abs() < 1e-12 && (d.y + 0.8 * cfg.slide_m).abs() < 1e-12,
+        "{d}"
+    );
 }
 
 #[test]
@@ -240,6 +267,20 @@ fn bad_search_settings_are_named() {
             "search_teacher.descent_m",
             TouchSearchConfig {
                 descent_m: Some(0.0),
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.bound_m",
+            TouchSearchConfig {
+                bound_m: Some(0.0),
+                ..Default::default()
+            },
+        ),
+        (
+            "search_teacher.bound_m",
+            TouchSearchConfig {
+                bound_m: Some(f64::INFINITY),
                 ..Default::default()
             },
         ),

@@ -89,6 +89,19 @@ pub struct TouchSearchConfig {
     pub descent_m: Option<f64>,
     /// Height above the box below which the descent slows to `step_m`, m.
     pub descent_until_m: f64,
+    /// On the box, the radius about the believed opening beyond which the
+    /// search turns back towards it, m: from `bound_m` to `bound_m` +
+    /// [`BOUND_RAMP_M`] the spiral's step blends into a slide of the same
+    /// length straight in, proportionally to the overshoot, so the search
+    /// orbits at about that radius. None (the default): unbounded. Why: a
+    /// tip that drifted out (a student whose step is a few tens of degrees
+    /// off its teacher's, or the friction's lead) kept spiralling outward,
+    /// and a teacher's labels out there only spiralled on, so DAgger taught
+    /// a drifted student nothing that brought it back (docs/experiments.md,
+    /// "Where the student on z lands"). At the default pitch and slide the
+    /// spiral reaches about 11 mm in the 250 steps an episode has left on
+    /// the box, so a bound of 15 mm or more leaves its own growth alone.
+    pub bound_m: Option<f64>,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
     /// `hole_error_m` must then be 0.
@@ -188,6 +201,7 @@ impl Default for TouchSearchConfig {
             approach_radius_m: None,
             descent_m: None,
             descent_until_m: 0.02,
+            bound_m: None,
             probe: None,
         }
     }
@@ -253,6 +267,15 @@ impl TouchSearchConfig {
         {
             return Err(FieldError::new(
                 f("descent_m"),
+                v,
+                "must be positive and finite",
+            ));
+        }
+        if let Some(v) = self.bound_m
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(FieldError::new(
+                f("bound_m"),
                 v,
                 "must be positive and finite",
             ));
@@ -348,6 +371,11 @@ pub const SEARCH_VIEW_DIM: usize = 8;
 /// Height above the box below which the tip is in the opening and the
 /// search goes straight down, m.
 pub const IN_OPENING_M: f64 = -0.002;
+
+/// Width of the band beyond [`TouchSearchConfig::bound_m`] over which the
+/// search's step turns from the spiral's to straight in, m: a label that
+/// changes continuously with the belief is one a student can fit.
+pub const BOUND_RAMP_M: f64 = 0.005;
 
 /// Readings averaged for the force (as the ground truth does).
 const FORCE_MEAN_READINGS: usize = 8;
@@ -448,7 +476,15 @@ impl TouchSearch {
                 // Stuck: step with the box's push, unwinding the lead.
                 return Vector3::new(f.x / fxy * c.slide_m, f.y / fxy * c.slide_m, dz);
             }
-            return Vector3::new((-ry + k * rx) * c.slide_m, (rx + k * ry) * c.slide_m, dz);
+            let mut lat = [(-ry + k * rx) * c.slide_m, (rx + k * ry) * c.slide_m];
+            if let Some(bound) = c.bound_m {
+                let w = ((r - bound) / BOUND_RAMP_M).clamp(0.0, 1.0);
+                lat = [
+                    (1.0 - w) * lat[0] - w * rx * c.slide_m,
+                    (1.0 - w) * lat[1] - w * ry * c.slide_m,
+                ];
+            }
+            return Vector3::new(lat[0], lat[1], dz);
         }
         // Above the box: towards the believed opening and down at once.
         // Not first centring and then descending: a student reading the
