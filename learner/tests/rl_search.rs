@@ -230,6 +230,16 @@ fn the_search_step_follows_its_spiral() {
         (d.x - 0.6 * cfg.slide_m).abs() < 1e-12 && (d.y + 0.8 * cfg.slide_m).abs() < 1e-12,
         "{d}"
     );
+    // Stuck, the box's push still leads, bounded or not.
+    let stuck_out = obs([-0.018, 0.024], 0.0, [-1.8, 2.4, cfg.press_n * 1.5]);
+    let sticky_bounded = TouchSearch {
+        cfg: TouchSearchConfig {
+            bound_m: Some(0.015),
+            ..sticky.cfg.clone()
+        },
+        scale: Default::default(),
+    };
+    assert_eq!(sticky_bounded.step(&stuck_out), sticky.step(&stuck_out));
 }
 
 #[test]

@@ -91,16 +91,17 @@ pub struct TouchSearchConfig {
     pub descent_until_m: f64,
     /// On the box, the radius about the believed opening beyond which the
     /// search turns back towards it, m: from `bound_m` to `bound_m` +
-    /// [`BOUND_RAMP_M`] the spiral's step blends into a slide of the same
-    /// length straight in, proportionally to the overshoot, so the search
-    /// orbits at about that radius. None (the default): unbounded. Why: a
+    /// [`BOUND_RAMP_M`] the spiral's step blends into a slide of `slide_m`
+    /// straight in, proportionally to the overshoot, so the search orbits
+    /// at about that radius (not while stuck, `stick_n`). None (the default): unbounded. Why: a
     /// tip that drifted out (a student whose step is a few tens of degrees
     /// off its teacher's, or the friction's lead) kept spiralling outward,
     /// and a teacher's labels out there only spiralled on, so DAgger taught
     /// a drifted student nothing that brought it back (docs/experiments.md,
     /// "Where the student on z lands"). At the default pitch and slide the
     /// spiral reaches about 11 mm in the 250 steps an episode has left on
-    /// the box, so a bound of 15 mm or more leaves its own growth alone.
+    /// the box, so a bound of 15 mm or more leaves its own growth alone; one
+    /// under the belief's error keeps the search from the opening.
     pub bound_m: Option<f64>,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
