@@ -184,16 +184,16 @@ fn overrides(sc: &mut TouchSearchConfig) {
     var("TOUCH_PRESS_N", &mut sc.press_n, 1.0);
     var("TOUCH_LEAD_MM_PER_N", &mut sc.lead_m_per_n, 1e-3);
     var("TOUCH_ROLL_GAIN", &mut sc.roll_gain, 1.0);
-    if let Ok(v) = std::env::var("TOUCH_STICK_N") {
-        sc.stick_n = Some(v.parse().expect("TOUCH_STICK_N"));
-    }
-    if let Ok(v) = std::env::var("TOUCH_DESCENT_MM") {
-        sc.descent_m = Some(v.parse::<f64>().expect("TOUCH_DESCENT_MM") * 1e-3);
-    }
     var("TOUCH_DESCENT_UNTIL_MM", &mut sc.descent_until_m, 1e-3);
-    if let Ok(v) = std::env::var("TOUCH_BOUND_MM") {
-        sc.bound_m = Some(v.parse::<f64>().expect("TOUCH_BOUND_MM") * 1e-3);
-    }
+    // The optional settings: set when their variable is.
+    let opt = |name: &str, v: &mut Option<f64>, unit: f64| {
+        if let Ok(s) = std::env::var(name) {
+            *v = Some(s.parse::<f64>().expect(name) * unit);
+        }
+    };
+    opt("TOUCH_STICK_N", &mut sc.stick_n, 1.0);
+    opt("TOUCH_DESCENT_MM", &mut sc.descent_m, 1e-3);
+    opt("TOUCH_BOUND_MM", &mut sc.bound_m, 1e-3);
 }
 
 fn search(sigma_mm: f64, episodes: u64) {

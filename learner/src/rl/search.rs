@@ -93,15 +93,16 @@ pub struct TouchSearchConfig {
     /// search turns back towards it, m: from `bound_m` to `bound_m` +
     /// [`BOUND_RAMP_M`] the spiral's step blends into a slide of `slide_m`
     /// straight in, proportionally to the overshoot, so the search orbits
-    /// at about that radius (not while stuck, `stick_n`). None (the default): unbounded. Why: a
-    /// tip that drifted out (a student whose step is a few tens of degrees
-    /// off its teacher's, or the friction's lead) kept spiralling outward,
-    /// and a teacher's labels out there only spiralled on, so DAgger taught
-    /// a drifted student nothing that brought it back (docs/experiments.md,
-    /// "Where the student on z lands"). At the default pitch and slide the
-    /// spiral reaches about 11 mm in the 250 steps an episode has left on
-    /// the box, so a bound of 15 mm or more leaves its own growth alone; one
-    /// under the belief's error keeps the search from the opening.
+    /// at about that radius (not while stuck, `stick_n`). None (the
+    /// default): unbounded. Why: a tip that drifted out (a student whose
+    /// step is a few tens of degrees off its teacher's, or the friction's
+    /// lead) kept spiralling outward, and a teacher's labels out there only
+    /// spiralled on, so DAgger taught a drifted student nothing that brought
+    /// it back (docs/experiments.md, "Where the student on z lands"). At the
+    /// default pitch and slide the spiral reaches about 11 mm in the 250
+    /// steps an episode has left on the box, so a bound of 15 mm or more
+    /// leaves its own growth alone; one under the belief's error keeps the
+    /// search from the opening.
     pub bound_m: Option<f64>,
     /// Tell the search where the hole is by a representation instead of
     /// the truth (`[search_teacher.probe]`): see [`ProbedSearchView`].
@@ -254,32 +255,16 @@ impl TouchSearchConfig {
                 ));
             }
         }
-        if let Some(v) = self.stick_n
-            && !(v.is_finite() && v > 0.0)
-        {
-            return Err(FieldError::new(
-                f("stick_n"),
-                v,
-                "must be positive and finite",
-            ));
-        }
-        if let Some(v) = self.descent_m
-            && !(v.is_finite() && v > 0.0)
-        {
-            return Err(FieldError::new(
-                f("descent_m"),
-                v,
-                "must be positive and finite",
-            ));
-        }
-        if let Some(v) = self.bound_m
-            && !(v.is_finite() && v > 0.0)
-        {
-            return Err(FieldError::new(
-                f("bound_m"),
-                v,
-                "must be positive and finite",
-            ));
+        for (name, v) in [
+            ("stick_n", self.stick_n),
+            ("descent_m", self.descent_m),
+            ("bound_m", self.bound_m),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(FieldError::new(f(name), v, "must be positive and finite"));
+            }
         }
         if let Some(r) = self.approach_radius_m
             && !(r.is_finite() && r >= self.step_m)
