@@ -356,6 +356,18 @@ fn the_touch_search_teaches_in_the_students_environment() {
         approach: false,
     });
     probed.camera = Some(hw_sim::config::CameraConfig::default());
-    let e = distill(probed, &dir.path().join("v"), false, &|| false).unwrap_err();
+    let e = distill(probed.clone(), &dir.path().join("v"), false, &|| false).unwrap_err();
     assert!(e.to_string().contains("[student.env.world.camera]"), "{e}");
+    // Planting the teacher's probes needs a teacher told by a probe of the
+    // representation the student observes: refused without a probe, and
+    // with one while the student observes the ground truth.
+    probed.camera = None;
+    probed.dagger.plant_probes = true;
+    let mut unprobed = probed.clone();
+    unprobed.search_teacher.as_mut().unwrap().probe = None;
+    unprobed.search_teacher.as_mut().unwrap().hole_error_m = 0.003;
+    for bad in [unprobed, probed] {
+        let e = distill(bad, &dir.path().join("w"), false, &|| false).unwrap_err();
+        assert!(e.to_string().contains("dagger.plant_probes"), "{e}");
+    }
 }

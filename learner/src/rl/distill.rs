@@ -98,6 +98,15 @@ pub struct DaggerConfig {
     /// Seed of the first collected episode (the run's episode seeds go up
     /// from it; apart from evaluation's, from 1 000 000, and validation's).
     pub episode_seed: u64,
+    /// Plant the search teacher's probes (near, then approach) in the
+    /// student's first hidden layer before every refit and hold them there
+    /// ([`GaussianPolicy::plant_probes`]): the student is still a network
+    /// of the z means alone, whose first units read what its teacher reads.
+    /// Needs a search teacher told by a probe of the representation the
+    /// student observes. Fitted offline, a student given those readings
+    /// fits unseen episodes about twice as well as one that must find them
+    /// (docs/experiments.md, "A student started from its teacher's probes").
+    pub plant_probes: bool,
 }
 
 impl Default for DaggerConfig {
@@ -110,6 +119,7 @@ impl Default for DaggerConfig {
             minibatch: 256,
             learning_rate: 1e-3,
             episode_seed: 5_000_000,
+            plant_probes: false,
         }
     }
 }
@@ -450,6 +460,19 @@ pub fn distill(
         ));
     }
     let probe_cfg = cfg.search_teacher.as_ref().and_then(|s| s.probe.as_ref());
+    if cfg.dagger.plant_probes {
+        let observes = |dir: &Path| {
+            student_cfg.observation == super::ObservationKind::Representation(dir.to_path_buf())
+        };
+        if !probe_cfg.is_some_and(|p| observes(&p.representation)) {
+            return Err(field(
+                "dagger.plant_probes",
+                &true,
+                "needs a [search_teacher.probe] of the representation the student observes \
+                 (student.observation = { representation = … }, the same directory)",
+            ));
+        }
+    }
     if let Some(camera) = &cfg.camera {
         if probe_cfg.is_some() {
             return Err(field(
@@ -504,6 +527,17 @@ pub fn distill(
         t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
     }
 
+    // The probes the student's first units read (fitted or read back above).
+    let planted = if cfg.dagger.plant_probes {
+        let p = probe_cfg.expect("checked with plant_probes");
+        let mut v: Vec<LinearProbe> = vec![read_json(&probe_path(out))?];
+        if p.approach {
+            v.push(read_json(&approach_probe_path(out))?);
+        }
+        v
+    } else {
+        Vec::new()
+    };
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     // Each against the world they share, named: the teacher keeps its
     // environment's camera, the student's comes from `[camera]`.
@@ -630,6 +664,17 @@ pub fn distill(
         let mut norm = ObsNorm::new(sd, student_cfg.policy.observation_clip);
         norm.update(&obs);
         state.policy.obs_norm = Some(norm);
+        // Planted again under this round's normalisation, then held.
+        let held = if planted.is_empty() {
+            Vec::new()
+        } else {
+            let refs: Vec<&LinearProbe> = planted.iter().collect();
+            state
+                .policy
+                .plant_probes(&refs, &obs)
+                .map_err(|e| field("dagger.plant_probes", &true, &e))?
+                .to_vec()
+        };
         let inputs = state.policy.inputs(&obs);
         let fit = MseFit {
             epochs: d.epochs,
@@ -639,13 +684,14 @@ pub fn distill(
         };
         let mut frng = rng::seeded(student_cfg.seed, (4 << 32) + r);
         let mlp = state.policy.mlp();
-        fit.run(
+        fit.run_holding(
             &mlp,
             &mut state.policy.net,
             &mut state.adam,
             &inputs,
             &targets,
             &mut frng,
+            &held,
         );
         let error_after_parts = input_error(&state.policy, &inputs, &targets);
         let (error_before, error_after) = (

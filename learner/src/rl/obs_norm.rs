@@ -90,6 +90,17 @@ impl ObsNorm {
         self.m2.iter().map(|s| (s / n1).sqrt()).collect()
     }
 
+    /// The shift and scale [`ObsNorm::apply`] uses, before its clip:
+    /// component i maps to (o − shift[i]) · scale[i]; the identity (0, 1)
+    /// before two observations have been seen.
+    pub fn affine(&self) -> (Vec<f64>, Vec<f64>) {
+        if self.count < 2 {
+            return (vec![0.0; self.dim()], vec![1.0; self.dim()]);
+        }
+        let scale = self.std().iter().map(|s| 1.0 / (s + EPS)).collect();
+        (self.mean.clone(), scale)
+    }
+
     /// The normalised batch: (o − mean) / (std + ε), clipped to ±clip; the
     /// observations unchanged before two have been seen.
     pub fn apply(&self, obs: &[f64]) -> Vec<f64> {
@@ -97,7 +108,7 @@ impl ObsNorm {
             return obs.to_vec();
         }
         let d = self.dim();
-        let scale: Vec<f64> = self.std().iter().map(|s| 1.0 / (s + EPS)).collect();
+        let (_, scale) = self.affine();
         let mut out = obs.to_vec();
         for o in out.chunks_exact_mut(d) {
             for ((x, m), s) in o.iter_mut().zip(&self.mean).zip(&scale) {
