@@ -23,7 +23,12 @@
 //! the box against where the teacher believed the opening, how long it
 //! searched there, how close it came to the opening's axis, how the
 //! student's lateral step agreed with the teacher's on the box, and how far
-//! the teacher's belief was off on the way down (above the probe's band).
+//! the teacher's belief was off on the way down (above the probe's band),
+//! and the peg's true roll relative to the hole at the start, at landing
+//! and at most on the box.
+//!
+//! `DISTILL_FIT_ROLL_WEIGHT=w` multiplies the Δroll labels by w before
+//! fitting and scoring (1 by default).
 //!
 //! `DISTILL_FIT_L2=λ` fits with that L2 penalty on every parameter (0 by
 //! default, as `learner policy distill`).
@@ -200,6 +205,9 @@ struct Shadowed {
     /// Squared error of the teacher's belief (x, y together, mm²) summed
     /// over the way down above the probe's band, and its count.
     way_down: (f64, u32),
+    /// The peg's true roll relative to the hole (wrapped by its symmetry)
+    /// at the start, at landing, and the largest |roll| on the box, rad.
+    roll: (f64, f64, f64),
 }
 
 /// The teacher's belief's RMS error on an episode's way down, mm.
@@ -242,6 +250,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             ..Default::default()
         };
         let mut step = 0u32;
+        r.roll.0 = env.task().s_psi_rad;
         let out = loop {
             let v = env.view().ok_or("no view after reset")?;
             t_view.observe(&[v], &mut to);
@@ -251,10 +260,13 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             let rad = 1e3 * s.x.hypot(s.y);
             match teacher.cfg.phase(&to) {
                 SearchPhase::OnBox => {
+                    let psi = env.task().s_psi_rad;
                     if r.land.is_none() {
                         let e = 1e3 * (to[0] - s.x).hypot(to[1] - s.y);
                         r.land = Some((step, rad, e));
+                        r.roll.1 = psi;
                     }
+                    r.roll.2 = r.roll.2.max(psi.abs());
                     r.on_box += 1;
                     r.min_r = r.min_r.min(rad);
                     r.max_r = r.max_r.max(rad);
@@ -285,7 +297,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
         r.outcome = out.outcome.index();
         let f = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
         println!(
-            "ep {ep}: {} | landed at step {} {} mm from the axis, belief {} mm off | {} steps on the box, nearest {} mm, farthest {} mm | opening at step {} | cos {} | belief RMS on the way down {} mm",
+            "ep {ep}: {} | landed at step {} {} mm from the axis, belief {} mm off | {} steps on the box, nearest {} mm, farthest {} mm | opening at step {} | cos {} | belief RMS on the way down {} mm | roll at the start {:.3}, at landing {}, largest on the box {} rad",
             out.outcome.name(),
             r.land.map_or("-".into(), |l| l.0.to_string()),
             f(r.land.map(|l| l.1)),
@@ -296,11 +308,14 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             r.opening.map_or("-".into(), |s| s.to_string()),
             f((r.cos.1 > 0).then(|| r.cos.0 / r.cos.1 as f64)),
             f(way_down_rms(&r)),
+            r.roll.0,
+            r.land.map_or("-".into(), |_| format!("{:.3}", r.roll.1)),
+            r.land.map_or("-".into(), |_| format!("{:.3}", r.roll.2)),
         );
         all.push(r);
     }
     println!(
-        "outcome | episodes | landed (mean step, mm from the axis, belief mm off) | steps on the box | nearest, farthest mm | reached the opening | cos | belief RMS on the way down, mm"
+        "outcome | episodes | landed (mean step, mm from the axis, belief mm off) | steps on the box | nearest, farthest mm | reached the opening | cos | belief RMS on the way down, mm | |roll| at the start, at landing, largest on the box, rad"
     );
     for (i, o) in learner::rl::Outcome::ALL.iter().enumerate() {
         let g: Vec<&Shadowed> = all.iter().filter(|r| r.outcome == i).collect();
@@ -317,7 +332,7 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             }
         };
         println!(
-            "{} | {} | {} ({}, {}, {}) | {} | {}, {} | {} | {} | {}",
+            "{} | {} | {} ({}, {}, {}) | {} | {}, {} | {} | {} | {} | {}, {}, {}",
             o.name(),
             g.len(),
             g.iter().filter(|r| r.land.is_some()).count(),
@@ -330,6 +345,9 @@ fn shadow(args: &[String]) -> Result<(), Box<dyn std::error::Error>> {
             g.iter().filter(|r| r.opening.is_some()).count(),
             mean(&|r| (r.cos.1 > 0).then(|| r.cos.0 / f64::from(r.cos.1)), 2),
             mean(&way_down_rms, 1),
+            mean(&|r| Some(r.roll.0.abs()), 3),
+            mean(&|r| r.land.map(|_| r.roll.1.abs()), 3),
+            mean(&|r| r.land.map(|_| r.roll.2), 3),
         );
     }
     Ok(())
@@ -370,6 +388,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             serde_json::from_slice(&std::fs::read(&path)?)?;
         for r in &mut rounds {
             *r = with_probe(r, &probe);
+        }
+    }
+    // Δroll's labels are a hundredth of the others' size with the touch
+    // search's roll_gain 0.01: scaled up, the squared error weighs them
+    // as much (errors and variances below are in the scaled units).
+    let roll_weight: f64 =
+        std::env::var("DISTILL_FIT_ROLL_WEIGHT").map_or(Ok(1.0), |v| v.parse())?;
+    for r in &mut rounds {
+        for a in r.actions.chunks_exact_mut(r.act_dim) {
+            a[3] *= roll_weight as f32;
         }
     }
     let split = rounds.len() - test_rounds;
@@ -418,7 +446,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("epoch | train: Δx Δy Δz Δroll | test: Δx Δy Δz Δroll | test, reach samples: Δx Δy");
     let f = |v: &[f64]| {
         v.iter()
-            .map(|x| format!("{x:.3}"))
+            .map(|x| format!("{x:.4}"))
             .collect::<Vec<_>>()
             .join(" ")
     };
@@ -450,6 +478,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "for scale, a fresh policy (mean near 0): test reach Δx Δy {} ({n} samples)",
         f(&reach0[..2])
+    );
+    let var = |c: usize| {
+        let v: Vec<f64> = test
+            .actions
+            .iter()
+            .skip(c)
+            .step_by(k)
+            .map(|&x| x as f64)
+            .collect();
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
+    };
+    println!(
+        "test label variance: Δx Δy Δz Δroll {} (Δroll ×{roll_weight})",
+        f(&(0..k).map(var).collect::<Vec<_>>())
     );
     Ok(())
 }
