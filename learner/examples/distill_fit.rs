@@ -36,7 +36,7 @@
 //! `DISTILL_FIT_PLANT=FILE[,FILE…]` starts the fit with those probes'
 //! readings planted in the first hidden layer
 //! ([`GaussianPolicy::plant_probes`]); with `DISTILL_FIT_HOLD` set as
-//! well the fit leaves them as planted.
+//! well (to any value) the fit leaves them as planted.
 //!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made

@@ -103,7 +103,9 @@ pub struct DaggerConfig {
     /// ([`GaussianPolicy::plant_probes`]): the student is still a network
     /// of the z means alone, whose first units read what its teacher reads.
     /// Needs a search teacher told by a probe of the representation the
-    /// student observes. Fitted offline, a student given those readings
+    /// student observes (the same directory, as written) and a first hidden
+    /// layer of a unit per reading (3, or 5 with the approach probe), both
+    /// checked before the probes are fitted. Fitted offline, a student given those readings
     /// fits unseen episodes about twice as well as one that must find them
     /// (docs/experiments.md, "A student started from its teacher's probes").
     pub plant_probes: bool,
@@ -464,12 +466,29 @@ pub fn distill(
         let observes = |dir: &Path| {
             student_cfg.observation == super::ObservationKind::Representation(dir.to_path_buf())
         };
-        if !probe_cfg.is_some_and(|p| observes(&p.representation)) {
+        let Some(p) = probe_cfg.filter(|p| observes(&p.representation)) else {
             return Err(field(
                 "dagger.plant_probes",
                 &true,
                 "needs a [search_teacher.probe] of the representation the student observes \
-                 (student.observation = { representation = … }, the same directory)",
+                 (student.observation = { representation = … }, the same directory as written)",
+            ));
+        };
+        let readings = 3 + if p.approach { 2 } else { 0 };
+        if student_cfg
+            .policy
+            .hidden
+            .first()
+            .is_none_or(|&h| h < readings)
+        {
+            return Err(field(
+                "dagger.plant_probes",
+                &true,
+                &format!(
+                    "needs a first hidden layer of at least {readings} units (one per probe \
+                     reading); student.policy.hidden is {:?}",
+                    student_cfg.policy.hidden
+                ),
             ));
         }
     }

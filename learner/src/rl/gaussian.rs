@@ -408,9 +408,11 @@ mod tests {
         let rows: Vec<Vec<f64>> = obs.chunks(5).map(|o| o.to_vec()).collect();
         let lin = |o: &[f64], a: f64| a + 2.0 * o[0] - 0.5 * o[2] + 0.1 * o[4];
         let ys: Vec<Vec<f64>> = rows.iter().map(|o| vec![lin(o, 1.0), -o[1]]).collect();
-        let near = LinearProbe::fit(&rows, &ys, 0.0).unwrap();
+        // Fitted on part of the batch, so that the probes' standardisation
+        // differs from the policy's normalisation (fitted on all of it).
+        let near = LinearProbe::fit(&rows[..40], &ys[..40], 0.0).unwrap();
         let ys: Vec<Vec<f64>> = rows.iter().map(|o| vec![lin(o, -3.0) + o[3]]).collect();
-        let far = LinearProbe::fit(&rows, &ys, 1e-3).unwrap();
+        let far = LinearProbe::fit(&rows[20..], &ys[20..], 1e-3).unwrap();
         let mut rng = rng::seeded(4, 0);
         let mut p = GaussianPolicy::new(5, &[6, 4], 2, 0.0, &mut rng);
         let mut norm = ObsNorm::new(5, 5.0);
