@@ -105,9 +105,10 @@ pub struct DaggerConfig {
     /// Needs a search teacher told by a probe of the representation the
     /// student observes (the same directory, as written) and a first hidden
     /// layer of a unit per reading (3, or 5 with the approach probe), both
-    /// checked before the probes are fitted. Fitted offline, a student given those readings
-    /// fits unseen episodes about twice as well as one that must find them
-    /// (docs/experiments.md, "A student started from its teacher's probes").
+    /// checked before the probes are fitted. Fitted offline, a student given
+    /// those readings fits unseen episodes about twice as well as one that
+    /// must find them (docs/experiments.md, "A student started from its
+    /// teacher's probes"); in DAgger it completed no more (same section).
     pub plant_probes: bool,
 }
 
