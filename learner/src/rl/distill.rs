@@ -543,21 +543,16 @@ pub fn distill(
         }
     }
     write_json(&cfg_path, &recorded)?;
+    // The probes the student's first units read, near then approach.
+    let mut planted: Vec<LinearProbe> = Vec::new();
     if let (Some(search), Some(p)) = (&cfg.search_teacher, probe_cfg) {
-        t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
-    }
-
-    // The probes the student's first units read (fitted or read back above).
-    let planted = if cfg.dagger.plant_probes {
-        let p = probe_cfg.expect("checked with plant_probes");
-        let mut v: Vec<LinearProbe> = vec![read_json(&probe_path(out))?];
-        if p.approach {
-            v.push(read_json(&approach_probe_path(out))?);
+        let (view, probes) = probed_view(search, p, &student_cfg, out, fresh)?;
+        t_obs = view;
+        if cfg.dagger.plant_probes {
+            planted.push(probes.near);
+            planted.extend(probes.approach);
         }
-        v
-    } else {
-        Vec::new()
-    };
+    }
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     // Each against the world they share, named: the teacher keeps its
     // environment's camera, the student's comes from `[camera]`.
@@ -827,7 +822,7 @@ pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>),
         .as_ref()
         .ok_or_else(|| refuse("not a distillation from the touch search".into(), &cfg_path))?;
     let view: Arc<dyn Observer> = match &search.probe {
-        Some(p) => probed_view(search, p, &cfg.student, out, false)?,
+        Some(p) => probed_view(search, p, &cfg.student, out, false)?.0,
         None => Arc::new(SearchView {
             std_m: search.hole_error_m,
         }),
@@ -839,15 +834,15 @@ pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>),
     Ok((teacher, view))
 }
 
-/// The representation-told search teacher's view: its probe fitted in the
-/// student's environment (a fresh run) or read back (a resumed one).
+/// The representation-told search teacher's view, with its probes: fitted
+/// in the student's environment (a fresh run) or read back (a resumed one).
 fn probed_view(
     search: &TouchSearchConfig,
     p: &BeliefProbeConfig,
     student_cfg: &TrainConfig,
     out: &Path,
     fresh: bool,
-) -> Result<Arc<dyn Observer>, RunError> {
+) -> Result<(Arc<dyn Observer>, BeliefProbes), RunError> {
     let path = probe_path(out);
     let approach_path = approach_probe_path(out);
     // A resumed run's rounds were labelled through its probes: refit ones
@@ -929,11 +924,12 @@ fn probed_view(
             ));
         }
     }
-    Ok(Arc::new(ProbedSearchView {
+    let view = Arc::new(ProbedSearchView {
         repr,
-        probes,
+        probes: probes.clone(),
         below_m: p.below_m,
-    }))
+    });
+    Ok((view, probes))
 }
 
 /// Who labels the student's states.

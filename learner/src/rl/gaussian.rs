@@ -5,7 +5,7 @@
 
 use super::mlp::{Cache, Mlp};
 use super::obs_norm::ObsNorm;
-use super::probe::LinearProbe;
+use super::probe::{LinearProbe, standardiser};
 use faer::Mat;
 use faer::prelude::*;
 use hw_sim::rng::{self, SimRng};
@@ -155,13 +155,16 @@ impl GaussianPolicy {
         for p in probes {
             let t = p.targets;
             let readings: Vec<f64> = obs.chunks_exact(d).flat_map(|o| p.predict(o)).collect();
-            let n = (readings.len() / t) as f64;
+            let (mean, sd) = standardiser(readings.chunks_exact(t), t);
             for k in 0..t {
-                let col = readings.iter().skip(k).step_by(t);
-                let c = col.clone().sum::<f64>() / n;
-                let s = (col.map(|r| (r - c).powi(2)).sum::<f64>() / n).sqrt();
-                // A reading constant over the batch gets unit gain.
-                let g = if s > 1e-12 { 1.0 / (2.0 * s) } else { 1.0 };
+                let c = mean[k];
+                // A reading constant over the batch (its deviation at the
+                // standardiser's floor) gets unit gain.
+                let g = if sd[k] > 1e-12 {
+                    1.0 / (2.0 * sd[k])
+                } else {
+                    1.0
+                };
                 // reading = Σ wᵢ (oᵢ − μᵢ)/σᵢ + b with oᵢ = shiftᵢ + uᵢ/scaleᵢ,
                 // uᵢ the network's input.
                 let mut bias = p.weights[d * t + k] - c;
