@@ -257,6 +257,13 @@ enum PolicyCmd {
         /// precisely the policy needs to know where the opening is.
         #[arg(long)]
         hole_error_mm: Option<f64>,
+        /// Half-range of the box's yaw, rad (hw-sim's
+        /// `task.box_yaw_range_rad`; default: the run's, 0.26). 0
+        /// randomises the box's position alone, as the paper's text
+        /// states ("we randomize the configuration of the box position"),
+        /// so the peg starts square to the hole.
+        #[arg(long)]
+        box_yaw_range_rad: Option<f64>,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -466,6 +473,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             depth_noise_m,
             rgb_noise,
             hole_error_mm,
+            box_yaw_range_rad,
             json,
             last,
         } => {
@@ -495,6 +503,13 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             }
             if occlusions > 0 {
                 world.perturbations.random_occlusions = occlusions;
+            }
+            if let Some(r) = box_yaw_range_rad {
+                anyhow::ensure!(
+                    r.is_finite() && r >= 0.0,
+                    "--box-yaw-range-rad {r}: must be a half-range in rad, 0 or more"
+                );
+                world.task.box_yaw_range_rad = r;
             }
             for (v, field) in [
                 (force_noise_n, &mut world.noise.force_std_n),

@@ -176,13 +176,22 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert_ne!(calm.normalised, pushed.normalised, "pushes");
     let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
     assert_ne!(calm.normalised, noisy.normalised, "force noise");
-    let o = learner()
-        .args(["policy", "eval", "--force-noise-n=-1", "--checkpoint"])
-        .arg(out.join("checkpoint.json"))
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    // The box square to the peg's start instead of turned up to 0.26 rad.
+    let square = eval(&["--box-yaw-range-rad", "0"], "square.json");
+    assert_ne!(calm.normalised, square.normalised, "box yaw");
+    // A bad value is refused, naming what is wrong.
+    let refused = |arg: &str| {
+        let o = learner()
+            .args(["policy", "eval", arg, "--checkpoint"])
+            .arg(out.join("checkpoint.json"))
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{arg}");
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    let err = refused("--box-yaw-range-rad=-0.1");
+    assert!(err.contains("--box-yaw-range-rad -0.1"), "{err}");
+    let err = refused("--force-noise-n=-1");
     assert!(err.contains("force_std_n"), "{err}");
 }
 
