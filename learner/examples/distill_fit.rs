@@ -479,20 +479,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "for scale, a fresh policy (mean near 0): test reach Δx Δy {} ({n} samples)",
         f(&reach0[..2])
     );
-    let var = |c: usize| {
-        let v: Vec<f64> = test
-            .actions
-            .iter()
-            .skip(c)
-            .step_by(k)
-            .map(|&x| x as f64)
-            .collect();
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
-    };
+    let labels: Vec<f64> = test.actions.iter().map(|&x| f64::from(x)).collect();
+    let (_, sd) = learner::rl::probe::standardiser(labels.chunks_exact(k), k);
     println!(
         "test label variance: Δx Δy Δz Δroll {} (Δroll ×{roll_weight})",
-        f(&(0..k).map(var).collect::<Vec<_>>())
+        f(&sd.iter().map(|s| s * s).collect::<Vec<_>>())
     );
     Ok(())
 }

@@ -259,9 +259,9 @@ enum PolicyCmd {
         hole_error_mm: Option<f64>,
         /// Half-range of the box's yaw, rad (hw-sim's
         /// `task.box_yaw_range_rad`; default: the run's, 0.26). 0
-        /// randomises the box's position alone, as the paper's text
-        /// states ("we randomize the configuration of the box position"),
-        /// so the peg starts square to the hole.
+        /// randomises the box's position alone, the paper's literal wording
+        /// ("we randomize the configuration of the box position"; it names
+        /// no yaw), so the peg starts square to the hole.
         #[arg(long)]
         box_yaw_range_rad: Option<f64>,
         /// Also write the report as JSON here.
