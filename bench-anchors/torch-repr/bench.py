@@ -10,6 +10,10 @@ example `repr_bench` times, on random inputs of the same shapes:
           update), THREADS intra-op threads
   infer   the z means of a batch of 1 and of 64 observations, one thread
 
+Usage: bench.py train|infer BATCH STEPS THREADS [cpu|cuda]. With cuda the
+model and the batch live on GPU 0 and each timed step ends with
+torch.cuda.synchronize(), so the time is the GPU's, not the launch's.
+
 Output: one JSON object per line, like the Rust side's.
 """
 
@@ -199,11 +203,17 @@ def median(xs):
 
 def main():
     what, b, steps, threads = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+    dev = torch.device(sys.argv[5] if len(sys.argv) > 5 else "cpu")
+    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     d, s = 128, 128
-    model = Full(d, s)
+    model = Full(d, s).to(dev)
     x, action, eps, y = batch(b, s, d)
+    x = tuple(t.to(dev) for t in x)
+    action, eps = action.to(dev), eps.to(dev)
+    y = {k: v.to(dev) for k, v in y.items()}
+    side = "pytorch" if dev.type == "cpu" else "pytorch-cuda"
     times = []
     if what == "train":
         opt = torch.optim.Adam(model.parameters(), lr=1e-4, betas=(0.5, 0.999))
@@ -213,10 +223,11 @@ def main():
             loss = losses(model(*x, action, eps), y)
             loss.backward()
             opt.step()
+            sync()
             if i >= 2:
                 times.append(time.perf_counter() - t)
         step = median(times)
-        print(json.dumps({"side": "pytorch", "what": "train", "batch": b, "threads": threads,
+        print(json.dumps({"side": side, "what": "train", "batch": b, "threads": threads,
                           "step_s": step, "samples_per_s": b / step, "steps": steps,
                           "torch": torch.__version__}))
     else:
@@ -229,7 +240,7 @@ def main():
                 if i >= 3:
                     times.append(time.perf_counter() - t)
         per = median(times)
-        print(json.dumps({"side": "pytorch", "what": "infer", "batch": b, "threads": threads,
+        print(json.dumps({"side": side, "what": "infer", "batch": b, "threads": threads,
                           "batch_s": per, "per_obs_ms": 1e3 * per / b, "steps": steps,
                           "torch": torch.__version__}))
 

@@ -9,15 +9,18 @@
 //! (threads: RAYON_NUM_THREADS; the last argument, default 3, measures the
 //! depth encoder's share). `infer` times burn's `encode`, `infer-fast` the
 //! CPU path the inference API takes (`learner::models::fast`).
+//! `REPR_BENCH_DEVICE=cuda|vulkan` runs `train` and `infer` on that burn GPU
+//! backend (a build with the feature of that name); the side is then named
+//! "burn-cuda" or "burn-vulkan".
 
 use burn::optim::{AdamConfig, GradientsParams};
-use burn::prelude::*;
 use learner::models::fast::FastEncoder;
 use learner::models::losses::{LabelTensors, losses};
 use learner::models::net::tensor;
 use learner::models::{
     InputArrays, InputTensors, LabelArrays, LossWeights, Modalities, ModelConfig, ReprNet, init,
 };
+use learner::train::DeviceKind;
 use std::time::Instant;
 
 fn median(mut xs: Vec<f64>) -> f64 {
@@ -41,11 +44,16 @@ fn main() {
     let mut randn =
         |n: usize| -> Vec<f32> { (0..n).map(|_| hw_sim::rng::normal(&mut r) as f32).collect() };
     let train = what == "train";
-    let dev = if train {
-        Device::flex().autodiff()
-    } else {
-        Device::flex()
+    let (kind, gpu_side) = match std::env::var("REPR_BENCH_DEVICE").as_deref() {
+        Ok("cuda") => (DeviceKind::Cuda, Some("burn-cuda")),
+        Ok("vulkan") => (DeviceKind::Vulkan, Some("burn-vulkan")),
+        Ok("cpu") | Err(_) => (DeviceKind::Cpu, None),
+        Ok(other) => panic!("REPR_BENCH_DEVICE={other}: expected cpu, cuda or vulkan"),
     };
+    let dev = kind.device(train).unwrap_or_else(|e| panic!("{e}"));
+    if gpu_side.is_some() && what == "infer-fast" {
+        panic!("infer-fast is the CPU path; on a GPU use infer");
+    }
     let arrays = InputArrays {
         batch: b,
         side: s,
@@ -94,7 +102,9 @@ fn main() {
         }
         let step = median(times);
         // `LEARNER_CONV=burn`: burn's own convolution (learner::models::conv_train).
-        let side = if std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn") {
+        let side = if let Some(g) = gpu_side {
+            g
+        } else if std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn") {
             "burn-flex"
         } else {
             "ours-conv"
@@ -123,7 +133,7 @@ fn main() {
             if fast.is_some() {
                 "ours-fast"
             } else {
-                "burn-flex"
+                gpu_side.unwrap_or("burn-flex")
             },
             1e3 * per / b as f64
         );

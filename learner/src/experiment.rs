@@ -74,8 +74,9 @@ pub struct ReprStage {
     pub epochs: Option<u32>,
     /// Batch size (overrides each variant's configuration).
     pub batch: Option<usize>,
-    /// Run on the GPU (a build with the `cuda` feature).
-    pub cuda: bool,
+    /// Where the representations train: `"cpu"` (the default), or a GPU
+    /// through `"vulkan"` or `"cuda"` (a learner built with that feature).
+    pub device: DeviceKind,
 }
 
 /// Policy training, shared by the variants.
@@ -477,11 +478,7 @@ fn representation(
         &out,
         &TrainOptions {
             resume,
-            device: if cfg.representation.cuda {
-                DeviceKind::Cuda
-            } else {
-                DeviceKind::Cpu
-            },
+            device: cfg.representation.device,
             progress: opts.progress,
             ..Default::default()
         },

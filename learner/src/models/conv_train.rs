@@ -43,7 +43,7 @@ use std::ops::Range;
 /// A square-kernel convolution with equal stride and padding on both axes
 /// (every convolution of the models), differentiable in its input, weight
 /// and bias.
-#[backend_extension(Flex, Cube: cfg(feature = "cuda"), Autodiff)]
+#[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
 pub trait ConvTrain: Backend {
     /// `x [B, Cin, H, W]`, `weight [Cout, Cin, k, k]`, `bias [Cout]` →
     /// `[B, Cout, Ho, Wo]`.
@@ -148,7 +148,7 @@ fn burns_own() -> bool {
     *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
 }
 
-#[cfg(feature = "cuda")]
+#[cfg(any(feature = "cuda", feature = "vulkan"))]
 impl ConvTrain for burn::backend::Cube {}
 
 /// The shapes of one convolution.

@@ -9,9 +9,6 @@ use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfi
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
-
 /// Width of the action encoding.
 const ACTION_FEATURES: usize = 32;
 
@@ -67,14 +64,49 @@ fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
         .init(device)
 }
 
-fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
-    let [_, _, h, w] = x.dims();
-    interpolate(
-        x,
-        InterpolateOptions::new(InterpolateMode::Bilinear)
-            .with_align_corners(true)
-            .with_output_size([h * factor, w * factor]),
-    )
+/// Bilinear upsampling by `factor` with aligned corners, written as two
+/// products with constant interpolation matrices (`U_h · X · U_wᵀ`) rather
+/// than burn's `interpolate`: burn's GPU backends have no backward pass for
+/// bilinear interpolation, and a product differentiates on every backend.
+/// The same map as `interpolate(.., Bilinear, align_corners)`, tested
+/// against it.
+pub(crate) fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
+    let [b, c, h, w] = x.dims();
+    let (ho, wo) = (h * factor, w * factor);
+    let device = x.device();
+    // [B·C·H, W] · U_wᵀ [W, Wo] → rows upsampled.
+    let uw = super::net::tensor(interpolation_matrix_t(w, wo), [w, wo], &device);
+    let x = x.reshape([b * c * h, w]).matmul(uw);
+    // Columns: bring H last, [B·C·Wo, H] · U_hᵀ [H, Ho].
+    let uh = super::net::tensor(interpolation_matrix_t(h, ho), [h, ho], &device);
+    let x = x
+        .reshape([b * c, h, wo])
+        .swap_dims(1, 2)
+        .reshape([b * c * wo, h])
+        .matmul(uh);
+    x.reshape([b * c, wo, ho])
+        .swap_dims(1, 2)
+        .reshape([b, c, ho, wo])
+}
+
+/// `Uᵀ`, row-major `[n_in, n_out]`, of linear interpolation from `n_in` to
+/// `n_out` samples with aligned corners: output `i` sits at input
+/// coordinate `i (n_in − 1) / (n_out − 1)`.
+fn interpolation_matrix_t(n_in: usize, n_out: usize) -> Vec<f32> {
+    let mut u = vec![0.0f32; n_in * n_out];
+    for i in 0..n_out {
+        let src = if n_out > 1 {
+            i as f64 * (n_in - 1) as f64 / (n_out - 1) as f64
+        } else {
+            0.0
+        };
+        let i0 = (src.floor() as usize).min(n_in - 1);
+        let i1 = (i0 + 1).min(n_in - 1);
+        let frac = (src - i0 as f64) as f32;
+        u[i0 * n_out + i] += 1.0 - frac;
+        u[i1 * n_out + i] += frac;
+    }
+    u
 }
 
 /// Channels of the up-convolutions, coarsest first.
@@ -226,6 +258,64 @@ impl ReconDecoders {
             rgb: sigmoid(x),
             wrench: self.wrench.forward(z.clone()),
             proprio: self.proprio.forward(z),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::module::interpolate;
+    use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+
+    fn burns(x: Tensor<4>, factor: usize) -> Tensor<4> {
+        let [_, _, h, w] = x.dims();
+        interpolate(
+            x,
+            InterpolateOptions::new(InterpolateMode::Bilinear)
+                .with_align_corners(true)
+                .with_output_size([h * factor, w * factor]),
+        )
+    }
+
+    fn values(t: Tensor<4>) -> Vec<f32> {
+        t.try_into_vec_as::<f32>().expect("an f32 tensor")
+    }
+
+    /// The product form is burn's bilinear interpolation, in value and in
+    /// gradient, on a non-square map at both factors the decoders use.
+    #[test]
+    fn upsample_is_bilinear_interpolation_with_aligned_corners() {
+        let dev = Device::flex().autodiff();
+        let n = 2 * 3 * 5 * 7;
+        let data: Vec<f32> = (0..n)
+            .map(|i| ((i * 37 % 101) as f32) / 17.0 - 3.0)
+            .collect();
+        for factor in [2, 4] {
+            let x = super::super::net::tensor(data.clone(), [2, 3, 5, 7], &dev).require_grad();
+            let ours = upsample(x.clone(), factor);
+            let theirs = burns(x.clone(), factor);
+            assert_eq!(ours.dims(), [2, 3, 5 * factor, 7 * factor]);
+            let (a, b) = (values(ours.clone()), values(theirs.clone()));
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(p, q)| (p - q).abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 1e-5, "factor {factor}: values differ by {worst}");
+            // The same weights on the output give the same input gradient.
+            let w: Vec<f32> = (0..a.len()).map(|i| ((i * 13 % 29) as f32) / 7.0).collect();
+            let wt = super::super::net::tensor(w, [2, 3, 5 * factor, 7 * factor], &dev);
+            let ga = (ours * wt.clone()).sum().backward();
+            let gb = (theirs * wt).sum().backward();
+            let (ga, gb) = (x.grad(&ga).unwrap(), x.grad(&gb).unwrap());
+            let (ga, gb) = (values(ga), values(gb));
+            let worst = ga
+                .iter()
+                .zip(&gb)
+                .map(|(p, q)| (p - q).abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 1e-4, "factor {factor}: gradients differ by {worst}");
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The self-supervised multimodal representation (paper, "Multi-Modal
 //! Representation Model" and "Baseline Representation Models"), written
 //! with burn: the same code runs on the CPU (`flex`) and, built with the
-//! `cuda` feature, on an NVIDIA GPU.
+//! `vulkan` (or `cuda`) feature, on a GPU.
 //!
 //! - [`config`]: what a model is (kind, latent size, modalities, loss
 //!   weights); one TOML file per model under `configs/repr/`.

@@ -75,13 +75,19 @@ pub struct TrainConfig {
 }
 
 /// Where the tensors live.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum DeviceKind {
     /// burn's `flex` CPU backend.
     #[default]
     Cpu,
     /// burn's CUDA backend, GPU 0 (a build with the `cuda` feature).
     Cuda,
+    /// burn's Vulkan backend (wgpu, SPIR-V kernels), the first high-power
+    /// GPU (a build with the `vulkan` feature). It runs the same model code
+    /// on an NVIDIA GPU where the CUDA build cannot be compiled (burn 0.22's
+    /// `cuda` downloads an LLVM bundle while building).
+    Vulkan,
 }
 
 impl DeviceKind {
@@ -95,6 +101,17 @@ impl DeviceKind {
             DeviceKind::Cuda => {
                 return Err(
                     "this learner was built without CUDA: rebuild with `--features cuda`".into(),
+                );
+            }
+            #[cfg(feature = "vulkan")]
+            DeviceKind::Vulkan => {
+                burn::prelude::Device::vulkan(burn::tensor::DeviceKind::DefaultDevice)
+            }
+            #[cfg(not(feature = "vulkan"))]
+            DeviceKind::Vulkan => {
+                return Err(
+                    "this learner was built without Vulkan: rebuild with `--features vulkan`"
+                        .into(),
                 );
             }
         };
