@@ -9,10 +9,10 @@
 # elsewhere and pass its path; PyTorch is the machine's own `python3`.
 #   cargo build --release -p learner --features vulkan --example repr_bench
 # Usage: bench-anchors/repr-gpu.sh REPR_BENCH_BINARY [ROUNDS] [OUT.jsonl]
-# Results: docs/performance.md, "The representation on a GPU".
+# Results: docs/performance.md, "The representation on an NVIDIA GPU".
 set -euo pipefail
 cd "$(dirname "$0")/.."
-BIN=$1
+BIN=${1:?usage: bench-anchors/repr-gpu.sh REPR_BENCH_BINARY [ROUNDS] [OUT.jsonl]}
 ROUNDS=${2:-2}
 OUT=${3:-target/repr-gpu.jsonl}
 PY="python3 bench-anchors/torch-repr/bench.py"

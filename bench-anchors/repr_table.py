@@ -4,7 +4,7 @@ ms per observation for inference.
 
 Usage: python3 bench-anchors/repr_table.py OUT.jsonl
 """
-import json, sys, collections
+import json, sys, collections, statistics
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
 by = collections.defaultdict(list)
 for r in rows:
@@ -15,4 +15,4 @@ print("| what | batch | threads | side | median | range | rounds |")
 print("|---|---|---|---|---|---|---|")
 for k in sorted(by):
     v = sorted(by[k]); unit = "samples/s" if k[0] == "train" else "ms/observation"
-    print(f"| {k[0]} | {k[1]} | {k[2]} | {k[3]} | {v[len(v)//2]:.3f} {unit} | {v[0]:.3f}–{v[-1]:.3f} | {len(v)} |")
+    print(f"| {k[0]} | {k[1]} | {k[2]} | {k[3]} | {statistics.median(v):.3f} {unit} | {v[0]:.3f}–{v[-1]:.3f} | {len(v)} |")

@@ -8,7 +8,8 @@ example `repr_bench` times, on random inputs of the same shapes:
 
   train   one Adam step at batch B (forward, the six losses, backward,
           update), THREADS intra-op threads
-  infer   the z means of a batch of 1 and of 64 observations, one thread
+  infer   the z means of a batch of 1 or of 64 observations, THREADS
+          intra-op threads (repr.sh passes 1)
 
 Usage: bench.py train|infer BATCH STEPS THREADS [cpu|cuda]. With cuda the
 model and the batch live on GPU 0 and each timed step ends with

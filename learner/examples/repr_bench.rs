@@ -94,7 +94,8 @@ fn main() {
             let l = losses(&out, &y, &x.proprio, &w);
             let grads = GradientsParams::from_grads(l.total.backward(), &net);
             net = optim.step(1e-4, net, grads);
-            // Reading a parameter back waits for the step to finish.
+            // Reading the loss back waits for the step to finish (on a GPU
+            // too: the timed step includes its kernels).
             let _ = l.total.into_scalar::<f32>();
             if i >= 2 {
                 times.push(t.elapsed().as_secs_f64());

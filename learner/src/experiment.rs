@@ -625,3 +625,34 @@ impl StageLog {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every shipped experiment loads; the paper-scale one trains its
+    /// representations on the GPU through Vulkan, the others on the CPU;
+    /// the old `cuda = true` is refused, naming the field.
+    #[test]
+    fn the_shipped_experiments_load_and_name_their_device() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/experiments");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            let cfg = ExperimentConfig::from_file(&p)
+                .unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
+            let expected = if p.ends_with("ablations_paper.toml") {
+                DeviceKind::Vulkan
+            } else {
+                DeviceKind::Cpu
+            };
+            assert_eq!(cfg.representation.device, expected, "{}", p.display());
+            n += 1;
+        }
+        assert!(n >= 3, "{n} experiments in {}", dir.display());
+        let e = toml::from_str::<ReprStage>("cuda = true").unwrap_err();
+        assert!(e.to_string().contains("cuda"), "{e}");
+        let r: ReprStage = toml::from_str("device = \"vulkan\"").unwrap();
+        assert_eq!(r.device, DeviceKind::Vulkan);
+    }
+}

@@ -9,6 +9,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfi
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
+
 /// Width of the action encoding.
 const ACTION_FEATURES: usize = 32;
 
@@ -70,7 +71,7 @@ fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
 /// bilinear interpolation, and a product differentiates on every backend.
 /// The same map as `interpolate(.., Bilinear, align_corners)`, tested
 /// against it.
-pub(crate) fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
+fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
     let [b, c, h, w] = x.dims();
     let (ho, wo) = (h * factor, w * factor);
     let device = x.device();
@@ -264,6 +265,7 @@ impl ReconDecoders {
 
 #[cfg(test)]
 mod tests {
+    use super::super::net::tensor;
     use super::*;
     use burn::tensor::module::interpolate;
     use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
@@ -283,29 +285,36 @@ mod tests {
     }
 
     /// The product form is burn's bilinear interpolation, in value and in
-    /// gradient, on a non-square map at both factors the decoders use.
+    /// gradient, on a non-square map at both factors the decoders use, and
+    /// on a map one pixel high (the reconstruction decoder starts at
+    /// side / 64: one pixel for 64 px images).
     #[test]
     fn upsample_is_bilinear_interpolation_with_aligned_corners() {
         let dev = Device::flex().autodiff();
-        let n = 2 * 3 * 5 * 7;
-        let data: Vec<f32> = (0..n)
-            .map(|i| ((i * 37 % 101) as f32) / 17.0 - 3.0)
-            .collect();
-        for factor in [2, 4] {
-            let x = super::super::net::tensor(data.clone(), [2, 3, 5, 7], &dev).require_grad();
+        for (shape, factor) in [([2, 3, 5, 7], 2), ([2, 3, 5, 7], 4), ([1, 2, 1, 3], 2)] {
+            let [b, c, h, w] = shape;
+            let n = b * c * h * w;
+            let data: Vec<f32> = (0..n)
+                .map(|i| ((i * 37 % 101) as f32) / 17.0 - 3.0)
+                .collect();
+            let x = tensor(data, shape, &dev).require_grad();
             let ours = upsample(x.clone(), factor);
             let theirs = burns(x.clone(), factor);
-            assert_eq!(ours.dims(), [2, 3, 5 * factor, 7 * factor]);
-            let (a, b) = (values(ours.clone()), values(theirs.clone()));
+            let out = [b, c, h * factor, w * factor];
+            assert_eq!(ours.dims(), out);
+            let (a, bv) = (values(ours.clone()), values(theirs.clone()));
             let worst = a
                 .iter()
-                .zip(&b)
+                .zip(&bv)
                 .map(|(p, q)| (p - q).abs())
                 .fold(0.0, f32::max);
-            assert!(worst < 1e-5, "factor {factor}: values differ by {worst}");
+            assert!(
+                worst < 1e-5,
+                "{shape:?} ×{factor}: values differ by {worst}"
+            );
             // The same weights on the output give the same input gradient.
-            let w: Vec<f32> = (0..a.len()).map(|i| ((i * 13 % 29) as f32) / 7.0).collect();
-            let wt = super::super::net::tensor(w, [2, 3, 5 * factor, 7 * factor], &dev);
+            let wv: Vec<f32> = (0..a.len()).map(|i| ((i * 13 % 29) as f32) / 7.0).collect();
+            let wt = tensor(wv, out, &dev);
             let ga = (ours * wt.clone()).sum().backward();
             let gb = (theirs * wt).sum().backward();
             let (ga, gb) = (x.grad(&ga).unwrap(), x.grad(&gb).unwrap());
@@ -315,7 +324,10 @@ mod tests {
                 .zip(&gb)
                 .map(|(p, q)| (p - q).abs())
                 .fold(0.0, f32::max);
-            assert!(worst < 1e-4, "factor {factor}: gradients differ by {worst}");
+            assert!(
+                worst < 1e-4,
+                "{shape:?} ×{factor}: gradients differ by {worst}"
+            );
         }
     }
 }

@@ -83,10 +83,9 @@ pub enum DeviceKind {
     Cpu,
     /// burn's CUDA backend, GPU 0 (a build with the `cuda` feature).
     Cuda,
-    /// burn's Vulkan backend (wgpu, SPIR-V kernels), the first high-power
-    /// GPU (a build with the `vulkan` feature). It runs the same model code
-    /// on an NVIDIA GPU where the CUDA build cannot be compiled (burn 0.22's
-    /// `cuda` downloads an LLVM bundle while building).
+    /// burn's Vulkan backend (wgpu, SPIR-V kernels) on wgpu's default
+    /// adapter, a high-power GPU first (`CUBECL_WGPU_DEFAULT_DEVICE`
+    /// overrides); a build with the `vulkan` feature.
     Vulkan,
 }
 
