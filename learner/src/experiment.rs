@@ -639,6 +639,9 @@ mod tests {
         let mut n = 0;
         for e in std::fs::read_dir(&dir).unwrap() {
             let p = e.unwrap().path();
+            if p.extension().is_none_or(|x| x != "toml") {
+                continue;
+            }
             let cfg = ExperimentConfig::from_file(&p)
                 .unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
             let expected = if p.ends_with("ablations_paper.toml") {

@@ -18,9 +18,9 @@
 //! - 1×1 layers read their input as the matrix; the bias's `db = Σ dy`.
 //!
 //! The GPU backends (burn's `Cube`: Vulkan, CUDA) run burn's own
-//! convolution kernels through the trait's default bodies; under autodiff every backend goes through this
-//! file's backward node, which calls the backend's kernels. The model code
-//! calls [`conv2d`] whatever the device. The parameters stay in burn's
+//! convolution kernels through the trait's default bodies; under autodiff
+//! every backend goes through this file's backward node, which calls the
+//! backend's kernels. The model code calls [`conv2d`] whatever the device. The parameters stay in burn's
 //! [`Conv2d`] module: records and checkpoints do not change.
 
 use burn::backend::autodiff::{

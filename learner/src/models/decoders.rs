@@ -286,12 +286,18 @@ mod tests {
 
     /// The product form is burn's bilinear interpolation, in value and in
     /// gradient, on a non-square map at both factors the decoders use, and
-    /// on a map one pixel high (the reconstruction decoder starts at
-    /// side / 64: one pixel for 64 px images).
+    /// on maps one pixel high and one pixel square (the reconstruction
+    /// decoder starts at side / 64: 1×1 for 64 px images).
     #[test]
     fn upsample_is_bilinear_interpolation_with_aligned_corners() {
         let dev = Device::flex().autodiff();
-        for (shape, factor) in [([2, 3, 5, 7], 2), ([2, 3, 5, 7], 4), ([1, 2, 1, 3], 2)] {
+        let cases = [
+            ([2, 3, 5, 7], 2),
+            ([2, 3, 5, 7], 4),
+            ([1, 2, 1, 3], 2),
+            ([1, 2, 1, 1], 2),
+        ];
+        for (shape, factor) in cases {
             let [b, c, h, w] = shape;
             let n = b * c * h * w;
             let data: Vec<f32> = (0..n)
