@@ -50,10 +50,10 @@ fn main() {
         Ok("cpu") | Err(_) => (DeviceKind::Cpu, None),
         Ok(other) => panic!("REPR_BENCH_DEVICE={other}: expected cpu, cuda or vulkan"),
     };
-    let dev = kind.device(train).unwrap_or_else(|e| panic!("{e}"));
     if gpu_side.is_some() && what == "infer-fast" {
         panic!("infer-fast is the CPU path; on a GPU use infer");
     }
+    let dev = kind.device(train).unwrap_or_else(|e| panic!("{e}"));
     let arrays = InputArrays {
         batch: b,
         side: s,

@@ -284,6 +284,14 @@ mod tests {
         t.try_into_vec_as::<f32>().expect("an f32 tensor")
     }
 
+    fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
+        assert_eq!(a.len(), b.len());
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f32::max)
+    }
+
     /// The product form is burn's bilinear interpolation, in value and in
     /// gradient, on a non-square map at both factors the decoders use, and
     /// on maps one pixel high and one pixel square (the reconstruction
@@ -309,11 +317,7 @@ mod tests {
             let out = [b, c, h * factor, w * factor];
             assert_eq!(ours.dims(), out);
             let (a, bv) = (values(ours.clone()), values(theirs.clone()));
-            let worst = a
-                .iter()
-                .zip(&bv)
-                .map(|(p, q)| (p - q).abs())
-                .fold(0.0, f32::max);
+            let worst = max_abs_difference(&a, &bv);
             assert!(
                 worst < 1e-5,
                 "{shape:?} ×{factor}: values differ by {worst}"
@@ -325,11 +329,7 @@ mod tests {
             let gb = (theirs * wt).sum().backward();
             let (ga, gb) = (x.grad(&ga).unwrap(), x.grad(&gb).unwrap());
             let (ga, gb) = (values(ga), values(gb));
-            let worst = ga
-                .iter()
-                .zip(&gb)
-                .map(|(p, q)| (p - q).abs())
-                .fold(0.0, f32::max);
+            let worst = max_abs_difference(&ga, &gb);
             assert!(
                 worst < 1e-4,
                 "{shape:?} ×{factor}: gradients differ by {worst}"
