@@ -226,9 +226,11 @@ impl Geometry {
 /// 3×3 layer at 64², was not, and copying it in and out cost as much as
 /// the product).
 fn band_rows(g: &Geometry) -> usize {
-    const TILE: usize = 64 * 1024;
-    (TILE / (g.taps() * g.wo).max(1)).clamp(1, g.ho)
+    (BAND_TILE / (g.taps() * g.wo).max(1)).clamp(1, g.ho)
 }
+
+/// Values per band's im2col tile (256 KB of f32).
+const BAND_TILE: usize = 64 * 1024;
 
 /// The output rows of band `i`.
 fn band(g: &Geometry, rows: usize, i: usize) -> Range<usize> {
@@ -366,12 +368,15 @@ struct Shifted {
     n: usize,
 }
 
-/// Strided layers with fewer input channels keep im2col: a tap's product
-/// would have an inner dimension of `Cin` (the RGB encoder's first layer: 3),
-/// where im2col's has `Cin·k²`.
+/// Strided layers with fewer input channels are not [`Shifted`]: a tap's
+/// product would have an inner dimension of `Cin` (the RGB encoder's first
+/// layer: 3, the depth encoder's: 1). They read the same split input as a
+/// stacked matrix instead ([`Shifted::stacked`]).
 const PHASED_MIN_CIN: usize = 8;
 
 impl Shifted {
+    /// The layer as k² products over views: stride 1 with a kernel larger
+    /// than 1, or strided with at least [`PHASED_MIN_CIN`] input channels.
     fn of(g: &Geometry) -> Option<Self> {
         let s = g.stride;
         let usable = if s == 1 {
@@ -379,16 +384,27 @@ impl Shifted {
         } else {
             g.k >= s && g.cin >= PHASED_MIN_CIN
         };
-        usable.then(|| {
-            let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
-            let wq = wp.div_ceil(s);
-            Self {
-                s,
-                wq,
-                plane: hp.div_ceil(s) * wq + g.k.div_ceil(s) - 1,
-                n: g.ho * wq,
-            }
-        })
+        usable.then(|| Self::layout(g))
+    }
+
+    /// A strided layer with fewer than [`PHASED_MIN_CIN`] input channels:
+    /// its im2col matrix is stacked from the split input's tap views, each
+    /// row one contiguous copy (`im2col` gathers every s-th value and fills
+    /// the padding row by row, 9 % of a training step in a profile).
+    fn stacked(g: &Geometry) -> Option<Self> {
+        (g.stride > 1 && g.k >= g.stride && g.cin < PHASED_MIN_CIN).then(|| Self::layout(g))
+    }
+
+    fn layout(g: &Geometry) -> Self {
+        let s = g.stride;
+        let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
+        let wq = wp.div_ceil(s);
+        Self {
+            s,
+            wq,
+            plane: hp.div_ceil(s) * wq + g.k.div_ceil(s) - 1,
+            n: g.ho * wq,
+        }
     }
 
     /// Values of one sample's split input: s² phases of `Cin` planes.
@@ -414,12 +430,17 @@ impl Shifted {
         for c in 0..g.cin {
             for iy in 0..g.h {
                 let src = &x[(c * g.h + iy) * g.w..][..g.w];
-                if self.s == 1 {
-                    let at = self.at(g, c, iy, 0);
-                    xp[at..at + g.w].copy_from_slice(src);
-                } else {
-                    for (ix, &v) in src.iter().enumerate() {
-                        xp[self.at(g, c, iy, ix)] = v;
+                // The row's columns of each phase, every s-th from `ix0`, lie
+                // side by side in that phase's plane.
+                for ix0 in 0..self.s.min(g.w) {
+                    let at = self.at(g, c, iy, ix0);
+                    let dst = &mut xp[at..];
+                    if self.s == 1 {
+                        dst[..g.w].copy_from_slice(src);
+                    } else {
+                        for (d, &v) in dst.iter_mut().zip(src[ix0..].iter().step_by(self.s)) {
+                            *d = v;
+                        }
                     }
                 }
             }
@@ -432,8 +453,11 @@ impl Shifted {
         for c in 0..g.cin {
             for iy in 0..g.h {
                 let dst = &mut dx[(c * g.h + iy) * g.w..][..g.w];
-                for (ix, d) in dst.iter_mut().enumerate() {
-                    *d = xp[self.at(g, c, iy, ix)];
+                for ix0 in 0..self.s.min(g.w) {
+                    let src = &xp[self.at(g, c, iy, ix0)..];
+                    for (d, &v) in dst[ix0..].iter_mut().step_by(self.s).zip(src) {
+                        *d = v;
+                    }
                 }
             }
         }
@@ -488,18 +512,132 @@ fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
                 for t in 0..g.k * g.k {
                     gemm(ypm.as_mut(), tap(g, &wt, t), sh.view(g, xp, t), t > 0);
                 }
-                for ((row, src), &bias) in
-                    ys.chunks_exact_mut(outs).zip(yp.chunks_exact(sh.n)).zip(b)
-                {
-                    for oy in 0..g.ho {
-                        let (d, s) = (&mut row[oy * g.wo..][..g.wo], &src[oy * sh.wq..][..g.wo]);
-                        for (d, s) in d.iter_mut().zip(s) {
-                            *d = s + bias;
-                        }
-                    }
+                unspread_rows(g, sh, yp, 0..g.ho, b, ys);
+            },
+        );
+}
+
+/// The output rows `oy` of `yp [Cout, oy.len()·wq]` (the product over the
+/// split input, with each row's discarded positions) into `y [Cout, Ho·Wo]`,
+/// plus the bias.
+fn unspread_rows(
+    g: &Geometry,
+    sh: Shifted,
+    yp: &[f32],
+    oy: Range<usize>,
+    b: &[f32],
+    y: &mut [f32],
+) {
+    let n = oy.len() * sh.wq;
+    for ((row, src), &bias) in y.chunks_exact_mut(g.outs()).zip(yp.chunks_exact(n)).zip(b) {
+        for (r, y) in oy.clone().enumerate() {
+            let (d, s) = (&mut row[y * g.wo..][..g.wo], &src[r * sh.wq..][..g.wo]);
+            for (d, s) in d.iter_mut().zip(s) {
+                *d = s + bias;
+            }
+        }
+    }
+}
+
+/// Output rows per band of a [`Shifted::stacked`] layer, its stacked tile
+/// kept within [`band_rows`]'s size.
+fn stacked_rows(g: &Geometry, sh: Shifted) -> usize {
+    (BAND_TILE / (g.taps() * sh.wq).max(1)).clamp(1, g.ho)
+}
+
+/// The stacked im2col tile of the output rows `oy` from the split input
+/// `xp`: `col [Cin·k·k, oy.len()·wq]`, row `(c, tap)` the tap's view of
+/// channel `c`, one contiguous copy (the padding is in `xp`).
+fn stack_band(g: &Geometry, sh: Shifted, xp: &[f32], oy: &Range<usize>, col: &mut [f32]) {
+    let (kk, n) = (g.k * g.k, oy.len() * sh.wq);
+    for (r, row) in col.chunks_exact_mut(n).enumerate() {
+        let (c, t) = (r / kk, r % kk);
+        let at = sh.offset(g, t) + c * sh.plane + oy.start * sh.wq;
+        row.copy_from_slice(&xp[at..at + n]);
+    }
+}
+
+/// [`forward`] for a [`Shifted::stacked`] layer: per band, one product of
+/// the `[Cout, Cin·k·k]` weights with the stacked tile.
+fn forward_stacked(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+    let (taps, rows) = (g.taps(), stacked_rows(g, sh));
+    let wm = MatRef::from_row_major_slice(w, g.cout, taps);
+    y.par_chunks_mut(g.cout * g.outs())
+        .zip(x.par_chunks(g.cin * g.h * g.w))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            || {
+                let tile = rows * sh.wq;
+                (
+                    vec![0.0f32; sh.len(g)],
+                    vec![0.0f32; taps * tile],
+                    vec![0.0f32; g.cout * tile],
+                )
+            },
+            |(xp, col, yb), (ys, xs)| {
+                sh.pad(g, xs, xp);
+                for i in 0..g.ho.div_ceil(rows) {
+                    let oy = band(g, rows, i);
+                    let n = oy.len() * sh.wq;
+                    stack_band(g, sh, xp, &oy, &mut col[..taps * n]);
+                    gemm(
+                        MatMut::from_row_major_slice_mut(&mut yb[..g.cout * n], g.cout, n),
+                        wm,
+                        MatRef::from_row_major_slice(&col[..taps * n], taps, n),
+                        false,
+                    );
+                    unspread_rows(g, sh, &yb[..g.cout * n], oy, b, ys);
                 }
             },
         );
+}
+
+/// [`wb_backward`] for a [`Shifted::stacked`] layer: per band,
+/// `dW += dy · colᵀ` with the stacked tile.
+fn wb_backward_stacked(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let (taps, outs, rows) = (g.taps(), g.outs(), stacked_rows(g, sh));
+    let zero = || {
+        (
+            vec![0.0f32; sh.len(g)],
+            vec![0.0f32; taps * rows * sh.wq],
+            vec![0.0f32; g.cout * sh.n],
+            vec![0.0f32; g.cout * taps],
+            vec![0.0f32; g.cout],
+        )
+    };
+    let (_, _, _, dw, db) = x
+        .par_chunks(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .fold(
+            zero,
+            |(mut xp, mut col, mut dyp, mut dw, mut db), (xs, dys)| {
+                sh.pad(g, xs, &mut xp);
+                spread(g, sh, dys, &mut dyp);
+                let dym = MatRef::from_row_major_slice(&dyp, g.cout, sh.n);
+                for i in 0..g.ho.div_ceil(rows) {
+                    let oy = band(g, rows, i);
+                    let n = oy.len() * sh.wq;
+                    stack_band(g, sh, &xp, &oy, &mut col[..taps * n]);
+                    let colm = MatRef::from_row_major_slice(&col[..taps * n], taps, n);
+                    let dwm = MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps);
+                    gemm(
+                        dwm,
+                        dym.subcols(oy.start * sh.wq, n),
+                        colm.transpose(),
+                        true,
+                    );
+                }
+                add_bias_grad(&mut db, dys, outs);
+                (xp, col, dyp, dw, db)
+            },
+        )
+        .reduce(zero, |(a, c, d, mut dw, mut db), (_, _, _, dw2, db2)| {
+            add(&mut dw, &dw2);
+            add(&mut db, &db2);
+            (a, c, d, dw, db)
+        });
+    (dw, db)
 }
 
 /// One sample's `dy [Cout, Ho·Wo]` spread into `[Cout, Ho·wq]` with zeros
@@ -612,9 +750,12 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
 
 /// The forward pass on contiguous f32 arrays.
 fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
-    match Shifted::of(g) {
-        Some(sh) => forward_shifted(g, sh, x, w, b, y),
-        None => forward_banded(g, x, w, b, y),
+    if let Some(sh) = Shifted::of(g) {
+        forward_shifted(g, sh, x, w, b, y)
+    } else if let Some(sh) = Shifted::stacked(g) {
+        forward_stacked(g, sh, x, w, b, y)
+    } else {
+        forward_banded(g, x, w, b, y)
     }
 }
 
@@ -690,9 +831,12 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
 
 /// The weight and bias gradients on contiguous f32 arrays.
 fn wb_backward(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
-    match Shifted::of(g) {
-        Some(sh) => wb_backward_shifted(g, sh, x, dy),
-        None => wb_backward_banded(g, x, dy),
+    if let Some(sh) = Shifted::of(g) {
+        wb_backward_shifted(g, sh, x, dy)
+    } else if let Some(sh) = Shifted::stacked(g) {
+        wb_backward_stacked(g, sh, x, dy)
+    } else {
+        wb_backward_banded(g, x, dy)
     }
 }
 
@@ -1042,9 +1186,53 @@ mod tests {
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
         }
-        // The RGB encoder's first layer (3 channels) keeps im2col.
+        // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
+    }
+
+    /// Strided layers of few input channels (the stacked tile from the
+    /// split input) against the im2col path, forward and weight gradient.
+    #[test]
+    fn stacked_paths_match_im2col() {
+        for &(b, cin, cout, h, w, k, s, p) in &[
+            // The RGB encoder's first layer at full size: many bands.
+            (2, 3, 4, 128, 128, 7, 2, 3),
+            // The depth encoder's first layer, odd sides, wider than high.
+            (2, 1, 3, 11, 14, 3, 2, 1),
+            (1, 2, 3, 13, 9, 5, 2, 2),
+            (2, 3, 2, 10, 12, 5, 3, 2),
+            (1, 7, 2, 2, 3, 3, 2, 1),
+        ] {
+            let g = Geometry::new(&[b, cin, h, w], &[cout, cin, k, k], s, p);
+            let what = format!("b {b} cin {cin} cout {cout} {h}×{w} k {k} stride {s} pad {p}");
+            assert!(Shifted::of(&g).is_none(), "{what}: Shifted");
+            let sh = Shifted::stacked(&g).expect("a stacked geometry");
+            let mut rng = fastrand::Rng::with_seed(5);
+            let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
+            let (x, wt, bias) = (vals(b * cin * h * w), vals(cout * cin * k * k), vals(cout));
+            let dy = vals(b * cout * g.outs());
+            let near = |a: &[f32], b: &[f32], pass: &str| {
+                assert_eq!(a.len(), b.len());
+                for (i, (u, v)) in a.iter().zip(b).enumerate() {
+                    assert!((u - v).abs() < 1e-4, "{what} {pass}[{i}]: {u} against {v}");
+                }
+            };
+            let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
+            forward_stacked(&g, sh, &x, &wt, &bias, &mut y1);
+            forward_banded(&g, &x, &wt, &bias, &mut y2);
+            near(&y1, &y2, "y");
+            let ((dw1, db1), (dw2, db2)) = (
+                wb_backward_stacked(&g, sh, &x, &dy),
+                wb_backward_banded(&g, &x, &dy),
+            );
+            near(&dw1, &dw2, "dw");
+            near(&db1, &db2, "db");
+        }
+        // The first case is split into bands.
+        let g = Geometry::new(&[1, 3, 128, 128], &[4, 3, 7, 7], 2, 3);
+        let sh = Shifted::stacked(&g).expect("stacked");
+        assert!(stacked_rows(&g, sh) < g.ho);
     }
 
     /// The columns kept inside the image, against a direct count.
