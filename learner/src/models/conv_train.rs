@@ -141,9 +141,10 @@ pub(crate) fn square(c: &Conv2d) -> (usize, usize, usize) {
 }
 
 /// `LEARNER_CONV=burn` in the environment sends [`conv2d`] through burn's
-/// own convolution instead: the A/B switch of the training benchmark
-/// (docs/performance.md), and a way to rule this path out.
-fn burns_own() -> bool {
+/// own convolution instead (and the leaky ReLU, [`super::encoders::act`],
+/// through burn's primitives): the A/B switch of the training benchmark
+/// (docs/performance.md), and a way to rule these paths out.
+pub(crate) fn burns_own() -> bool {
     static BURN: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
 }
@@ -883,11 +884,11 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
 
 /// The tensor in contiguous layout (copied only if it is not), or `None`
 /// for another dtype than f32.
-fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
+pub(crate) fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
     (t.dtype() == DType::F32).then(|| t.to_contiguous())
 }
 
-fn flex_tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
+pub(crate) fn flex_tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
     FlexTensor::from_data(burn::tensor::TensorData::new(values, shape))
 }
 

@@ -8,7 +8,9 @@ use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
-use super::conv_train::conv2d;
+use super::act_train::ActTrain;
+use super::conv_train::{burns_own, conv2d};
+use burn::backend::Dispatch;
 
 /// Slope of every leaky ReLU (the authors' code uses 0.1).
 pub const LEAKY_SLOPE: f64 = 0.1;
@@ -16,13 +18,21 @@ pub const LEAKY_SLOPE: f64 = 0.1;
 /// Six stride-2 layers bring an image of side S to S/64.
 pub const IMAGE_DOWNSAMPLE: usize = 64;
 
-/// Leaky ReLU with [`LEAKY_SLOPE`], as `slope·x + (1 − slope)·relu(x)`:
-/// the same function, but ReLU is one of burn's primitives with its own
-/// backward, while `leaky_relu` is composed of a comparison and a
-/// `mask_where` whose forward and backward took 11 % of a training step on
-/// the flex backend (perf, docs/performance.md).
+/// Leaky ReLU with [`LEAKY_SLOPE`], as one operation with its own
+/// backward pass ([`super::act_train`]; one pass each way on the CPU).
+/// With `LEARNER_CONV=burn` (the benchmark's A/B switch) it is the
+/// composition `slope·x + (1 − slope)·relu(x)` of burn's primitives: ReLU
+/// has its own backward, while burn's `leaky_relu` is a comparison and a
+/// `mask_where` whose two passes took 11 % of a training step on `flex`
+/// (docs/performance.md).
 pub fn act<const D: usize>(x: Tensor<D>) -> Tensor<D> {
-    x.clone().mul_scalar(LEAKY_SLOPE) + relu(x).mul_scalar(1.0 - LEAKY_SLOPE)
+    if burns_own() {
+        return x.clone().mul_scalar(LEAKY_SLOPE) + relu(x).mul_scalar(1.0 - LEAKY_SLOPE);
+    }
+    Tensor::from_dispatch(<Dispatch as ActTrain>::leaky_train(
+        x.into_dispatch(),
+        LEAKY_SLOPE,
+    ))
 }
 
 /// A multilayer perceptron: leaky ReLU between layers, none after the last.

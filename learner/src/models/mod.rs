@@ -16,6 +16,7 @@
 //! Training loops, checkpoints and evaluation live in [`crate::train`];
 //! nothing here reads files except the exported model's loader.
 
+pub mod act_train;
 pub mod config;
 pub mod conv_train;
 pub mod decoders;
