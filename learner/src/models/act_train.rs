@@ -62,11 +62,12 @@ impl ActTrain for Flex {
         y.par_chunks_mut(CHUNK)
             .zip(src.par_chunks(CHUNK))
             .for_each(move |(d, s)| {
-                // Branch-free, and `a` a local of the closure: a branch per
-                // value (random signs) or `a` read through a reference kept
-                // this loop scalar (perf annotate).
+                // A select, not a branch, and `a` a local of the closure: a
+                // branch per value (random signs) or `a` read through a
+                // reference kept this loop scalar (perf annotate). Not
+                // `max`/`min`, which would turn NaN into 0.
                 for (d, &v) in d.iter_mut().zip(s) {
-                    *d = v.max(0.0) + a * v.min(0.0);
+                    *d = v * if v > 0.0 { 1.0 } else { a };
                 }
             });
         flex_tensor(y, x.shape().to_vec())
@@ -147,6 +148,7 @@ mod tests {
         let mut v: Vec<f32> = (0..n).map(|_| rng.f32() * 2.0 - 1.0).collect();
         v[5] = 0.0;
         v[n - 1] = 0.0;
+        v[7] = f32::NAN;
         let x = Tensor::<1>::from_floats(v.as_slice(), &device).reshape([n / 17, 17]);
         let w: Vec<f32> = (0..n).map(|_| rng.f32()).collect();
         let w = Tensor::<1>::from_floats(w.as_slice(), &device).reshape([n / 17, 17]);
@@ -172,15 +174,17 @@ mod tests {
         for (what, a, b) in [("value", &y1, &y2), ("gradient", &dx1, &dx2)] {
             assert_eq!(a.len(), n, "{what}s");
             for (i, (p, q)) in a.iter().zip(b.iter()).enumerate() {
+                if i == 7 {
+                    // NaN stays NaN, so that a diverged run shows in its
+                    // loss. (Its gradient, 1 through the composition and 0.1
+                    // through ours, is not compared: NaN has no slope.)
+                    if what == "value" {
+                        assert!(p.is_nan() && q.is_nan(), "value of NaN: {p} against {q}");
+                    }
+                    continue;
+                }
                 assert!((p - q).abs() <= 1e-6, "{what} {i}: {p} against {q}");
             }
         }
-        // Not the identity, nor a ReLU: the negative side is scaled.
-        assert!(
-            (y1[5 + 1..]
-                .iter()
-                .zip(&v[5 + 1..])
-                .any(|(y, x)| *x < 0.0 && (y - 0.1 * x).abs() < 1e-7))
-        );
     }
 }

@@ -9,13 +9,17 @@
 //! gives `flex` its own three passes, per sample and split over rayon's
 //! threads:
 //!
-//! - strided layers, through im2col in bands of output rows (a tile that
-//!   stays in cache) and one faer product per band: `y = W · im2col(x) + b`,
-//!   `dx = col2im(Wᵀ · dy)`, `dW = Σ dy · im2col(x)ᵀ`;
 //! - stride-1 layers, without im2col ([`Shifted`]): k² products of each
 //!   tap's weights with a view of the zero-padded input; the input gradient
 //!   is the same kind of convolution of `dy` with the kernel flipped;
-//! - 1×1 layers read their input as the matrix; the bias's `db = Σ dy`.
+//! - strided layers of at least 8 input channels, the same on the input
+//!   split into stride² phases;
+//! - strided layers of fewer channels (the encoders' first layers),
+//!   [`Shifted::stacked`]: the im2col tile of a band of output rows (in
+//!   cache) stacked from the split input by contiguous copies, and one faer
+//!   product per band, `y = W · col + b`, `dW = Σ dy · colᵀ`;
+//! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
+//!   layers read their input as the matrix; the bias's `db = Σ dy`.
 //!
 //! The GPU backends (burn's `Cube`: Vulkan, CUDA) run burn's own
 //! convolution kernels through the trait's default bodies; under autodiff
@@ -888,6 +892,7 @@ pub(crate) fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
     (t.dtype() == DType::F32).then(|| t.to_contiguous())
 }
 
+/// A contiguous f32 flex tensor of `shape` holding `values`.
 pub(crate) fn flex_tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
     FlexTensor::from_data(burn::tensor::TensorData::new(values, shape))
 }
@@ -1063,9 +1068,9 @@ mod tests {
             (1, 4, 3, 1, 3, 1, 1),
             // A stride-1 layer of the depth encoder's size (the shifted path).
             (2, 16, 3, 40, 3, 1, 1),
-            // Strided layers in several row bands (`band_rows`), the last
-            // one short: im2col's (3 and 1 input channels, the encoders'
-            // first layers) and the split input's.
+            // Strided layers in several row bands, the last one short: the
+            // stacked path's (3 and 1 input channels, the encoders' first
+            // layers) and the split input's.
             (1, 3, 2, 128, 5, 2, 2),
             (1, 1, 2, 256, 3, 2, 1),
             (1, 8, 2, 50, 5, 2, 2),
@@ -1073,7 +1078,7 @@ mod tests {
         ];
         for (seed, &(b, cin, cout, side, k, s, p)) in cases.iter().enumerate() {
             let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
-            let rows = band_rows(&g);
+            let rows = Shifted::stacked(&g).map_or(band_rows(&g), |sh| stacked_rows(&g, sh));
             assert!(
                 side < 40
                     || Shifted::of(&g).is_some()
@@ -1201,6 +1206,10 @@ mod tests {
             (2, 3, 4, 128, 128, 7, 2, 3),
             // The depth encoder's first layer, odd sides, wider than high.
             (2, 1, 3, 11, 14, 3, 2, 1),
+            // Narrower than the stride; a kernel as wide as the stride,
+            // no padding (no zeros after a phase plane).
+            (1, 2, 3, 7, 2, 3, 3, 1),
+            (2, 3, 2, 8, 9, 2, 2, 0),
             (1, 2, 3, 13, 9, 5, 2, 2),
             (2, 3, 2, 10, 12, 5, 3, 2),
             (1, 7, 2, 2, 3, 3, 2, 1),
