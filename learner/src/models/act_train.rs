@@ -18,7 +18,6 @@ use burn::backend::autodiff::{
     grads::Gradients,
     ops::{Backward, Ops, OpsKind},
 };
-use burn::backend::ops::{ActivationOps, FloatTensorOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
 use rayon::prelude::*;
@@ -28,8 +27,7 @@ use rayon::prelude::*;
 pub trait ActTrain: Backend {
     /// `x` where `x > 0`, else `slope·x` (`slope` in (0, 1)).
     fn leaky_train(x: FloatTensor<Self>, slope: f64) -> FloatTensor<Self> {
-        let pos = Self::float_mul_scalar(Self::relu(x.clone()), (1.0 - slope).into());
-        Self::float_add(Self::float_mul_scalar(x, slope.into()), pos)
+        composed::<Self>(x, slope)
     }
 
     /// The gradient with respect to `x`, from the forward pass's output `y`
@@ -39,10 +37,25 @@ pub trait ActTrain: Backend {
         grad: FloatTensor<Self>,
         slope: f64,
     ) -> FloatTensor<Self> {
-        let pos =
-            Self::float_mul_scalar(Self::relu_backward(y, grad.clone()), (1.0 - slope).into());
-        Self::float_add(Self::float_mul_scalar(grad, slope.into()), pos)
+        composed_backward::<Self>(y, grad, slope)
     }
+}
+
+/// `slope·x + (1 − slope)·relu(x)` of `B`'s primitives: the GPU backends'
+/// leaky ReLU, and flex's for other dtypes than f32.
+fn composed<B: Backend>(x: FloatTensor<B>, slope: f64) -> FloatTensor<B> {
+    let pos = B::float_mul_scalar(B::relu(x.clone()), (1.0 - slope).into());
+    B::float_add(B::float_mul_scalar(x, slope.into()), pos)
+}
+
+/// [`composed`]'s input gradient from its output `y`.
+fn composed_backward<B: Backend>(
+    y: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    slope: f64,
+) -> FloatTensor<B> {
+    let pos = B::float_mul_scalar(B::relu_backward(y, grad.clone()), (1.0 - slope).into());
+    B::float_add(B::float_mul_scalar(grad, slope.into()), pos)
 }
 
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
@@ -54,8 +67,7 @@ const CHUNK: usize = 1 << 15;
 impl ActTrain for Flex {
     fn leaky_train(x: FlexTensor, slope: f64) -> FlexTensor {
         let Some(xc) = f32s(&x) else {
-            let pos = Flex::float_mul_scalar(Flex::relu(x.clone()), (1.0 - slope).into());
-            return Flex::float_add(Flex::float_mul_scalar(x, slope.into()), pos);
+            return composed::<Flex>(x, slope);
         };
         let (src, a) = (xc.storage::<f32>(), slope as f32);
         let mut y = vec![0.0f32; src.len()];
@@ -75,9 +87,7 @@ impl ActTrain for Flex {
 
     fn leaky_train_backward(y: FlexTensor, grad: FlexTensor, slope: f64) -> FlexTensor {
         let (Some(yc), Some(gc)) = (f32s(&y), f32s(&grad)) else {
-            let pos =
-                Flex::float_mul_scalar(Flex::relu_backward(y, grad.clone()), (1.0 - slope).into());
-            return Flex::float_add(Flex::float_mul_scalar(grad, slope.into()), pos);
+            return composed_backward::<Flex>(y, grad, slope);
         };
         let (ys, gs, a) = (yc.storage::<f32>(), gc.storage::<f32>(), slope as f32);
         let mut dx = vec![0.0f32; gs.len()];

@@ -332,6 +332,23 @@ fn add(acc: &mut [f32], v: &[f32]) {
     acc.iter_mut().zip(v).for_each(|(a, b)| *a += b);
 }
 
+/// The weight and bias gradients summed over the rayon tasks of a fold,
+/// `(dW, db)` each; the folds' scratch buffers are dropped before this, so
+/// the identity allocates only the two sums.
+fn sum_grads<I>(tasks: I, dw_len: usize, cout: usize) -> (Vec<f32>, Vec<f32>)
+where
+    I: ParallelIterator<Item = (Vec<f32>, Vec<f32>)>,
+{
+    tasks.reduce(
+        || (vec![0.0f32; dw_len], vec![0.0f32; cout]),
+        |(mut dw, mut db), (dw2, db2)| {
+            add(&mut dw, &dw2);
+            add(&mut db, &db2);
+            (dw, db)
+        },
+    )
+}
+
 /// `db[c] += Σ dy[c, ·]` for one sample's `dy [Cout, outs]`.
 fn add_bias_grad(db: &mut [f32], dy: &[f32], outs: usize) {
     for (d, row) in db.iter_mut().zip(dy.chunks_exact(outs)) {
@@ -610,7 +627,7 @@ fn wb_backward_stacked(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
             vec![0.0f32; g.cout],
         )
     };
-    let (_, _, _, dw, db) = x
+    let folds = x
         .par_chunks(g.cin * g.h * g.w)
         .zip(dy.par_chunks(g.cout * outs))
         .with_min_len(per_task(g.batch))
@@ -637,12 +654,8 @@ fn wb_backward_stacked(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
                 (xp, col, dyp, dw, db)
             },
         )
-        .reduce(zero, |(a, c, d, mut dw, mut db), (_, _, _, dw2, db2)| {
-            add(&mut dw, &dw2);
-            add(&mut db, &db2);
-            (a, c, d, dw, db)
-        });
-    (dw, db)
+        .map(|(_, _, _, dw, db)| (dw, db));
+    sum_grads(folds, g.cout * taps, g.cout)
 }
 
 /// One sample's `dy [Cout, Ho·Wo]` spread into `[Cout, Ho·wq]` with zeros
@@ -720,7 +733,7 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
             vec![0.0f32; g.cout],
         )
     };
-    let (_, _, dwt, db) = x
+    let folds = x
         .par_chunks(g.cin * g.h * g.w)
         .zip(dy.par_chunks(g.cout * outs))
         .with_min_len(per_task(g.batch))
@@ -739,11 +752,8 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
             add_bias_grad(&mut db, dys, outs);
             (xp, dyp, dwt, db)
         })
-        .reduce(zero, |(a, b, mut dwt, mut db), (_, _, dwt2, db2)| {
-            add(&mut dwt, &dwt2);
-            add(&mut db, &db2);
-            (a, b, dwt, db)
-        });
+        .map(|(_, _, dwt, db)| (dwt, db));
+    let (dwt, db) = sum_grads(folds, g.cout * g.cin * kk, g.cout);
     // Back to [Cout, Cin, k, k].
     let mut dw = vec![0.0f32; dwt.len()];
     for (i, d) in dw.iter_mut().enumerate() {
@@ -855,7 +865,7 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
             vec![0.0f32; g.cout],
         )
     };
-    let (_, dw, db) = x
+    let folds = x
         .par_chunks(g.cin * g.h * g.w)
         .zip(dy.par_chunks(g.cout * outs))
         .with_min_len(per_task(g.batch))
@@ -878,12 +888,8 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
             add_bias_grad(&mut db, dys, outs);
             (col, dw, db)
         })
-        .reduce(zero, |(c, mut dw, mut db), (_, dw2, db2)| {
-            add(&mut dw, &dw2);
-            add(&mut db, &db2);
-            (c, dw, db)
-        });
-    (dw, db)
+        .map(|(_, dw, db)| (dw, db));
+    sum_grads(folds, g.cout * taps, g.cout)
 }
 
 /// The tensor in contiguous layout (copied only if it is not), or `None`
@@ -1133,6 +1139,19 @@ mod tests {
         close(conv2d(&c, x.clone()), c.forward(x), "y");
     }
 
+    /// `n` values uniform in [−0.5, 0.5).
+    fn uniform(rng: &mut fastrand::Rng, n: usize) -> Vec<f32> {
+        (0..n).map(|_| rng.f32() - 0.5).collect()
+    }
+
+    /// `a` against `b`, value by value, within 1e-4.
+    fn near(a: &[f32], b: &[f32], label: &str) {
+        assert_eq!(a.len(), b.len(), "{label}: sizes");
+        for (i, (u, v)) in a.iter().zip(b).enumerate() {
+            assert!((u - v).abs() < 1e-4, "{label}[{i}]: {u} against {v}");
+        }
+    }
+
     /// The paths without im2col (stride 1; strided, on the split input)
     /// against the im2col path, on raw arrays, one pass at a time.
     #[test]
@@ -1158,21 +1177,15 @@ mod tests {
             let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
             let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
-            let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
             let (x, w, bias) = (
-                vals(b * cin * side * width),
-                vals(cout * cin * k * k),
-                vals(cout),
+                uniform(&mut rng, b * cin * side * width),
+                uniform(&mut rng, cout * cin * k * k),
+                uniform(&mut rng, cout),
             );
-            let dy = vals(b * cout * g.outs());
+            let dy = uniform(&mut rng, b * cout * g.outs());
             let what =
                 format!("b {b} cin {cin} cout {cout} {side}×{width} k {k} stride {s} pad {p}");
-            let near = |a: &[f32], b: &[f32], pass: &str| {
-                assert_eq!(a.len(), b.len());
-                for (i, (u, v)) in a.iter().zip(b).enumerate() {
-                    assert!((u - v).abs() < 1e-4, "{what} {pass}[{i}]: {u} against {v}");
-                }
-            };
+            let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
             let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
             forward_shifted(&g, sh, &x, &w, &bias, &mut y1);
             forward_banded(&g, &x, &w, &bias, &mut y2);
@@ -1219,15 +1232,13 @@ mod tests {
             assert!(Shifted::of(&g).is_none(), "{what}: Shifted");
             let sh = Shifted::stacked(&g).expect("a stacked geometry");
             let mut rng = fastrand::Rng::with_seed(5);
-            let mut vals = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.f32() - 0.5).collect() };
-            let (x, wt, bias) = (vals(b * cin * h * w), vals(cout * cin * k * k), vals(cout));
-            let dy = vals(b * cout * g.outs());
-            let near = |a: &[f32], b: &[f32], pass: &str| {
-                assert_eq!(a.len(), b.len());
-                for (i, (u, v)) in a.iter().zip(b).enumerate() {
-                    assert!((u - v).abs() < 1e-4, "{what} {pass}[{i}]: {u} against {v}");
-                }
-            };
+            let (x, wt, bias) = (
+                uniform(&mut rng, b * cin * h * w),
+                uniform(&mut rng, cout * cin * k * k),
+                uniform(&mut rng, cout),
+            );
+            let dy = uniform(&mut rng, b * cout * g.outs());
+            let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
             let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
             forward_stacked(&g, sh, &x, &wt, &bias, &mut y1);
             forward_banded(&g, &x, &wt, &bias, &mut y2);
