@@ -19,13 +19,19 @@
 //!   cache) stacked from the split input by contiguous copies, and one faer
 //!   product per band, `y = W · col + b`, `dW = Σ dy · colᵀ`;
 //! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
-//!   layers read their input as the matrix; the bias's `db = Σ dy`.
+//!   layers read their input as the matrix; the bias's `db = Σ dy`;
+//! - transposed convolutions (the flow decoder's up-convolutions,
+//!   [`conv_transpose2d`]) as the input-gradient pass of the convolution
+//!   with the same weight, whose forward pass is their input gradient and
+//!   whose weight gradient, with the roles of input and output gradient
+//!   swapped, is theirs (burn's took about 12 % of a training step).
 //!
 //! The GPU backends (burn's `Cube`: Vulkan, CUDA) run burn's own
 //! convolution kernels through the trait's default bodies; under autodiff
 //! every backend goes through this file's backward node, which calls the
-//! backend's kernels. The model code calls [`conv2d`] whatever the device. The parameters stay in burn's
-//! [`Conv2d`] module: records and checkpoints do not change.
+//! backend's kernels. The model code calls [`conv2d`] and
+//! [`conv_transpose2d`] whatever the device. The parameters stay in burn's
+//! [`Conv2d`] and [`ConvTranspose2d`] modules: records and checkpoints do not change.
 
 use burn::backend::autodiff::{
     Autodiff,
@@ -33,12 +39,12 @@ use burn::backend::autodiff::{
     grads::Gradients,
     ops::{Backward, Ops, OpsKind},
 };
-use burn::backend::ops::{ConvOptions, ModuleOps};
+use burn::backend::ops::{ConvOptions, ConvTransposeOptions, ModuleOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::backend::{DType, Flex, flex::FlexTensor};
 use burn::nn::PaddingConfig2d;
-use burn::nn::conv::Conv2d;
+use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::prelude::*;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
@@ -82,10 +88,61 @@ pub trait ConvTrain: Backend {
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         burns_wb_backward::<Self>(x, weight, grad, stride, pad)
     }
+
+    /// The transposed convolution: `x [B, Cin, H, W]`, `weight [Cin, Cout,
+    /// k, k]` (burn's layout for it), `bias [Cout]` → `[B, Cout, (H − 1)·s −
+    /// 2p + k, …]`; the input gradient of the convolution of the same
+    /// weight, stride and padding, plus the bias.
+    fn conv_transpose2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d(x, weight, Some(bias), transposed_options(stride, pad))
+    }
+
+    /// The gradient of [`ConvTrain::conv_transpose2d_train`] with respect
+    /// to `x`.
+    fn conv_transpose2d_train_x_backward(
+        _x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d_x_backward(weight, grad, transposed_options(stride, pad))
+    }
+
+    /// The gradients of [`ConvTrain::conv_transpose2d_train`] with respect
+    /// to the weight and the bias.
+    fn conv_transpose2d_train_wb_backward(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let cout = weight.shape()[1];
+        let opts = transposed_options(stride, pad);
+        let dw = Self::conv_transpose2d_weight_backward(x, weight, grad.clone(), opts);
+        (dw, bias_grad::<Self>(grad, cout))
+    }
 }
 
 fn options(stride: usize, pad: usize) -> ConvOptions<2> {
     ConvOptions::new([stride, stride], [pad, pad], [1, 1], 1)
+}
+
+fn transposed_options(stride: usize, pad: usize) -> ConvTransposeOptions<2> {
+    ConvTransposeOptions::new([stride, stride], [pad, pad], [0, 0], [1, 1], 1)
+}
+
+/// `Σ grad` over the batch and the positions, per channel: `[cout]`.
+fn bias_grad<B: Backend>(grad: FloatTensor<B>, cout: usize) -> FloatTensor<B> {
+    let db = B::float_sum_dim(B::float_sum_dim(grad, 3), 2);
+    B::float_reshape(B::float_sum_dim(db, 0), [cout].into())
 }
 
 /// burn's own weight and bias gradients on backend `B`.
@@ -98,9 +155,7 @@ fn burns_wb_backward<B: Backend>(
 ) -> (FloatTensor<B>, FloatTensor<B>) {
     let cout = weight.shape()[0];
     let dw = B::conv2d_weight_backward(x, weight, grad.clone(), options(stride, pad));
-    let db = B::float_sum_dim(B::float_sum_dim(grad, 3), 2);
-    let db = B::float_sum_dim(db, 0);
-    (dw, B::float_reshape(db, [cout].into()))
+    (dw, bias_grad::<B>(grad, cout))
 }
 
 /// `c.forward(x)`, through [`ConvTrain`].
@@ -144,10 +199,43 @@ pub(crate) fn square(c: &Conv2d) -> (usize, usize, usize) {
     (kh, c.stride[0], pad)
 }
 
-/// `LEARNER_CONV=burn` in the environment sends [`conv2d`] through burn's
-/// own convolution instead (and the leaky ReLU, [`super::encoders::act`],
-/// through burn's primitives): the A/B switch of the training benchmark
-/// (docs/performance.md), and a way to rule these paths out.
+/// `c.forward(x)` for a transposed convolution (the flow decoder's
+/// up-convolutions), through [`ConvTrain`]: on the CPU, the input-gradient
+/// pass of the convolution with the same weight, stride and padding.
+///
+/// # Panics
+/// If it has no bias, a non-square kernel, unequal strides or paddings, an
+/// output padding, dilation or groups (none of the models' has one).
+pub fn conv_transpose2d(c: &ConvTranspose2d, x: Tensor<4>) -> Tensor<4> {
+    if burns_own() {
+        return c.forward(x);
+    }
+    let [_, _, kh, kw] = c.weight.dims();
+    assert!(
+        kh == kw
+            && c.stride[0] == c.stride[1]
+            && c.padding[0] == c.padding[1]
+            && c.padding_out == [0, 0]
+            && c.dilation == [1, 1]
+            && c.groups == 1,
+        "conv_transpose2d: only square kernels with one stride and padding, no output \
+         padding, dilation or groups"
+    );
+    let bias = c.bias.as_ref().expect("conv_transpose2d: one with a bias");
+    Tensor::from_dispatch(<Dispatch as ConvTrain>::conv_transpose2d_train(
+        x.into_dispatch(),
+        c.weight.val().into_dispatch(),
+        bias.val().into_dispatch(),
+        c.stride[0],
+        c.padding[0],
+    ))
+}
+
+/// `LEARNER_CONV=burn` in the environment sends [`conv2d`] and
+/// [`conv_transpose2d`] through burn's own convolutions instead (and the
+/// leaky ReLU, [`super::encoders::act`], through burn's primitives): the
+/// A/B switch of the training benchmark (docs/performance.md), and a way to
+/// rule these paths out.
 pub(crate) fn burns_own() -> bool {
     static BURN: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
@@ -192,6 +280,31 @@ impl Geometry {
             ho: (h + 2 * pad - k) / stride + 1,
             wo: (w + 2 * pad - k) / stride + 1,
         }
+    }
+
+    /// The convolution whose input gradient is the transposed convolution
+    /// of `x [B, Cin, H, W]` by `weight [Cin, Cout, k, k]`: input `[B, Cout,
+    /// (H − 1)·s − 2p + k, …]`, output `[B, Cin, H, W]`, the same weight.
+    fn transposed(x: &[usize], weight: &[usize], stride: usize, pad: usize) -> Self {
+        let k = weight[2];
+        let side = |n: usize| {
+            ((n - 1) * stride + k)
+                .checked_sub(2 * pad)
+                .filter(|&v| v > 0)
+                .expect("conv_transpose2d: padding larger than the output")
+        };
+        let g = Self::new(
+            &[x[0], weight[1], side(x[2]), side(x[3])],
+            weight,
+            stride,
+            pad,
+        );
+        assert_eq!(
+            weight[0], x[1],
+            "conv_transpose2d: weight and input channels differ"
+        );
+        debug_assert_eq!((g.ho, g.wo), (x[2], x[3]));
+        g
     }
 
     /// Rows of the im2col matrix (one per input channel and tap).
@@ -503,13 +616,24 @@ impl Shifted {
     }
 }
 
-/// `weight [Cout, Cin, k, k]` → tap-major `[k·k][Cout, Cin]`.
+/// `weight [Cout, Cin, k, k]` → tap-major `[k·k][Cout, Cin]`, written in
+/// order (a scattered write per value took 1.5 % of a training step in a
+/// profile).
 fn taps_major(g: &Geometry, w: &[f32]) -> Vec<f32> {
-    let kk = g.k * g.k;
-    let mut out = vec![0.0f32; w.len()];
-    for (i, &v) in w.iter().enumerate() {
-        let (oc, t) = (i / kk, i % kk);
-        out[t * g.cout * g.cin + oc] = v;
+    let (kk, n) = (g.k * g.k, g.cout * g.cin);
+    let mut out = Vec::with_capacity(w.len());
+    for t in 0..kk {
+        out.extend(w[t..].iter().step_by(kk).take(n));
+    }
+    out
+}
+
+/// The adjoint of [`taps_major`]: `[k·k][Cout, Cin]` → `[Cout, Cin, k, k]`.
+fn taps_minor(g: &Geometry, wt: &[f32]) -> Vec<f32> {
+    let (kk, n) = (g.k * g.k, g.cout * g.cin);
+    let mut out = Vec::with_capacity(wt.len());
+    for oc in 0..n {
+        out.extend(wt[oc..].iter().step_by(n).take(kk));
     }
     out
 }
@@ -519,9 +643,41 @@ fn tap<'a>(g: &Geometry, wt: &'a [f32], t: usize) -> MatRef<'a, f32> {
     MatRef::from_row_major_slice(&wt[t * g.cout * g.cin..][..g.cout * g.cin], g.cout, g.cin)
 }
 
+/// Which kernel [`forward_shifted`] applies.
+#[derive(Clone, Copy)]
+enum Kernel<'a> {
+    /// The layer's own, in [`taps_major`]'s layout.
+    Own(&'a [f32]),
+    /// The kernel flipped with its input and output channels swapped, of
+    /// the layer whose [`taps_major`] layout this is (the stride-1 input
+    /// gradient, [`x_backward_shifted`]): tap `t` is that layer's tap `k² −
+    /// 1 − t`, transposed.
+    Flipped(&'a [f32]),
+}
+
+impl Kernel<'_> {
+    /// Tap `t`'s `[Cout, Cin]` matrix for the convolution `g` applies.
+    fn tap(&self, g: &Geometry, t: usize) -> MatRef<'_, f32> {
+        match *self {
+            Kernel::Own(wt) => tap(g, wt, t),
+            Kernel::Flipped(wt) => {
+                let n = g.cout * g.cin;
+                let at = (g.k * g.k - 1 - t) * n;
+                MatRef::from_column_major_slice(&wt[at..][..n], g.cout, g.cin)
+            }
+        }
+    }
+}
+
 /// [`forward`] for a [`Shifted`] convolution.
-fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
-    let wt = taps_major(g, w);
+fn forward_shifted(
+    g: &Geometry,
+    sh: Shifted,
+    x: &[f32],
+    kernel: Kernel<'_>,
+    b: &[f32],
+    y: &mut [f32],
+) {
     let outs = g.outs();
     y.par_chunks_mut(g.cout * outs)
         .zip(x.par_chunks(g.cin * g.h * g.w))
@@ -532,7 +688,7 @@ fn forward_shifted(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
                 sh.pad(g, xs, xp);
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
                 for t in 0..g.k * g.k {
-                    gemm(ypm.as_mut(), tap(g, &wt, t), sh.view(g, xp, t), t > 0);
+                    gemm(ypm.as_mut(), kernel.tap(g, t), sh.view(g, xp, t), t > 0);
                 }
                 unspread_rows(g, sh, yp, 0..g.ho, b, ys);
             },
@@ -684,18 +840,9 @@ fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
         k - 1 - g.pad,
     );
     debug_assert_eq!((gt.ho, gt.wo), (g.h, g.w));
-    let mut flipped = vec![0.0f32; w.len()];
-    for co in 0..g.cout {
-        for ci in 0..g.cin {
-            for t in 0..k * k {
-                let (ky, kx) = (t / k, t % k);
-                let src = (co * g.cin + ci) * k * k + t;
-                flipped[(ci * g.cout + co) * k * k + (k - 1 - ky) * k + (k - 1 - kx)] = w[src];
-            }
-        }
-    }
+    let wt = taps_major(g, w);
     let sh = Shifted::of(&gt).expect("stride 1");
-    forward_shifted(&gt, sh, dy, &flipped, &vec![0.0; g.cin], dx);
+    forward_shifted(&gt, sh, dy, Kernel::Flipped(&wt), &vec![0.0; g.cin], dx);
 }
 
 /// [`x_backward`] for a strided [`Shifted`] convolution: tap by tap, the
@@ -754,19 +901,13 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
         })
         .map(|(_, _, dwt, db)| (dwt, db));
     let (dwt, db) = sum_grads(folds, g.cout * g.cin * kk, g.cout);
-    // Back to [Cout, Cin, k, k].
-    let mut dw = vec![0.0f32; dwt.len()];
-    for (i, d) in dw.iter_mut().enumerate() {
-        let (oc, t) = (i / kk, i % kk);
-        *d = dwt[t * g.cout * g.cin + oc];
-    }
-    (dw, db)
+    (taps_minor(g, &dwt), db)
 }
 
 /// The forward pass on contiguous f32 arrays.
 fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
     if let Some(sh) = Shifted::of(g) {
-        forward_shifted(g, sh, x, w, b, y)
+        forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
     } else if let Some(sh) = Shifted::stacked(g) {
         forward_stacked(g, sh, x, w, b, y)
     } else {
@@ -959,6 +1100,160 @@ impl ConvTrain for Flex {
             flex_tensor(db, vec![g.cout]),
         )
     }
+
+    fn conv_transpose2d_train(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> FlexTensor {
+        let (Some(xc), Some(wc), Some(bc)) = (f32s(&x), f32s(&weight), f32s(&bias)) else {
+            return Flex::conv_transpose2d(x, weight, Some(bias), transposed_options(stride, pad));
+        };
+        let g = Geometry::transposed(&x.shape(), &weight.shape(), stride, pad);
+        let mut y = vec![0.0f32; g.batch * g.cin * g.h * g.w];
+        x_backward(&g, wc.storage::<f32>(), xc.storage::<f32>(), &mut y);
+        let plane = g.h * g.w;
+        let b = bc.storage::<f32>();
+        y.par_chunks_mut(plane)
+            .enumerate()
+            .for_each(|(i, p)| p.iter_mut().for_each(|v| *v += b[i % g.cin]));
+        flex_tensor(y, vec![g.batch, g.cin, g.h, g.w])
+    }
+
+    fn conv_transpose2d_train_x_backward(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> FlexTensor {
+        let (Some(wc), Some(dyc)) = (f32s(&weight), f32s(&grad)) else {
+            return Flex::conv_transpose2d_x_backward(
+                weight,
+                grad,
+                transposed_options(stride, pad),
+            );
+        };
+        let g = Geometry::transposed(&x.shape(), &weight.shape(), stride, pad);
+        let mut dx = vec![0.0f32; g.batch * g.cout * g.outs()];
+        let zero = vec![0.0f32; g.cout];
+        forward(
+            &g,
+            dyc.storage::<f32>(),
+            wc.storage::<f32>(),
+            &zero,
+            &mut dx,
+        );
+        flex_tensor(dx, vec![g.batch, g.cout, g.ho, g.wo])
+    }
+
+    fn conv_transpose2d_train_wb_backward(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        stride: usize,
+        pad: usize,
+    ) -> (FlexTensor, FlexTensor) {
+        let (Some(xc), Some(dyc)) = (f32s(&x), f32s(&grad)) else {
+            let opts = transposed_options(stride, pad);
+            let cout = weight.shape()[1];
+            let dw = Flex::conv_transpose2d_weight_backward(x, weight, grad.clone(), opts);
+            return (dw, bias_grad::<Flex>(grad, cout));
+        };
+        let g = Geometry::transposed(&x.shape(), &weight.shape(), stride, pad);
+        let dys = dyc.storage::<f32>();
+        // The convolution's weight gradient with the roles of its input and
+        // output gradient taken by this one's output gradient and input (its
+        // bias gradient, Σ x, is not this one's).
+        let (dw, _) = wb_backward(&g, dys, xc.storage::<f32>());
+        let mut db = vec![0.0f32; g.cin];
+        for sample in dys.chunks_exact(g.cin * g.h * g.w) {
+            add_bias_grad(&mut db, sample, g.h * g.w);
+        }
+        (
+            flex_tensor(dw, vec![g.cout, g.cin, g.k, g.k]),
+            flex_tensor(db, vec![g.cin]),
+        )
+    }
+}
+
+/// The autodiff node of both convolutions: their three passes are
+/// [`ConvTrain`]'s, whatever the backend.
+#[derive(Debug)]
+struct ConvBackward {
+    transposed: bool,
+}
+
+impl<B: Backend + ConvTrain> Backward<B, 3> for ConvBackward {
+    type State = (FloatTensor<B>, FloatTensor<B>, usize, usize);
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_w, node_b] = ops.parents;
+        let grad = grads.consume::<B>(&ops.node);
+        let (x, w, stride, pad) = ops.state;
+        if let Some(node) = node_x {
+            let (x, w, g) = (x.clone(), w.clone(), grad.clone());
+            let dx = if self.transposed {
+                B::conv_transpose2d_train_x_backward(x, w, g, stride, pad)
+            } else {
+                B::conv2d_train_x_backward(x, w, g, stride, pad)
+            };
+            grads.register::<B>(node.id, dx);
+        }
+        if node_w.is_some() || node_b.is_some() {
+            let (dw, db) = if self.transposed {
+                B::conv_transpose2d_train_wb_backward(x, w, grad, stride, pad)
+            } else {
+                B::conv2d_train_wb_backward(x, w, grad, stride, pad)
+            };
+            if let Some(node) = node_w {
+                grads.register::<B>(node.id, dw);
+            }
+            if let Some(node) = node_b {
+                grads.register::<B>(node.id, db);
+            }
+        }
+    }
+}
+
+impl ConvBackward {
+    /// The forward pass on `B`, recorded for the backward pass when any
+    /// of its inputs is tracked.
+    fn run<B: Backend + ConvTrain, C: CheckpointStrategy>(
+        self,
+        x: FloatTensor<Autodiff<B, C>>,
+        weight: FloatTensor<Autodiff<B, C>>,
+        bias: FloatTensor<Autodiff<B, C>>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Autodiff<B, C>> {
+        let transposed = self.transposed;
+        let fwd = |x, w, b| {
+            if transposed {
+                B::conv_transpose2d_train(x, w, b, stride, pad)
+            } else {
+                B::conv2d_train(x, w, b, stride, pad)
+            }
+        };
+        match self
+            .prepare::<C>([x.node(), weight.node(), bias.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (xp, wp) = (x.primitive().clone(), weight.primitive().clone());
+                let y = fwd(xp.clone(), wp.clone(), bias.into_primitive());
+                prep.finish((xp, wp, stride, pad), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(fwd(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+            )),
+        }
+    }
 }
 
 impl<B: Backend + ConvTrain, C: CheckpointStrategy> ConvTrain for Autodiff<B, C> {
@@ -969,56 +1264,17 @@ impl<B: Backend + ConvTrain, C: CheckpointStrategy> ConvTrain for Autodiff<B, C>
         stride: usize,
         pad: usize,
     ) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct ConvBackward;
+        ConvBackward { transposed: false }.run::<B, C>(x, weight, bias, stride, pad)
+    }
 
-        impl<B: Backend + ConvTrain> Backward<B, 3> for ConvBackward {
-            type State = (FloatTensor<B>, FloatTensor<B>, usize, usize);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 3>,
-                grads: &mut Gradients,
-                _checkpointer: &mut Checkpointer,
-            ) {
-                let [node_x, node_w, node_b] = ops.parents;
-                let grad = grads.consume::<B>(&ops.node);
-                let (x, w, stride, pad) = ops.state;
-                if let Some(node) = node_x {
-                    let dx =
-                        B::conv2d_train_x_backward(x.clone(), w.clone(), grad.clone(), stride, pad);
-                    grads.register::<B>(node.id, dx);
-                }
-                if node_w.is_some() || node_b.is_some() {
-                    let (dw, db) = B::conv2d_train_wb_backward(x, w, grad, stride, pad);
-                    if let Some(node) = node_w {
-                        grads.register::<B>(node.id, dw);
-                    }
-                    if let Some(node) = node_b {
-                        grads.register::<B>(node.id, db);
-                    }
-                }
-            }
-        }
-
-        match ConvBackward
-            .prepare::<C>([x.node(), weight.node(), bias.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => {
-                let (xp, wp) = (x.primitive().clone(), weight.primitive().clone());
-                let y = B::conv2d_train(xp.clone(), wp.clone(), bias.into_primitive(), stride, pad);
-                prep.finish((xp, wp, stride, pad), y)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv2d_train(
-                x.into_primitive(),
-                weight.into_primitive(),
-                bias.into_primitive(),
-                stride,
-                pad,
-            )),
-        }
+    fn conv_transpose2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        stride: usize,
+        pad: usize,
+    ) -> FloatTensor<Self> {
+        ConvBackward { transposed: true }.run::<B, C>(x, weight, bias, stride, pad)
     }
 }
 
@@ -1126,6 +1382,59 @@ mod tests {
         }
     }
 
+    /// The transposed convolution's values and gradients against burn's
+    /// own, for the flow decoder's up-convolutions (k 4, stride 2, padding
+    /// 1, from 1×1 maps up), a stride-1 one (the shifted path backwards) and
+    /// one without padding whose input has fewer than 8 channels (burn's
+    /// layout; the stacked path for the input gradient).
+    #[test]
+    fn transposed_matches_burns_and_its_gradients() {
+        use burn::nn::conv::ConvTranspose2dConfig;
+        assert!(!burns_own(), "LEARNER_CONV=burn is set");
+        let device = Device::flex().autodiff();
+        let cases = [
+            // (batch, cin, cout, side, k, stride, pad)
+            (2, 16, 8, 1, 4, 2, 1),
+            (2, 12, 9, 5, 4, 2, 1),
+            (1, 24, 8, 16, 4, 2, 1),
+            (2, 5, 3, 7, 3, 1, 1),
+            (2, 4, 3, 6, 3, 2, 0),
+        ];
+        for (seed, &(b, cin, cout, side, k, s, p)) in cases.iter().enumerate() {
+            let what = format!("b {b} cin {cin} cout {cout} side {side} k {k} stride {s} pad {p}");
+            let c = ConvTranspose2dConfig::new([cin, cout], [k, k])
+                .with_stride([s, s])
+                .with_padding([p, p])
+                .init(&device);
+            let x = filled([b, cin, side, side], 200 + seed as u64, &device).require_grad();
+            let ours = conv_transpose2d(&c, x.clone());
+            let theirs = c.forward(x.clone());
+            close(ours.clone(), theirs.clone(), &format!("{what}: y"));
+            let r = filled(ours.dims(), 300 + seed as u64, &device);
+            let g1 = (ours * r.clone()).sum().backward();
+            let g2 = (theirs * r).sum().backward();
+            close(
+                x.grad(&g1).unwrap(),
+                x.grad(&g2).unwrap(),
+                &format!("{what}: dx"),
+            );
+            close(
+                c.weight.grad(&g1).unwrap(),
+                c.weight.grad(&g2).unwrap(),
+                &format!("{what}: dw"),
+            );
+            let (db1, db2) = (
+                c.bias.as_ref().unwrap().grad(&g1).unwrap(),
+                c.bias.as_ref().unwrap().grad(&g2).unwrap(),
+            );
+            close(
+                db1.reshape([1, 1, 1, cout]),
+                db2.reshape([1, 1, 1, cout]),
+                &format!("{what}: db"),
+            );
+        }
+    }
+
     /// Without autodiff (inference through burn) it is the same function.
     #[test]
     fn runs_without_autodiff() {
@@ -1187,7 +1496,7 @@ mod tests {
                 format!("b {b} cin {cin} cout {cout} {side}×{width} k {k} stride {s} pad {p}");
             let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
             let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
-            forward_shifted(&g, sh, &x, &w, &bias, &mut y1);
+            forward_shifted(&g, sh, &x, Kernel::Own(&taps_major(&g, &w)), &bias, &mut y1);
             forward_banded(&g, &x, &w, &bias, &mut y2);
             near(&y1, &y2, "y");
             let (mut dx1, mut dx2) = (vec![0.0; x.len()], vec![0.0; x.len()]);

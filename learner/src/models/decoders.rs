@@ -3,7 +3,7 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
-use super::conv_train::conv2d;
+use super::conv_train::{conv_transpose2d, conv2d};
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
@@ -173,7 +173,7 @@ impl FlowDecoder {
             Tensor::cat(vec![coarsest.clone(), tiled], 1),
         ));
         for (i, u) in self.ups.iter().enumerate() {
-            x = act(u.forward(x));
+            x = act(conv_transpose2d(u, x));
             x = Tensor::cat(vec![x, maps[4 - i].clone()], 1);
         }
         let mask_logits = conv2d(&self.mask, x.clone());
