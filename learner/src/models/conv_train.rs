@@ -11,7 +11,9 @@
 //!
 //! - stride-1 layers, without im2col ([`Shifted`]): k² products of each
 //!   tap's weights with a view of the zero-padded input; the input gradient
-//!   is the same kind of convolution of `dy` with the kernel flipped;
+//!   is the same kind of convolution of `dy` with the kernel flipped (the
+//!   3×3 ones with rows a multiple of 16 wide through
+//!   [`super::conv_direct`]'s kernel instead, where the CPU has AVX and FMA);
 //! - strided layers of at least 8 input channels, the same on the input
 //!   split into stride² phases;
 //! - strided layers of fewer channels (the encoders' first layers),
@@ -49,6 +51,8 @@ use burn::prelude::*;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 use std::ops::Range;
+
+use super::conv_direct;
 
 /// A square-kernel convolution with equal stride and padding on both axes
 /// (every convolution of the models), differentiable in its input, weight
@@ -239,6 +243,14 @@ pub fn conv_transpose2d(c: &ConvTranspose2d, x: Tensor<4>) -> Tensor<4> {
 pub(crate) fn burns_own() -> bool {
     static BURN: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
+}
+
+/// `LEARNER_CONV=products` keeps our passes but runs the stride-1 3×3
+/// layers as faer products rather than [`conv_direct`]'s kernel (the A/B
+/// switch of that kernel's benchmark).
+fn products_only() -> bool {
+    static PRODUCTS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *PRODUCTS.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "products"))
 }
 
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
@@ -679,13 +691,23 @@ fn forward_shifted(
     y: &mut [f32],
 ) {
     let outs = g.outs();
+    let direct = !products_only() && conv_direct::covers(g.k, g.stride, g.pad, g.cout, g.wo);
+    let packed =
+        direct.then(|| conv_direct::pack(g.cout, g.cin, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
     y.par_chunks_mut(g.cout * outs)
         .zip(x.par_chunks(g.cin * g.h * g.w))
         .with_min_len(per_task(g.batch))
         .for_each_init(
-            || (vec![0.0f32; sh.len(g)], vec![0.0f32; g.cout * sh.n]),
+            || {
+                let n = if direct { 0 } else { g.cout * sh.n };
+                (vec![0.0f32; sh.len(g)], vec![0.0f32; n])
+            },
             |(xp, yp), (ys, xs)| {
                 sh.pad(g, xs, xp);
+                if let Some(packed) = &packed {
+                    conv_direct::forward(xp, sh.plane, g.cin, packed, b, g.ho, g.wo, ys);
+                    return;
+                }
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
                 for t in 0..g.k * g.k {
                     gemm(ypm.as_mut(), kernel.tap(g, t), sh.view(g, xp, t), t > 0);
@@ -1465,6 +1487,7 @@ mod tests {
     /// against the im2col path, on raw arrays, one pass at a time.
     #[test]
     fn shifted_paths_match_im2col() {
+        let mut direct = 0;
         for (i, &(b, cin, cout, side, k, s, p)) in [
             (2, 4, 3, 7, 3, 1, 1),
             (1, 2, 3, 5, 3, 1, 0),
@@ -1477,6 +1500,11 @@ mod tests {
             (1, 8, 2, 13, 5, 3, 2),
             (2, 8, 3, 2, 3, 2, 1),
             (1, 8, 3, 10, 3, 3, 1),
+            // conv_direct's kernel (rows a multiple of 16 wide, output
+            // channels of 4): 32×32, and 13×16 with the input gradient's
+            // too (8 input channels).
+            (2, 3, 4, 32, 3, 1, 1),
+            (1, 8, 8, 13, 3, 1, 1),
         ]
         .iter()
         .enumerate()
@@ -1484,6 +1512,7 @@ mod tests {
             // Every other case 3 columns wider than high.
             let width = if i % 2 == 1 { side + 3 } else { side };
             let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
+            direct += usize::from(conv_direct::covers(k, s, p, cout, g.wo));
             let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
             let (x, w, bias) = (
@@ -1514,6 +1543,8 @@ mod tests {
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
         }
+        // The last two cases' forward passes took conv_direct's kernel.
+        assert_eq!(direct, if conv_direct::cpu() { 2 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());

@@ -18,6 +18,7 @@
 
 pub mod act_train;
 pub mod config;
+mod conv_direct;
 pub mod conv_train;
 pub mod decoders;
 pub mod encoder;
