@@ -11,15 +11,17 @@
 //!
 //! - stride-1 layers, without im2col ([`Shifted`]): k² products of each
 //!   tap's weights with a view of the zero-padded input; the input gradient
-//!   is the same kind of convolution of `dy` with the kernel flipped (the
-//!   3×3 ones with rows a multiple of 16 wide through
-//!   [`super::conv_direct`]'s kernel instead, where the CPU has AVX and FMA);
+//!   is the same kind of convolution of `dy` with the kernel flipped;
 //! - strided layers of at least 8 input channels, the same on the input
 //!   split into stride² phases;
 //! - strided layers of fewer channels (the encoders' first layers),
 //!   [`Shifted::stacked`]: the im2col tile of a band of output rows (in
 //!   cache) stacked from the split input by contiguous copies, and one faer
 //!   product per band, `y = W · col + b`, `dW = Σ dy · colᵀ`;
+//! - the forward pass over those views (the shifted, phased and stacked
+//!   layouts) through [`super::conv_direct`]'s kernel instead of products
+//!   where the output rows are a multiple of 16 wide and the output
+//!   channels of 4, on a CPU with AVX and FMA;
 //! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
 //!   layers read their input as the matrix; the bias's `db = Σ dy`;
 //! - transposed convolutions (the flow decoder's up-convolutions,
@@ -245,9 +247,15 @@ pub(crate) fn burns_own() -> bool {
     *BURN.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn"))
 }
 
-/// `LEARNER_CONV=products` keeps our passes but runs the stride-1 3×3
-/// layers as faer products rather than [`conv_direct`]'s kernel (the A/B
-/// switch of that kernel's benchmark).
+/// Whether `g`'s forward pass (on its [`Shifted`] layout) takes
+/// [`conv_direct`]'s kernel.
+fn direct(g: &Geometry) -> bool {
+    !products_only() && conv_direct::covers(g.cout, g.wo)
+}
+
+/// `LEARNER_CONV=products` keeps our passes but runs every layer's products
+/// through faer rather than [`conv_direct`]'s kernel (the A/B switch of that
+/// kernel's benchmark).
 fn products_only() -> bool {
     static PRODUCTS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *PRODUCTS.get_or_init(|| std::env::var("LEARNER_CONV").is_ok_and(|v| v == "products"))
@@ -691,9 +699,16 @@ fn forward_shifted(
     y: &mut [f32],
 ) {
     let outs = g.outs();
-    let direct = !products_only() && conv_direct::covers(g.k, g.stride, g.pad, g.cout, g.wo);
-    let packed =
-        direct.then(|| conv_direct::pack(g.cout, g.cin, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
+    let kk = g.k * g.k;
+    let direct = direct(g);
+    let packed = direct
+        .then(|| conv_direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
+    let offsets: Vec<usize> = (0..kk).map(|t| sh.offset(g, t)).collect();
+    let views = conv_direct::Views {
+        plane: sh.plane,
+        wq: sh.wq,
+        taps: &offsets,
+    };
     y.par_chunks_mut(g.cout * outs)
         .zip(x.par_chunks(g.cin * g.h * g.w))
         .with_min_len(per_task(g.batch))
@@ -705,7 +720,7 @@ fn forward_shifted(
             |(xp, yp), (ys, xs)| {
                 sh.pad(g, xs, xp);
                 if let Some(packed) = &packed {
-                    conv_direct::forward(xp, sh.plane, g.cin, packed, b, g.ho, g.wo, ys);
+                    conv_direct::forward(xp, views, g.cin, packed, b, g.ho, g.wo, ys);
                     return;
                 }
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
@@ -931,7 +946,11 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
     if let Some(sh) = Shifted::of(g) {
         forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
     } else if let Some(sh) = Shifted::stacked(g) {
-        forward_stacked(g, sh, x, w, b, y)
+        if direct(g) {
+            forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
+        } else {
+            forward_stacked(g, sh, x, w, b, y)
+        }
     } else {
         forward_banded(g, x, w, b, y)
     }
@@ -1359,6 +1378,10 @@ mod tests {
             (1, 1, 2, 256, 3, 2, 1),
             (1, 8, 2, 50, 5, 2, 2),
             (1, 16, 2, 64, 3, 2, 1),
+            // The first layers with 4 output channels: conv_direct's kernel
+            // on the stacked layout, where the CPU has it.
+            (1, 3, 4, 64, 7, 2, 3),
+            (2, 1, 4, 32, 3, 2, 1),
         ];
         for (seed, &(b, cin, cout, side, k, s, p)) in cases.iter().enumerate() {
             let g = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p);
@@ -1502,9 +1525,11 @@ mod tests {
             (1, 8, 3, 10, 3, 3, 1),
             // conv_direct's kernel (rows a multiple of 16 wide, output
             // channels of 4): 32×32, and 13×16 with the input gradient's
-            // too (8 input channels).
+            // too (8 input channels, stride 1).
             (2, 3, 4, 32, 3, 1, 1),
             (1, 8, 8, 13, 3, 1, 1),
+            // And strided on the split input: 16×16 out of 32×32, k 5.
+            (1, 8, 4, 32, 5, 2, 2),
         ]
         .iter()
         .enumerate()
@@ -1512,7 +1537,7 @@ mod tests {
             // Every other case 3 columns wider than high.
             let width = if i % 2 == 1 { side + 3 } else { side };
             let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
-            direct += usize::from(conv_direct::covers(k, s, p, cout, g.wo));
+            direct += usize::from(conv_direct::covers(cout, g.wo));
             let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
             let (x, w, bias) = (
@@ -1543,8 +1568,8 @@ mod tests {
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
         }
-        // The last two cases' forward passes took conv_direct's kernel.
-        assert_eq!(direct, if conv_direct::cpu() { 2 } else { 0 });
+        // The last three cases' forward passes took conv_direct's kernel.
+        assert_eq!(direct, if conv_direct::cpu() { 3 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
