@@ -7,7 +7,8 @@
 //! `reps` after one warm-up, in ms and in GFLOP/s of the layer's
 //! multiply-adds (2 per MAC; the backward pass counts twice the forward's,
 //! whether or not the layer's input needs its gradient). One JSON line per
-//! layer. `LEARNER_CONV=burn` times burn's own convolution instead.
+//! layer. `LEARNER_CONV=burn` times burn's own convolution instead,
+//! `LEARNER_CONV=products` ours without `conv_direct`'s kernel.
 //!
 //! Usage: `conv_bench BATCH REPS` (threads: RAYON_NUM_THREADS).
 
@@ -80,10 +81,10 @@ fn main() {
     let reps: usize = args.get(2).expect(usage).parse().expect(usage);
     let threads = rayon::current_num_threads();
     let device = Device::flex().autodiff();
-    let side_name = if std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn") {
-        "burn-flex"
-    } else {
-        "ours-conv"
+    let side_name = match std::env::var("LEARNER_CONV").as_deref() {
+        Ok("burn") => "burn-flex",
+        Ok("products") => "ours-products",
+        _ => "ours-conv",
     };
     for (i, &(name, count, cin, cout, side, k, s, p, transposed)) in LAYERS.iter().enumerate() {
         let x = filled([b, cin, side, side], i as u64, &device).require_grad();
@@ -94,10 +95,8 @@ fn main() {
                 .with_stride([s, s])
                 .with_padding([p, p])
                 .init(&device);
-            let out = (side - 1) * s + k - 2 * p;
             // Each input position meets every output channel through k² taps.
             let macs = b * side * side * cin * cout * k * k;
-            debug_assert!(out > 0);
             (Box::new(move |x| conv_transpose2d(&c, x)), macs)
         } else {
             let c = Conv2dConfig::new([cin, cout], [k, k])

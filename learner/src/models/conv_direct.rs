@@ -6,7 +6,8 @@
 //! encoder's first three layers, the first layers of both).
 //!
 //! Through faer, such a layer is k² products with an inner dimension of
-//! `Cin` (1–64), each reading and adding into the whole output: the
+//! `Cin` (16–64), each reading and adding into the whole output (the 1- and
+//! 3-channel first layers one stacked product per band): the
 //! 16-channel layers ran at about 27 GFLOP/s where wider products reach 50
 //! (docs/performance.md). Here each block of 4 output channels × 16
 //! positions of a row stays in eight registers while all `Cin·k²` taps are
@@ -94,11 +95,16 @@ pub(crate) fn forward(
 ) {
     let cout = b.len();
     assert!(covers(cout, wo), "conv_direct: a layer it does not cover");
-    let last = views.taps.iter().max().expect("conv_direct: no taps")
-        + (cin - 1) * views.plane
-        + (ho - 1) * views.wq
-        + wo
-        - 1;
+    assert!(cin > 0 && ho > 0, "conv_direct: an empty layer");
+    // The last value any view reads, computed without wrapping: the bound
+    // the unchecked loads rely on.
+    let last = (cin - 1)
+        .checked_mul(views.plane)
+        .zip((ho - 1).checked_mul(views.wq))
+        .and_then(|(a, b)| a.checked_add(b))
+        .and_then(|v| v.checked_add(*views.taps.iter().max()?))
+        .and_then(|v| v.checked_add(wo - 1))
+        .expect("conv_direct: views beyond the address space");
     assert!(
         wo <= views.wq && last < xp.len(),
         "conv_direct: a view reaches past the input"
@@ -119,6 +125,12 @@ mod avx {
     use super::{CO, PX, Views};
     use std::arch::x86_64::*;
 
+    /// [`super::forward`]'s loops.
+    ///
+    /// # Safety
+    /// The CPU has AVX and FMA; `xp` holds every value the views read (the
+    /// last at `super::forward`'s `last`); `packed` holds `Cout·Cin·taps`
+    /// weights and `b` is `Cout` long, a multiple of 4.
     #[target_feature(enable = "avx,fma")]
     #[allow(clippy::too_many_arguments)]
     pub(super) unsafe fn forward(
@@ -147,6 +159,11 @@ mod avx {
 
     /// Four output channels × 16 positions: eight accumulators over all of
     /// `Cin`'s taps, then the bias, stored once.
+    ///
+    /// # Safety
+    /// The CPU has AVX and FMA; for every channel `ci` and tap offset `off`,
+    /// `ci·plane + at + off + 15` is inside `xp`; `w` holds `Cin·taps·4`
+    /// weights.
     #[target_feature(enable = "avx,fma")]
     #[allow(clippy::too_many_arguments)]
     #[inline]
@@ -166,6 +183,8 @@ mod avx {
         for ci in 0..cin {
             let base = ci * views.plane + at;
             for &off in views.taps {
+                // SAFETY: the 16 values from `base + off` are inside `xp`
+                // and `ws` stays inside `w` (this function's contract).
                 unsafe {
                     let p = xs.add(base + off);
                     let (v0, v1) = (_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));

@@ -57,8 +57,8 @@ use std::ops::Range;
 use super::conv_direct;
 
 /// A square-kernel convolution with equal stride and padding on both axes
-/// (every convolution of the models), differentiable in its input, weight
-/// and bias.
+/// (every convolution of the models), and the transposed one, each
+/// differentiable in its input, weight and bias.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
 pub trait ConvTrain: Backend {
     /// `x [B, Cin, H, W]`, `weight [Cout, Cin, k, k]`, `bias [Cout]` →
@@ -211,7 +211,7 @@ pub(crate) fn square(c: &Conv2d) -> (usize, usize, usize) {
 ///
 /// # Panics
 /// If it has no bias, a non-square kernel, unequal strides or paddings, an
-/// output padding, dilation or groups (none of the models' has one).
+/// output padding, dilation or groups (none of the models has one).
 pub fn conv_transpose2d(c: &ConvTranspose2d, x: Tensor<4>) -> Tensor<4> {
     if burns_own() {
         return c.forward(x);
@@ -306,6 +306,10 @@ impl Geometry {
     /// of `x [B, Cin, H, W]` by `weight [Cin, Cout, k, k]`: input `[B, Cout,
     /// (H − 1)·s − 2p + k, …]`, output `[B, Cin, H, W]`, the same weight.
     fn transposed(x: &[usize], weight: &[usize], stride: usize, pad: usize) -> Self {
+        assert_eq!(
+            weight[0], x[1],
+            "conv_transpose2d: weight and input channels differ"
+        );
         let k = weight[2];
         let side = |n: usize| {
             ((n - 1) * stride + k)
@@ -318,10 +322,6 @@ impl Geometry {
             weight,
             stride,
             pad,
-        );
-        assert_eq!(
-            weight[0], x[1],
-            "conv_transpose2d: weight and input channels differ"
         );
         debug_assert_eq!((g.ho, g.wo), (x[2], x[3]));
         g
@@ -865,9 +865,9 @@ fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
 /// [`x_backward`] for a stride-1 convolution: the input gradient is itself
 /// a stride-1 convolution of `dy`, padded by `k − 1 − pad`, with the kernel
 /// flipped and its channels swapped, so it takes [`forward_shifted`], whose
-/// products only read strided views. (Strided layers accumulate `Wᵀ·dy`
-/// tap by tap into writable views instead, [`x_backward_phased`]; this
-/// path predates [`Shifted::view_mut`] and is kept, tested, for stride 1.)
+/// products (or [`conv_direct`]'s kernel) only read strided views; the
+/// gradient is written once, not accumulated tap by tap as strided layers
+/// do into writable views ([`x_backward_phased`]).
 fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     let k = g.k;
     let gt = Geometry::new(
@@ -1157,9 +1157,11 @@ impl ConvTrain for Flex {
         x_backward(&g, wc.storage::<f32>(), xc.storage::<f32>(), &mut y);
         let plane = g.h * g.w;
         let b = bc.storage::<f32>();
-        y.par_chunks_mut(plane)
-            .enumerate()
-            .for_each(|(i, p)| p.iter_mut().for_each(|v| *v += b[i % g.cin]));
+        y.par_chunks_mut(g.cin * plane).for_each(|sample| {
+            for (p, &bias) in sample.chunks_exact_mut(plane).zip(b) {
+                p.iter_mut().for_each(|v| *v += bias);
+            }
+        });
         flex_tensor(y, vec![g.batch, g.cin, g.h, g.w])
     }
 
@@ -1429,9 +1431,10 @@ mod tests {
 
     /// The transposed convolution's values and gradients against burn's
     /// own, for the flow decoder's up-convolutions (k 4, stride 2, padding
-    /// 1, from 1×1 maps up), a stride-1 one (the shifted path backwards) and
-    /// one without padding whose input has fewer than 8 channels (burn's
-    /// layout; the stacked path for the input gradient).
+    /// 1, from 1×1 maps up; the 16×16 one's input gradient through
+    /// conv_direct's kernel), a stride-1 one (the shifted path backwards) and
+    /// one without padding with fewer than 8 output channels (the stacked
+    /// path for its input gradient, col2im for its forward pass).
     #[test]
     fn transposed_matches_burns_and_its_gradients() {
         use burn::nn::conv::ConvTranspose2dConfig;
@@ -1510,7 +1513,8 @@ mod tests {
     /// against the im2col path, on raw arrays, one pass at a time.
     #[test]
     fn shifted_paths_match_im2col() {
-        let mut direct = 0;
+        assert!(!products_only(), "LEARNER_CONV=products is set");
+        let mut direct_passes = 0;
         for (i, &(b, cin, cout, side, k, s, p)) in [
             (2, 4, 3, 7, 3, 1, 1),
             (1, 2, 3, 5, 3, 1, 0),
@@ -1537,7 +1541,12 @@ mod tests {
             // Every other case 3 columns wider than high.
             let width = if i % 2 == 1 { side + 3 } else { side };
             let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
-            direct += usize::from(conv_direct::covers(cout, g.wo));
+            direct_passes += usize::from(direct(&g));
+            if s == 1 {
+                // The input gradient's own convolution (padded by k − 1 − p).
+                let gt = Geometry::new(&[b, cout, g.ho, g.wo], &[cin, cout, k, k], 1, k - 1 - p);
+                direct_passes += usize::from(direct(&gt));
+            }
             let sh = Shifted::of(&g).expect("a shifted geometry");
             let mut rng = fastrand::Rng::with_seed(3);
             let (x, w, bias) = (
@@ -1568,8 +1577,9 @@ mod tests {
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
         }
-        // The last three cases' forward passes took conv_direct's kernel.
-        assert_eq!(direct, if conv_direct::cpu() { 3 } else { 0 });
+        // The last three cases' forward passes take conv_direct's kernel,
+        // and the second's input gradient (8 input channels, 16 wide).
+        assert_eq!(direct_passes, if conv_direct::cpu() { 4 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
