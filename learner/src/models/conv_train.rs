@@ -943,14 +943,12 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
 
 /// The forward pass on contiguous f32 arrays.
 fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
-    if let Some(sh) = Shifted::of(g) {
+    // A stacked layer the kernel covers reads its views tap by tap too.
+    let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct(g)));
+    if let Some(sh) = by_taps {
         forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
     } else if let Some(sh) = Shifted::stacked(g) {
-        if direct(g) {
-            forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
-        } else {
-            forward_stacked(g, sh, x, w, b, y)
-        }
+        forward_stacked(g, sh, x, w, b, y)
     } else {
         forward_banded(g, x, w, b, y)
     }
@@ -1324,6 +1322,7 @@ impl<B: Backend + ConvTrain, C: CheckpointStrategy> ConvTrain for Autodiff<B, C>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use burn::module::Param;
     use burn::nn::conv::Conv2dConfig;
 
     fn filled(shape: [usize; 4], seed: u64, device: &Device) -> Tensor<4> {
@@ -1400,33 +1399,44 @@ mod tests {
                 .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
                 .init(&device);
             let x = filled([b, cin, side, side], seed as u64, &device).require_grad();
-            let ours = conv2d(&c, x.clone());
-            let theirs = c.forward(x.clone());
-            close(ours.clone(), theirs.clone(), &format!("{what}: y"));
-            // A loss that weighs every output differently.
-            let r = filled(ours.dims(), 100 + seed as u64, &device);
-            let g1 = (ours * r.clone()).sum().backward();
-            let g2 = (theirs * r).sum().backward();
-            close(
-                x.grad(&g1).unwrap(),
-                x.grad(&g2).unwrap(),
-                &format!("{what}: dx"),
-            );
-            close(
-                c.weight.grad(&g1).unwrap(),
-                c.weight.grad(&g2).unwrap(),
-                &format!("{what}: dw"),
-            );
-            let (db1, db2) = (
-                c.bias.as_ref().unwrap().grad(&g1).unwrap(),
-                c.bias.as_ref().unwrap().grad(&g2).unwrap(),
-            );
-            close(
-                db1.reshape([1, 1, 1, cout]),
-                db2.reshape([1, 1, 1, cout]),
-                &format!("{what}: db"),
-            );
+            let (ours, theirs) = (conv2d(&c, x.clone()), c.forward(x.clone()));
+            let bias = c.bias.as_ref().unwrap();
+            same_as_burns(&what, &x, ours, theirs, &c.weight, bias, 100 + seed as u64);
         }
+    }
+
+    /// `ours` and burn's `theirs`, both of `x` through a layer of `weight`
+    /// and `bias`: the values, then the three gradients of a loss that
+    /// weighs every output differently (by values seeded with `seed`).
+    fn same_as_burns(
+        what: &str,
+        x: &Tensor<4>,
+        ours: Tensor<4>,
+        theirs: Tensor<4>,
+        weight: &Param<Tensor<4>>,
+        bias: &Param<Tensor<1>>,
+        seed: u64,
+    ) {
+        close(ours.clone(), theirs.clone(), &format!("{what}: y"));
+        let r = filled(ours.dims(), seed, &ours.device());
+        let g1 = (ours * r.clone()).sum().backward();
+        let g2 = (theirs * r).sum().backward();
+        close(
+            x.grad(&g1).unwrap(),
+            x.grad(&g2).unwrap(),
+            &format!("{what}: dx"),
+        );
+        close(
+            weight.grad(&g1).unwrap(),
+            weight.grad(&g2).unwrap(),
+            &format!("{what}: dw"),
+        );
+        let cout = bias.dims()[0];
+        close(
+            bias.grad(&g1).unwrap().reshape([1, 1, 1, cout]),
+            bias.grad(&g2).unwrap().reshape([1, 1, 1, cout]),
+            &format!("{what}: db"),
+        );
     }
 
     /// The transposed convolution's values and gradients against burn's
@@ -1455,31 +1465,9 @@ mod tests {
                 .with_padding([p, p])
                 .init(&device);
             let x = filled([b, cin, side, side], 200 + seed as u64, &device).require_grad();
-            let ours = conv_transpose2d(&c, x.clone());
-            let theirs = c.forward(x.clone());
-            close(ours.clone(), theirs.clone(), &format!("{what}: y"));
-            let r = filled(ours.dims(), 300 + seed as u64, &device);
-            let g1 = (ours * r.clone()).sum().backward();
-            let g2 = (theirs * r).sum().backward();
-            close(
-                x.grad(&g1).unwrap(),
-                x.grad(&g2).unwrap(),
-                &format!("{what}: dx"),
-            );
-            close(
-                c.weight.grad(&g1).unwrap(),
-                c.weight.grad(&g2).unwrap(),
-                &format!("{what}: dw"),
-            );
-            let (db1, db2) = (
-                c.bias.as_ref().unwrap().grad(&g1).unwrap(),
-                c.bias.as_ref().unwrap().grad(&g2).unwrap(),
-            );
-            close(
-                db1.reshape([1, 1, 1, cout]),
-                db2.reshape([1, 1, 1, cout]),
-                &format!("{what}: db"),
-            );
+            let (ours, theirs) = (conv_transpose2d(&c, x.clone()), c.forward(x.clone()));
+            let bias = c.bias.as_ref().unwrap();
+            same_as_burns(&what, &x, ours, theirs, &c.weight, bias, 300 + seed as u64);
         }
     }
 
