@@ -96,15 +96,7 @@ pub(crate) fn forward(
     let cout = b.len();
     assert!(covers(cout, wo), "conv_direct: a layer it does not cover");
     assert!(cin > 0 && ho > 0, "conv_direct: an empty layer");
-    // The last value any view reads, computed without wrapping: the bound
-    // the unchecked loads rely on.
-    let last = (cin - 1)
-        .checked_mul(views.plane)
-        .zip((ho - 1).checked_mul(views.wq))
-        .and_then(|(a, b)| a.checked_add(b))
-        .and_then(|v| v.checked_add(*views.taps.iter().max()?))
-        .and_then(|v| v.checked_add(wo - 1))
-        .expect("conv_direct: views beyond the address space");
+    let last = last_read(views, cin, ho, wo);
     assert!(
         wo <= views.wq && last < xp.len(),
         "conv_direct: a view reaches past the input"
@@ -120,9 +112,83 @@ pub(crate) fn forward(
     unreachable!()
 }
 
+/// Output positions per step of [`weight_grad`] (one 8-wide vector).
+const GX: usize = 8;
+
+/// Whether [`weight_grad`] covers a layer with `cout` output channels and
+/// output rows `wo` wide on this CPU: multiples of [`CO`] and of [`PX`]
+/// (the loop steps by [`GX`]; on 8-wide maps its twelve sums per 8 rows
+/// measured slower than faer's products).
+pub(crate) fn covers_weight_grad(cout: usize, wo: usize) -> bool {
+    cout.is_multiple_of(CO) && wo.is_multiple_of(PX) && cpu()
+}
+
+/// One sample's weight gradient added into `dw [Cout, Cin, taps]` (the
+/// layer's own layout): `dw[co, ci, t] += Σ_(oy, ox) dy[co, oy·Wo + ox] ·
+/// xp[ci·plane + taps[t] + oy·wq + ox]`, with `dy [Cout, Ho·Wo]` as the
+/// layer's output gradient comes (no discarded positions to skip).
+///
+/// Through faer this was k² products `[Cout, Ho·wq] · [Ho·wq, Cin]`, each
+/// with a small output and a long inner dimension; here 4 output channels ×
+/// 3 taps of one input channel stay in twelve registers over every output
+/// position, each position's 3 input and 4 gradient vectors loaded once.
+///
+/// # Panics
+/// If a view reaches past `xp`, the buffers do not match the shapes, or
+/// [`covers_weight_grad`] is false.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn weight_grad(
+    xp: &[f32],
+    views: Views<'_>,
+    cin: usize,
+    dy: &[f32],
+    ho: usize,
+    wo: usize,
+    dw: &mut [f32],
+) {
+    let kk = views.taps.len();
+    let cout = dw.len() / (cin * kk).max(1);
+    assert!(
+        covers_weight_grad(cout, wo),
+        "conv_direct: a weight gradient it does not cover"
+    );
+    assert!(cin > 0 && ho > 0 && kk > 0, "conv_direct: an empty layer");
+    let last = last_read(views, cin, ho, wo);
+    assert!(
+        wo <= views.wq && last < xp.len(),
+        "conv_direct: a view reaches past the input"
+    );
+    assert!(dw.len() == cout * cin * kk && dy.len() == cout * ho * wo);
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `covers_weight_grad` checked AVX and FMA; every value of `xp`
+    // read is at most `last` (asserted inside it), every value of `dy` read
+    // and of `dw` written inside them (their lengths asserted).
+    unsafe {
+        avx::weight_grad(xp, views, cin, dy, ho, wo, dw)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!()
+}
+
+/// The last value of the input any view reads for an output of `ho` rows
+/// `wo` wide, computed without wrapping: the bound the unchecked loads rely
+/// on.
+///
+/// # Panics
+/// If it lies beyond the address space, or a dimension is 0.
+fn last_read(views: Views<'_>, cin: usize, ho: usize, wo: usize) -> usize {
+    (cin - 1)
+        .checked_mul(views.plane)
+        .zip((ho - 1).checked_mul(views.wq))
+        .and_then(|(a, b)| a.checked_add(b))
+        .and_then(|v| v.checked_add(*views.taps.iter().max()?))
+        .and_then(|v| v.checked_add(wo - 1))
+        .expect("conv_direct: views beyond the address space")
+}
+
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::{CO, PX, Views};
+    use super::{CO, GX, PX, Views};
     use std::arch::x86_64::*;
 
     /// [`super::forward`]'s loops.
@@ -205,5 +271,128 @@ mod avx {
                 _mm256_storeu_ps(out.as_mut_ptr().add(8), _mm256_add_ps(a[1], bj));
             }
         }
+    }
+
+    /// [`super::weight_grad`]'s loops: per block of 4 output channels and
+    /// input channel, the taps in groups of 3 (the last group 1 or 2).
+    ///
+    /// # Safety
+    /// As [`super::weight_grad`] asserts: the CPU has AVX and FMA; `xp`
+    /// holds every value the views read; `dy` is `Cout·Ho·Wo` and `dw`
+    /// `Cout·Cin·taps` long, `Cout` a multiple of 4 and `Wo` of 8.
+    #[target_feature(enable = "avx,fma")]
+    pub(super) unsafe fn weight_grad(
+        xp: &[f32],
+        views: Views<'_>,
+        cin: usize,
+        dy: &[f32],
+        ho: usize,
+        wo: usize,
+        dw: &mut [f32],
+    ) {
+        let (kk, outs) = (views.taps.len(), ho * wo);
+        let cout = dy.len() / outs;
+        for cb in 0..cout / CO {
+            let d = &dy[cb * CO * outs..][..CO * outs];
+            for ci in 0..cin {
+                let base = ci * views.plane;
+                let mut t0 = 0;
+                while t0 < kk {
+                    let offs = &views.taps[t0..];
+                    // SAFETY: this function's contract, passed on.
+                    let (n, sums) = unsafe {
+                        match kk - t0 {
+                            1 => (1, group::<1>(xp, base, offs, views.wq, d, ho, wo).map(pad)),
+                            2 => (2, group::<2>(xp, base, offs, views.wq, d, ho, wo).map(pad)),
+                            _ => (3, group::<3>(xp, base, offs, views.wq, d, ho, wo)),
+                        }
+                    };
+                    for (j, s) in sums.iter().enumerate() {
+                        let at = ((cb * CO + j) * cin + ci) * kk + t0;
+                        for (w, v) in dw[at..][..n].iter_mut().zip(s) {
+                            *w += v;
+                        }
+                    }
+                    t0 += n;
+                }
+            }
+        }
+    }
+
+    /// A group's sums widened to three (the unused ones never read).
+    fn pad<const T: usize>(s: [f32; T]) -> [f32; 3] {
+        let mut out = [0.0; 3];
+        out[..T].copy_from_slice(&s);
+        out
+    }
+
+    /// `Σ_(oy, ox) d[j, oy·Wo + ox] · xp[base + offs[t] + oy·wq + ox]` for
+    /// the 4 channels `j` of `d` and the first `T` taps of `offs`: 4·T
+    /// accumulators, 8 positions at a time.
+    ///
+    /// # Safety
+    /// The CPU has AVX and FMA; every `base + offs[t] + oy·wq + ox + 7` read
+    /// is inside `xp`; `d` holds 4 rows of `Ho·Wo`, `Wo` a multiple of 8.
+    #[target_feature(enable = "avx,fma")]
+    #[inline]
+    unsafe fn group<const T: usize>(
+        xp: &[f32],
+        base: usize,
+        offs: &[usize],
+        wq: usize,
+        d: &[f32],
+        ho: usize,
+        wo: usize,
+    ) -> [[f32; T]; CO] {
+        let outs = ho * wo;
+        let mut acc = [[_mm256_setzero_ps(); T]; CO];
+        // Loops, not closures: a closure would not inherit this function's
+        // target features, and its intrinsics would not be inlined.
+        let mut xs = [xp.as_ptr(); T];
+        for (t, p) in xs.iter_mut().enumerate() {
+            // SAFETY: inside `xp` (this function's contract).
+            *p = unsafe { p.add(base + offs[t]) };
+        }
+        let ds = d.as_ptr();
+        let mut xv = [_mm256_setzero_ps(); T];
+        for oy in 0..ho {
+            let (xrow, drow) = (oy * wq, oy * wo);
+            for ox in (0..wo).step_by(GX) {
+                // SAFETY: the 8 values from each `xs[t] + xrow + ox` are
+                // inside `xp`, those from `ds + j·outs + drow + ox` inside `d`.
+                unsafe {
+                    for (v, p) in xv.iter_mut().zip(&xs) {
+                        *v = _mm256_loadu_ps(p.add(xrow + ox));
+                    }
+                    for (j, a) in acc.iter_mut().enumerate() {
+                        let dv = _mm256_loadu_ps(ds.add(j * outs + drow + ox));
+                        for (a, &x) in a.iter_mut().zip(&xv) {
+                            *a = _mm256_fmadd_ps(dv, x, *a);
+                        }
+                    }
+                }
+            }
+        }
+        let mut sums = [[0.0; T]; CO];
+        for (s, a) in sums.iter_mut().zip(&acc) {
+            for (s, &v) in s.iter_mut().zip(a) {
+                // SAFETY: the CPU has AVX (this function's contract).
+                *s = unsafe { hsum(v) };
+            }
+        }
+        sums
+    }
+
+    /// The sum of a vector's eight lanes.
+    ///
+    /// # Safety
+    /// The CPU has AVX.
+    #[target_feature(enable = "avx,fma")]
+    #[inline]
+    unsafe fn hsum(v: __m256) -> f32 {
+        let s = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+        let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+        let s = _mm_add_ss(s, _mm_shuffle_ps(s, s, 1));
+        _mm_cvtss_f32(s)
     }
 }

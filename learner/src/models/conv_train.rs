@@ -253,6 +253,12 @@ fn direct(g: &Geometry) -> bool {
     !products_only() && conv_direct::covers(g.cout, g.wo)
 }
 
+/// Whether `g`'s weight gradient (on its [`Shifted`] or stacked layout)
+/// takes [`conv_direct::weight_grad`].
+fn direct_weight_grad(g: &Geometry) -> bool {
+    !products_only() && conv_direct::covers_weight_grad(g.cout, g.wo)
+}
+
 /// `LEARNER_CONV=products` keeps our passes but runs every layer's products
 /// through faer rather than [`conv_direct`]'s kernel (the A/B switch of that
 /// kernel's benchmark).
@@ -941,6 +947,39 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
     (taps_minor(g, &dwt), db)
 }
 
+/// [`wb_backward`] for a [`Shifted`] or [`Shifted::stacked`] layer through
+/// [`conv_direct::weight_grad`]: per sample, straight into the layer's own
+/// `[Cout, Cin, k, k]` layout from its padded input and its output gradient
+/// as it comes.
+fn wb_backward_direct(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let (kk, outs) = (g.k * g.k, g.outs());
+    let offsets: Vec<usize> = (0..kk).map(|t| sh.offset(g, t)).collect();
+    let views = conv_direct::Views {
+        plane: sh.plane,
+        wq: sh.wq,
+        taps: &offsets,
+    };
+    let zero = || {
+        (
+            vec![0.0f32; sh.len(g)],
+            vec![0.0f32; g.cout * g.cin * kk],
+            vec![0.0f32; g.cout],
+        )
+    };
+    let folds = x
+        .par_chunks(g.cin * g.h * g.w)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .fold(zero, |(mut xp, mut dw, mut db), (xs, dys)| {
+            sh.pad(g, xs, &mut xp);
+            conv_direct::weight_grad(&xp, views, g.cin, dys, g.ho, g.wo, &mut dw);
+            add_bias_grad(&mut db, dys, outs);
+            (xp, dw, db)
+        })
+        .map(|(_, dw, db)| (dw, db));
+    sum_grads(folds, g.cout * g.cin * kk, g.cout)
+}
+
 /// The forward pass on contiguous f32 arrays.
 fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
     // A stacked layer the kernel covers reads its views tap by tap too.
@@ -1026,7 +1065,10 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
 
 /// The weight and bias gradients on contiguous f32 arrays.
 fn wb_backward(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
-    if let Some(sh) = Shifted::of(g) {
+    let views = Shifted::of(g).or_else(|| Shifted::stacked(g));
+    if let Some(sh) = views.filter(|_| direct_weight_grad(g)) {
+        wb_backward_direct(g, sh, x, dy)
+    } else if let Some(sh) = Shifted::of(g) {
         wb_backward_shifted(g, sh, x, dy)
     } else if let Some(sh) = Shifted::stacked(g) {
         wb_backward_stacked(g, sh, x, dy)
@@ -1502,7 +1544,7 @@ mod tests {
     #[test]
     fn shifted_paths_match_im2col() {
         assert!(!products_only(), "LEARNER_CONV=products is set");
-        let mut direct_passes = 0;
+        let (mut direct_passes, mut weight_grads) = (0, 0);
         for (i, &(b, cin, cout, side, k, s, p)) in [
             (2, 4, 3, 7, 3, 1, 1),
             (1, 2, 3, 5, 3, 1, 0),
@@ -1564,10 +1606,19 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
+            if direct_weight_grad(&g) {
+                weight_grads += 1;
+                let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
+                near(&dw3, &dw2, "dw, direct");
+                near(&db3, &db2, "db, direct");
+            }
         }
         // The last three cases' forward passes take conv_direct's kernel,
         // and the second's input gradient (8 input channels, 16 wide).
         assert_eq!(direct_passes, if conv_direct::cpu() { 4 } else { 0 });
+        // Their weight gradients too (rows a multiple of 16 wide, output
+        // channels of 4).
+        assert_eq!(weight_grads, if conv_direct::cpu() { 3 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
@@ -1577,6 +1628,7 @@ mod tests {
     /// split input) against the im2col path, forward and weight gradient.
     #[test]
     fn stacked_paths_match_im2col() {
+        let mut weight_grads = 0;
         for &(b, cin, cout, h, w, k, s, p) in &[
             // The RGB encoder's first layer at full size: many bands.
             (2, 3, 4, 128, 128, 7, 2, 3),
@@ -1612,7 +1664,16 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
+            if direct_weight_grad(&g) {
+                weight_grads += 1;
+                let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
+                near(&dw3, &dw2, "dw, direct");
+                near(&db3, &db2, "db, direct");
+            }
         }
+        // conv_direct's weight gradient takes the first case (4 output
+        // channels, 64 wide; 49 taps: groups of 3 and a last one of 1).
+        assert_eq!(weight_grads, if conv_direct::cpu() { 1 } else { 0 });
         // The first case is split into bands.
         let g = Geometry::new(&[1, 3, 128, 128], &[4, 3, 7, 7], 2, 3);
         let sh = Shifted::stacked(&g).expect("stacked");
