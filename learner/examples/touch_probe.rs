@@ -19,8 +19,9 @@
 //!   `TOUCH_DESCENT_MM` sets `descent_m`, `TOUCH_BOUND_MM` `bound_m`,
 //!   `TOUCH_STICK_N` sets `stick_n`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
-//!   triangle, semicircle, hexagon) picks the peg. Prints each episode and
-//!   the outcomes.
+//!   triangle, semicircle, hexagon) picks the peg, `TOUCH_BOX_YAW_RAD` the
+//!   box's yaw range (`policy eval --box-yaw-range-rad`). Prints each
+//!   episode and the outcomes.
 //! - `touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT TEST`: the search told
 //!   where the opening is by a linear probe of a representation's z means
 //!   (`search::ProbedSearchView`), fitted on FIT episodes (seeds from
@@ -90,12 +91,23 @@ fn config() -> RlEnvConfig {
     let mut cfg = RlEnvConfig::default();
     // gt-trpo-stiff-ft's wrist (configs/rt-controller/stiff-tilts.toml).
     cfg.controller.impedance.kp = [300.0, 300.0, 300.0, 3000.0, 3000.0, 300.0];
+    task_from_env(&mut cfg.world.task);
+    cfg
+}
+
+/// `TOUCH_PEG` and `TOUCH_BOX_YAW_RAD` into the task (applied again after a
+/// world file replaces the world).
+fn task_from_env(task: &mut hw_sim::config::TaskConfig) {
     if let Ok(name) = std::env::var("TOUCH_PEG") {
         // The parser behind the CLI's `--peg`.
-        cfg.world.task.peg = <hw_sim::PegShape as clap::ValueEnum>::from_str(&name, false)
+        task.peg = <hw_sim::PegShape as clap::ValueEnum>::from_str(&name, false)
             .unwrap_or_else(|e| panic!("TOUCH_PEG={name}: {e}"));
     }
-    cfg
+    if let Ok(v) = std::env::var("TOUCH_BOX_YAW_RAD") {
+        task.box_yaw_range_rad = v
+            .parse()
+            .unwrap_or_else(|e| panic!("TOUCH_BOX_YAW_RAD={v}: {e}"));
+    }
 }
 
 /// A step in the hole frame (x, y, z, roll) through the env's action scale.
@@ -277,6 +289,7 @@ fn on_representation(model: &str, world: &str) -> (RlEnvConfig, std::sync::Arc<d
     if world != "-" {
         cfg.world = hw_sim::WorldConfig::from_file(std::path::Path::new(world)).expect("world");
         cfg.world.task.enabled = true;
+        task_from_env(&mut cfg.world.task);
     }
     let repr = learner::rl::ObservationKind::Representation(model.into())
         .observer_on(0)
