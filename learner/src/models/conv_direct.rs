@@ -1,17 +1,20 @@
-//! A direct, register-blocked convolution kernel for the training path on
-//! x86-64 with AVX and FMA: the forward pass (and the stride-1 input
-//! gradient) of `conv_train`'s layers that read a zero-padded, possibly
-//! phase-split input (`conv_train::Shifted`) and whose output rows are a
-//! multiple of 16 wide (the depth encoder's 64², 32² and 16² stages, the RGB
-//! encoder's first three layers, the first layers of both).
+//! Direct, register-blocked convolution kernels for the training path on
+//! x86-64 with AVX and FMA, for `conv_train`'s layers that read a
+//! zero-padded, possibly phase-split input (`conv_train::Shifted`) and whose
+//! output rows are a multiple of 16 wide and output channels a multiple of
+//! 4 (the depth encoder's 64², 32² and 16² stages, the RGB encoder's first
+//! three layers, the first layers of both):
 //!
-//! Through faer, such a layer is k² products with an inner dimension of
-//! `Cin` (16–64), each reading and adding into the whole output (the 1- and
-//! 3-channel first layers one stacked product per band): the
-//! 16-channel layers ran at about 27 GFLOP/s where wider products reach 50
-//! (docs/performance.md). Here each block of 4 output channels × 16
-//! positions of a row stays in eight registers while all `Cin·k²` taps are
-//! added into it, so the output is written once.
+//! - [`forward`], the forward pass (and the stride-1 input gradient, itself
+//!   such a convolution). Through faer a layer was k² products with an
+//!   inner dimension of `Cin` (16–64), each reading and adding into the
+//!   whole output: the 16-channel layers ran at about 27 GFLOP/s where wider
+//!   products reach 50 (docs/performance.md). Here each block of 6 (or 4)
+//!   output channels × 16 positions of a row stays in registers while all
+//!   `Cin·k²` taps are added into it, so the output is written once.
+//! - [`weight_grad`], the weight gradient: 4 output channels × 3 taps of an
+//!   input channel in registers over every output position, where faer's
+//!   products had a small output and a long inner dimension.
 //!
 //! It owns nothing but the arithmetic: `conv_train` builds the input and
 //! says where each tap's view starts; other geometries and other CPUs keep
@@ -43,9 +46,31 @@ pub(crate) fn cpu() -> bool {
     false
 }
 
-/// The weights `tap(t)[co, ci]` of `taps` taps packed for the kernel:
-/// `[Cout/4][Cin][taps][4]`, the four output channels of a block side by
-/// side.
+/// Output channels per register block of the forward pass where `Cout`
+/// allows: 6 × 16 positions in twelve accumulators, where four channels'
+/// eight leave the FMA units waiting on their latency.
+const WIDE: usize = 6;
+
+/// The forward pass's blocks of output channels, `(first, count)`: as many
+/// of [`WIDE`] as leave a multiple of [`CO`], then blocks of [`CO`]
+/// (16 = 6 + 6 + 4, 32 = 4·6 + 2·4, 64 = 10·6 + 4).
+fn blocks(cout: usize) -> impl Iterator<Item = (usize, usize)> {
+    let wide = (0..=cout / WIDE)
+        .rev()
+        .find(|a| (cout - a * WIDE).is_multiple_of(CO))
+        .unwrap_or(0);
+    let sizes =
+        std::iter::repeat_n(WIDE, wide).chain(std::iter::repeat_n(CO, (cout - wide * WIDE) / CO));
+    sizes.scan(0, |first, c| {
+        let block = (*first, c);
+        *first += c;
+        Some(block)
+    })
+}
+
+/// The weights `tap(t)[co, ci]` of `taps` taps packed for the kernel: per
+/// block of [`blocks`], `[Cin][taps][c]`, the block's `c` output channels
+/// side by side.
 pub(crate) fn pack(
     cout: usize,
     cin: usize,
@@ -53,10 +78,10 @@ pub(crate) fn pack(
     tap: impl Fn(usize, usize, usize) -> f32,
 ) -> Vec<f32> {
     let mut out = Vec::with_capacity(cout * cin * taps);
-    for cb in 0..cout / CO {
+    for (first, c) in blocks(cout) {
         for ci in 0..cin {
             for t in 0..taps {
-                out.extend((0..CO).map(|j| tap(t, cb * CO + j, ci)));
+                out.extend((first..first + c).map(|co| tap(t, co, ci)));
             }
         }
     }
@@ -188,7 +213,7 @@ fn last_read(views: Views<'_>, cin: usize, ho: usize, wo: usize) -> usize {
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::{CO, GX, PX, Views};
+    use super::{CO, GX, PX, Views, WIDE};
     use std::arch::x86_64::*;
 
     /// [`super::forward`]'s loops.
@@ -210,30 +235,36 @@ mod avx {
         y: &mut [f32],
     ) {
         let (kk, outs) = (views.taps.len(), ho * wo);
-        for cb in 0..b.len() / CO {
-            let w = &packed[cb * cin * kk * CO..][..cin * kk * CO];
-            let bias = &b[cb * CO..][..CO];
+        for (first, c) in super::blocks(b.len()) {
+            let w = &packed[first * cin * kk..][..cin * kk * c];
+            let bias = &b[first..][..c];
             for oy in 0..ho {
                 for ox in (0..wo).step_by(PX) {
-                    let to = cb * CO * outs + oy * wo + ox;
+                    let (at, to) = (oy * views.wq + ox, first * outs + oy * wo + ox);
                     // SAFETY: the values read are at most `forward`'s `last`.
-                    unsafe { block(xp, views, cin, w, bias, oy * views.wq + ox, y, outs, to) };
+                    unsafe {
+                        if c == WIDE {
+                            block::<WIDE>(xp, views, cin, w, bias, at, y, outs, to)
+                        } else {
+                            block::<CO>(xp, views, cin, w, bias, at, y, outs, to)
+                        }
+                    };
                 }
             }
         }
     }
 
-    /// Four output channels × 16 positions: eight accumulators over all of
+    /// `C` output channels × 16 positions: 2·C accumulators over all of
     /// `Cin`'s taps, then the bias, stored once.
     ///
     /// # Safety
     /// The CPU has AVX and FMA; for every channel `ci` and tap offset `off`,
-    /// `ci·plane + at + off + 15` is inside `xp`; `w` holds `Cin·taps·4`
-    /// weights.
+    /// `ci·plane + at + off + 15` is inside `xp`; `w` holds `Cin·taps·C`
+    /// weights, `bias` C; `y` holds C rows of `outs` from `to` on.
     #[target_feature(enable = "avx,fma")]
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    unsafe fn block(
+    unsafe fn block<const C: usize>(
         xp: &[f32],
         views: Views<'_>,
         cin: usize,
@@ -244,7 +275,7 @@ mod avx {
         outs: usize,
         to: usize,
     ) {
-        let mut acc = [[_mm256_setzero_ps(); 2]; CO];
+        let mut acc = [[_mm256_setzero_ps(); 2]; C];
         let (xs, mut ws) = (xp.as_ptr(), w.as_ptr());
         for ci in 0..cin {
             let base = ci * views.plane + at;
@@ -259,7 +290,7 @@ mod avx {
                         a[0] = _mm256_fmadd_ps(wj, v0, a[0]);
                         a[1] = _mm256_fmadd_ps(wj, v1, a[1]);
                     }
-                    ws = ws.add(CO);
+                    ws = ws.add(C);
                 }
             }
         }

@@ -1558,12 +1558,13 @@ mod tests {
             (2, 8, 3, 2, 3, 2, 1),
             (1, 8, 3, 10, 3, 3, 1),
             // conv_direct's kernel (rows a multiple of 16 wide, output
-            // channels of 4): 32×32, and 13×16 with the input gradient's
-            // too (8 input channels, stride 1).
-            (2, 3, 4, 32, 3, 1, 1),
+            // channels a multiple of 4; its blocks of 6 and 4 channels:
+            // 16 = 6 + 6 + 4, 8 = 4 + 4, 12 = 6 + 6): 32×32, and 13×16
+            // with the input gradient's too (8 input channels, stride 1).
+            (2, 3, 16, 32, 3, 1, 1),
             (1, 8, 8, 13, 3, 1, 1),
             // And strided on the split input: 16×16 out of 32×32, k 5.
-            (1, 8, 4, 32, 5, 2, 2),
+            (1, 8, 12, 32, 5, 2, 2),
         ]
         .iter()
         .enumerate()
