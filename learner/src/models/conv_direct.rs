@@ -25,8 +25,9 @@ const CO: usize = 4;
 /// Output positions per register block (two 8-wide vectors).
 const PX: usize = 16;
 
-/// Whether the kernel covers a layer with `cout` output channels and
-/// output rows `wo` wide on this CPU: multiples of [`CO`] and [`PX`].
+/// Whether [`forward`] runs a layer with `cout` output channels and output
+/// rows `wo` wide on this CPU: multiples of [`CO`] and [`PX`] (its blocks
+/// read and write whole rows of 16).
 pub(crate) fn covers(cout: usize, wo: usize) -> bool {
     cout.is_multiple_of(CO) && wo.is_multiple_of(PX) && cpu()
 }
@@ -119,8 +120,14 @@ pub(crate) fn forward(
     y: &mut [f32],
 ) {
     let cout = b.len();
-    assert!(covers(cout, wo), "conv_direct: a layer it does not cover");
-    assert!(cin > 0 && ho > 0, "conv_direct: an empty layer");
+    assert!(cin > 0 && ho > 0 && wo > 0, "conv_direct: an empty layer");
+    // Asserted apart from `covers`, whose CPU check it also needs: the
+    // unchecked loads and stores rely on whole rows of 16 and blocks of 4.
+    assert!(
+        cout.is_multiple_of(CO) && wo.is_multiple_of(PX),
+        "conv_direct: a layer of {cout} channels, rows {wo} wide"
+    );
+    assert!(covers(cout, wo), "conv_direct: a CPU without AVX and FMA");
     let last = last_read(views, cin, ho, wo);
     assert!(
         wo <= views.wq && last < xp.len(),
@@ -140,12 +147,12 @@ pub(crate) fn forward(
 /// Output positions per step of [`weight_grad`] (one 8-wide vector).
 const GX: usize = 8;
 
-/// Whether [`weight_grad`] covers a layer with `cout` output channels and
-/// output rows `wo` wide on this CPU: multiples of [`CO`] and of [`PX`]
-/// (the loop steps by [`GX`]; on 8-wide maps its twelve sums per 8 rows
-/// measured slower than faer's products).
-pub(crate) fn covers_weight_grad(cout: usize, wo: usize) -> bool {
-    cout.is_multiple_of(CO) && wo.is_multiple_of(PX) && cpu()
+/// Whether [`weight_grad`] runs a layer with `cout` output channels and
+/// output rows `wo` wide on this CPU: multiples of [`CO`] and [`GX`] (its
+/// loads read whole rows of 8). Where it is faster than faer's products is
+/// `conv_train`'s choice.
+pub(crate) fn runs_weight_grad(cout: usize, wo: usize) -> bool {
+    cout.is_multiple_of(CO) && wo.is_multiple_of(GX) && cpu()
 }
 
 /// One sample's weight gradient added into `dw [Cout, Cin, taps]` (the
@@ -153,14 +160,16 @@ pub(crate) fn covers_weight_grad(cout: usize, wo: usize) -> bool {
 /// xp[ci·plane + taps[t] + oy·wq + ox]`, with `dy [Cout, Ho·Wo]` as the
 /// layer's output gradient comes (no discarded positions to skip).
 ///
-/// Through faer this was k² products `[Cout, Ho·wq] · [Ho·wq, Cin]`, each
-/// with a small output and a long inner dimension; here 4 output channels ×
-/// 3 taps of one input channel stay in twelve registers over every output
-/// position, each position's 3 input and 4 gradient vectors loaded once.
+/// Through faer this was k² products `[Cout, Ho·wq] · [Ho·wq, Cin]` (for
+/// the stacked first layers one `[Cout, Ho·wq] · [Ho·wq, Cin·k²]` per band
+/// of rows), each with a small output and a long inner dimension; here 4
+/// output channels × 3 taps of one input channel stay in twelve registers
+/// over every output position, each position's 3 input and 4 gradient
+/// vectors loaded once.
 ///
 /// # Panics
 /// If a view reaches past `xp`, the buffers do not match the shapes, or
-/// [`covers_weight_grad`] is false.
+/// [`runs_weight_grad`] is false.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn weight_grad(
     xp: &[f32],
@@ -172,12 +181,21 @@ pub(crate) fn weight_grad(
     dw: &mut [f32],
 ) {
     let kk = views.taps.len();
-    let cout = dw.len() / (cin * kk).max(1);
     assert!(
-        covers_weight_grad(cout, wo),
-        "conv_direct: a weight gradient it does not cover"
+        cin > 0 && ho > 0 && wo > 0 && kk > 0,
+        "conv_direct: an empty layer"
     );
-    assert!(cin > 0 && ho > 0 && kk > 0, "conv_direct: an empty layer");
+    let cout = dy.len() / (ho * wo);
+    // Asserted apart from `runs_weight_grad`, whose CPU check it also
+    // needs: the unchecked loads rely on whole rows of 8 and blocks of 4.
+    assert!(
+        cout.is_multiple_of(CO) && wo.is_multiple_of(GX),
+        "conv_direct: a weight gradient of {cout} channels, rows {wo} wide"
+    );
+    assert!(
+        runs_weight_grad(cout, wo),
+        "conv_direct: a CPU without AVX and FMA"
+    );
     let last = last_read(views, cin, ho, wo);
     assert!(
         wo <= views.wq && last < xp.len(),
@@ -185,7 +203,7 @@ pub(crate) fn weight_grad(
     );
     assert!(dw.len() == cout * cin * kk && dy.len() == cout * ho * wo);
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: `covers_weight_grad` checked AVX and FMA; every value of `xp`
+    // SAFETY: `runs_weight_grad` checked AVX and FMA; every value of `xp`
     // read is at most `last` (asserted inside it), every value of `dy` read
     // and of `dw` written inside them (their lengths asserted).
     unsafe {
@@ -243,10 +261,10 @@ mod avx {
                     let (at, to) = (oy * views.wq + ox, first * outs + oy * wo + ox);
                     // SAFETY: the values read are at most `forward`'s `last`.
                     unsafe {
-                        if c == WIDE {
-                            block::<WIDE>(xp, views, cin, w, bias, at, y, outs, to)
-                        } else {
-                            block::<CO>(xp, views, cin, w, bias, at, y, outs, to)
+                        match c {
+                            WIDE => block::<WIDE>(xp, views, cin, w, bias, at, y, outs, to),
+                            CO => block::<CO>(xp, views, cin, w, bias, at, y, outs, to),
+                            _ => unreachable!("blocks() yields blocks of 6 and 4"),
                         }
                     };
                 }
@@ -297,6 +315,7 @@ mod avx {
         for (j, a) in acc.iter().enumerate() {
             let bj = _mm256_set1_ps(bias[j]);
             let out = &mut y[to + j * outs..][..PX];
+            // SAFETY: `out` is 16 values long (a checked slice).
             unsafe {
                 _mm256_storeu_ps(out.as_mut_ptr(), _mm256_add_ps(a[0], bj));
                 _mm256_storeu_ps(out.as_mut_ptr().add(8), _mm256_add_ps(a[1], bj));
@@ -333,8 +352,14 @@ mod avx {
                     // SAFETY: this function's contract, passed on.
                     let (n, sums) = unsafe {
                         match kk - t0 {
-                            1 => (1, group::<1>(xp, base, offs, views.wq, d, ho, wo).map(pad)),
-                            2 => (2, group::<2>(xp, base, offs, views.wq, d, ho, wo).map(pad)),
+                            1 => (
+                                1,
+                                group::<1>(xp, base, offs, views.wq, d, ho, wo).map(widen),
+                            ),
+                            2 => (
+                                2,
+                                group::<2>(xp, base, offs, views.wq, d, ho, wo).map(widen),
+                            ),
                             _ => (3, group::<3>(xp, base, offs, views.wq, d, ho, wo)),
                         }
                     };
@@ -351,7 +376,7 @@ mod avx {
     }
 
     /// A group's sums widened to three (the unused ones never read).
-    fn pad<const T: usize>(s: [f32; T]) -> [f32; 3] {
+    fn widen<const T: usize>(s: [f32; T]) -> [f32; 3] {
         let mut out = [0.0; 3];
         out[..T].copy_from_slice(&s);
         out
@@ -425,5 +450,90 @@ mod avx {
         let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
         let s = _mm_add_ss(s, _mm_shuffle_ps(s, s, 1));
         _mm_cvtss_f32(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both kernels against their definitions on views of a plain array,
+    /// with 5 taps at arbitrary offsets (the weight gradient's groups of 3
+    /// and 2, which no layer of the model has) and 16, 8 and 12 output
+    /// channels (blocks of 6 + 6 + 4, 4 + 4, 6 + 6).
+    #[test]
+    fn kernels_match_their_definitions() {
+        if !cpu() {
+            return;
+        }
+        let (cin, ho, wo, wq) = (3, 3, 16, 19);
+        let taps = [0, 1, 2, wq, wq + 3];
+        let plane = (ho + 1) * wq + 3;
+        let views = Views {
+            plane,
+            wq,
+            taps: &taps,
+        };
+        let mut rng = fastrand::Rng::with_seed(11);
+        let xp: Vec<f32> = (0..cin * plane).map(|_| rng.f32() - 0.5).collect();
+        let at =
+            |ci: usize, t: usize, oy: usize, ox: usize| xp[ci * plane + taps[t] + oy * wq + ox];
+        let outs = ho * wo;
+        for cout in [16, 8, 12] {
+            let kk = taps.len();
+            let w: Vec<f32> = (0..cout * cin * kk).map(|_| rng.f32() - 0.5).collect();
+            let b: Vec<f32> = (0..cout).map(|_| rng.f32()).collect();
+            let wat = |co: usize, ci: usize, t: usize| w[(co * cin + ci) * kk + t];
+            let packed = pack(cout, cin, kk, |t, co, ci| wat(co, ci, t));
+            let mut y = vec![0.0; cout * outs];
+            forward(&xp, views, cin, &packed, &b, ho, wo, &mut y);
+            let dy: Vec<f32> = (0..cout * outs).map(|_| rng.f32() - 0.5).collect();
+            let mut dw = vec![0.0; cout * cin * kk];
+            weight_grad(&xp, views, cin, &dy, ho, wo, &mut dw);
+            for co in 0..cout {
+                for p in 0..outs {
+                    let (oy, ox) = (p / wo, p % wo);
+                    let mut want = b[co];
+                    for ci in 0..cin {
+                        for t in 0..kk {
+                            want += wat(co, ci, t) * at(ci, t, oy, ox);
+                        }
+                    }
+                    let got = y[co * outs + p];
+                    assert!(
+                        (got - want).abs() < 1e-4,
+                        "cout {cout} y[{co}, {p}]: {got} against {want}"
+                    );
+                }
+                for ci in 0..cin {
+                    for t in 0..kk {
+                        let want: f32 = (0..outs)
+                            .map(|p| dy[co * outs + p] * at(ci, t, p / wo, p % wo))
+                            .sum();
+                        let got = dw[(co * cin + ci) * kk + t];
+                        assert!(
+                            (got - want).abs() < 1e-4,
+                            "cout {cout} dw[{co}, {ci}, {t}]: {got} against {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// A view past the input is refused before any load.
+    #[test]
+    #[should_panic(expected = "reaches past the input")]
+    fn refuses_a_view_past_the_input() {
+        if !cpu() {
+            panic!("reaches past the input (no AVX here: nothing to test)");
+        }
+        let views = Views {
+            plane: 20,
+            wq: 16,
+            taps: &[0, 5],
+        };
+        let (xp, dy) = (vec![0.0; 20], vec![0.0; 4 * 16]);
+        weight_grad(&xp, views, 1, &dy, 1, 16, &mut vec![0.0; 8]);
     }
 }

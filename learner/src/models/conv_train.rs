@@ -21,7 +21,8 @@
 //! - the forward pass over those views (the shifted, phased and stacked
 //!   layouts) through [`super::conv_direct`]'s kernel instead of products
 //!   where the output rows are a multiple of 16 wide and the output
-//!   channels of 4, on a CPU with AVX and FMA;
+//!   channels of 4, on a CPU with AVX and FMA, and the weight gradient
+//!   through its second kernel;
 //! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
 //!   layers read their input as the matrix; the bias's `db = Σ dy`;
 //! - transposed convolutions (the flow decoder's up-convolutions,
@@ -254,9 +255,13 @@ fn direct(g: &Geometry) -> bool {
 }
 
 /// Whether `g`'s weight gradient (on its [`Shifted`] or stacked layout)
-/// takes [`conv_direct::weight_grad`].
+/// takes [`conv_direct::weight_grad`]: where it runs and the output rows are
+/// a multiple of 16 wide. On 8-wide rows it measured slower than faer's
+/// products; on 16-wide ones about even in all (the 64-channel 16² layer
+/// about 7 % slower, the largest up-convolution's 11 % faster;
+/// docs/performance.md).
 fn direct_weight_grad(g: &Geometry) -> bool {
-    !products_only() && conv_direct::covers_weight_grad(g.cout, g.wo)
+    !products_only() && g.wo.is_multiple_of(16) && conv_direct::runs_weight_grad(g.cout, g.wo)
 }
 
 /// `LEARNER_CONV=products` keeps our passes but runs every layer's products
@@ -588,7 +593,7 @@ impl Shifted {
     /// One sample's `x [Cin, H, W]` into its zero-padded phases. Writes
     /// the image positions only: `xp` must be zero elsewhere, as a buffer
     /// allocated zeroed that only this writes stays (every caller's, one
-    /// per thread, reused sample after sample of one layer). Zeroing it
+    /// per rayon task, reused sample after sample of one layer call). Zeroing it
     /// whole per sample took about 1 % of a training step (a profile).
     fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
         for c in 0..g.cin {
@@ -625,6 +630,11 @@ impl Shifted {
                 }
             }
         }
+    }
+
+    /// Each tap's [`Shifted::offset`], for [`conv_direct::Views`].
+    fn tap_offsets(&self, g: &Geometry) -> Vec<usize> {
+        (0..g.k * g.k).map(|t| self.offset(g, t)).collect()
     }
 
     /// The split input seen from tap `t`: `[Cin, Ho·wq]`.
@@ -712,7 +722,7 @@ fn forward_shifted(
     let direct = direct(g);
     let packed = direct
         .then(|| conv_direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
-    let offsets: Vec<usize> = (0..kk).map(|t| sh.offset(g, t)).collect();
+    let offsets = sh.tap_offsets(g);
     let views = conv_direct::Views {
         plane: sh.plane,
         wq: sh.wq,
@@ -956,7 +966,7 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
 /// as it comes.
 fn wb_backward_direct(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let (kk, outs) = (g.k * g.k, g.outs());
-    let offsets: Vec<usize> = (0..kk).map(|t| sh.offset(g, t)).collect();
+    let offsets = sh.tap_offsets(g);
     let views = conv_direct::Views {
         plane: sh.plane,
         wq: sh.wq,
@@ -1610,8 +1620,8 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
-            if direct_weight_grad(&g) {
-                weight_grads += 1;
+            weight_grads += usize::from(direct_weight_grad(&g));
+            if conv_direct::runs_weight_grad(cout, g.wo) {
                 let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
                 near(&dw3, &dw2, "dw, direct");
                 near(&db3, &db2, "db, direct");
@@ -1620,18 +1630,45 @@ mod tests {
         // The last three cases' forward passes take conv_direct's kernel,
         // and the second's input gradient (8 input channels, 16 wide).
         assert_eq!(direct_passes, if conv_direct::cpu() { 4 } else { 0 });
-        // Their weight gradients too (rows a multiple of 16 wide, output
-        // channels of 4).
+        // The weight-gradient kernel runs on those three and the 8-wide
+        // strided case (12×15, k 5); the three are routed to it.
         assert_eq!(weight_grads, if conv_direct::cpu() { 3 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
     }
 
+    /// [`Shifted::pad`] writes every image position and nothing else: a
+    /// buffer that held another sample's padded input holds this one's
+    /// exactly as a fresh one does (its callers rely on it, zeroing their
+    /// buffers once).
+    #[test]
+    fn padding_into_a_used_buffer_is_padding_into_a_fresh_one() {
+        for (cin, h, w, k, s, p) in [(3, 7, 9, 3, 1, 1), (2, 9, 8, 5, 2, 2), (8, 11, 13, 3, 3, 1)] {
+            let g = Geometry::new(&[1, cin, h, w], &[4, cin, k, k], s, p);
+            let sh = Shifted::layout(&g);
+            let mut rng = fastrand::Rng::with_seed(9);
+            let (a, b) = (
+                uniform(&mut rng, cin * h * w),
+                uniform(&mut rng, cin * h * w),
+            );
+            let mut fresh = vec![0.0; sh.len(&g)];
+            sh.pad(&g, &a, &mut fresh);
+            let mut used = vec![0.0; sh.len(&g)];
+            sh.pad(&g, &b, &mut used);
+            sh.pad(&g, &a, &mut used);
+            assert_eq!(fresh, used, "cin {cin} {h}×{w} k {k} stride {s} pad {p}");
+            // And the padding is zeros: all but the image's values.
+            let nonzero = fresh.iter().filter(|v| **v != 0.0).count();
+            assert_eq!(nonzero, a.iter().filter(|v| **v != 0.0).count());
+        }
+    }
+
     /// Strided layers of few input channels (the stacked tile from the
     /// split input) against the im2col path, forward and weight gradient.
     #[test]
     fn stacked_paths_match_im2col() {
+        assert!(!products_only(), "LEARNER_CONV=products is set");
         let mut weight_grads = 0;
         for &(b, cin, cout, h, w, k, s, p) in &[
             // The RGB encoder's first layer at full size: many bands.
@@ -1668,15 +1705,16 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
-            if direct_weight_grad(&g) {
-                weight_grads += 1;
+            weight_grads += usize::from(direct_weight_grad(&g));
+            if conv_direct::runs_weight_grad(cout, g.wo) {
                 let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
                 near(&dw3, &dw2, "dw, direct");
                 near(&db3, &db2, "db, direct");
             }
         }
         // conv_direct's weight gradient takes the first case (4 output
-        // channels, 64 wide; 49 taps: groups of 3 and a last one of 1).
+        // channels, 64 wide; 49 taps: groups of 3 and a last one of 1); the
+        // others are not a multiple of 8 wide, or of 4 channels.
         assert_eq!(weight_grads, if conv_direct::cpu() { 1 } else { 0 });
         // The first case is split into bands.
         let g = Geometry::new(&[1, 3, 128, 128], &[4, 3, 7, 7], 2, 3);
