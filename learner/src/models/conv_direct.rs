@@ -534,6 +534,6 @@ mod tests {
             taps: &[0, 5],
         };
         let (xp, dy) = (vec![0.0; 20], vec![0.0; 4 * 16]);
-        weight_grad(&xp, views, 1, &dy, 1, 16, &mut vec![0.0; 8]);
+        weight_grad(&xp, views, 1, &dy, 1, 16, &mut [0.0; 8]);
     }
 }
