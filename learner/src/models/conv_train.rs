@@ -593,8 +593,9 @@ impl Shifted {
     /// One sample's `x [Cin, H, W]` into its zero-padded phases. Writes
     /// the image positions only: `xp` must be zero elsewhere, as a buffer
     /// allocated zeroed that only this writes stays (every caller's, one
-    /// per rayon task, reused sample after sample of one layer call). Zeroing it
-    /// whole per sample took about 1 % of a training step (a profile).
+    /// per rayon task, reused sample after sample of one layer call).
+    /// Zeroing it whole per sample took about 1 % of a training step (a
+    /// profile).
     fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
         for c in 0..g.cin {
             for iy in 0..g.h {
@@ -632,9 +633,19 @@ impl Shifted {
         }
     }
 
-    /// Each tap's [`Shifted::offset`], for [`conv_direct::Views`].
+    /// Each tap's [`Shifted::offset`], for [`Shifted::views`].
     fn tap_offsets(&self, g: &Geometry) -> Vec<usize> {
         (0..g.k * g.k).map(|t| self.offset(g, t)).collect()
+    }
+
+    /// The split input as [`conv_direct`]'s kernels read it, the taps at
+    /// `offsets` (from [`Shifted::tap_offsets`]).
+    fn views<'a>(&self, offsets: &'a [usize]) -> conv_direct::Views<'a> {
+        conv_direct::Views {
+            plane: self.plane,
+            wq: self.wq,
+            taps: offsets,
+        }
     }
 
     /// The split input seen from tap `t`: `[Cin, Ho·wq]`.
@@ -723,11 +734,7 @@ fn forward_shifted(
     let packed = direct
         .then(|| conv_direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
     let offsets = sh.tap_offsets(g);
-    let views = conv_direct::Views {
-        plane: sh.plane,
-        wq: sh.wq,
-        taps: &offsets,
-    };
+    let views = sh.views(&offsets);
     y.par_chunks_mut(g.cout * outs)
         .zip(x.par_chunks(g.cin * g.h * g.w))
         .with_min_len(per_task(g.batch))
@@ -967,11 +974,7 @@ fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec
 fn wb_backward_direct(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let (kk, outs) = (g.k * g.k, g.outs());
     let offsets = sh.tap_offsets(g);
-    let views = conv_direct::Views {
-        plane: sh.plane,
-        wq: sh.wq,
-        taps: &offsets,
-    };
+    let views = sh.views(&offsets);
     let zero = || {
         (
             vec![0.0f32; sh.len(g)],
@@ -1539,6 +1542,24 @@ mod tests {
         close(conv2d(&c, x.clone()), c.forward(x), "y");
     }
 
+    /// Where conv_direct's weight-gradient kernel runs on `g`, its
+    /// gradients against `want` (im2col's); 1 if `g` is routed to it, else 0.
+    fn direct_weight_grad_as(
+        g: &Geometry,
+        sh: Shifted,
+        x: &[f32],
+        dy: &[f32],
+        want: (&[f32], &[f32]),
+        what: &str,
+    ) -> usize {
+        if conv_direct::runs_weight_grad(g.cout, g.wo) {
+            let (dw, db) = wb_backward_direct(g, sh, x, dy);
+            near(&dw, want.0, &format!("{what} dw, direct"));
+            near(&db, want.1, &format!("{what} db, direct"));
+        }
+        usize::from(direct_weight_grad(g))
+    }
+
     /// `n` values uniform in [−0.5, 0.5).
     fn uniform(rng: &mut fastrand::Rng, n: usize) -> Vec<f32> {
         (0..n).map(|_| rng.f32() - 0.5).collect()
@@ -1620,12 +1641,7 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
-            weight_grads += usize::from(direct_weight_grad(&g));
-            if conv_direct::runs_weight_grad(cout, g.wo) {
-                let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
-                near(&dw3, &dw2, "dw, direct");
-                near(&db3, &db2, "db, direct");
-            }
+            weight_grads += direct_weight_grad_as(&g, sh, &x, &dy, (&dw2, &db2), &what);
         }
         // The last three cases' forward passes take conv_direct's kernel,
         // and the second's input gradient (8 input channels, 16 wide).
@@ -1705,12 +1721,7 @@ mod tests {
             );
             near(&dw1, &dw2, "dw");
             near(&db1, &db2, "db");
-            weight_grads += usize::from(direct_weight_grad(&g));
-            if conv_direct::runs_weight_grad(cout, g.wo) {
-                let (dw3, db3) = wb_backward_direct(&g, sh, &x, &dy);
-                near(&dw3, &dw2, "dw, direct");
-                near(&db3, &db2, "db, direct");
-            }
+            weight_grads += direct_weight_grad_as(&g, sh, &x, &dy, (&dw2, &db2), &what);
         }
         // conv_direct's weight gradient takes the first case (4 output
         // channels, 64 wide; 49 taps: groups of 3 and a last one of 1); the
