@@ -5,6 +5,12 @@
 //! policy on each evaluation peg; then one results table and bar charts of
 //! the completed-insertion share next to the paper's numbers.
 //!
+//! The policy learns one of two ways: by `learner policy train` (TRPO or
+//! PPO on z, the paper's), or by `learner policy distill` (DAgger from the
+//! touch search whose belief of the opening is a linear probe of the same
+//! z, the route that completes insertions here; docs/experiments.md). Both
+//! take the variant's representation in place of their configuration's.
+//!
 //! Every stage leaves its output in the experiment's directory and is
 //! skipped when that output is complete, so an interrupted experiment
 //! resumes where it stopped (the representation and the policy also resume
@@ -16,6 +22,7 @@ use crate::collect::{self, CollectConfig, Mix};
 use crate::dataset::{self, BuildConfig, Dataset};
 use crate::log::LogOptions;
 use crate::plot::{Chart, Series};
+use crate::rl::distill::{self, DistillConfig};
 use crate::rl::observe::ObservationKind;
 use crate::rl::reward::Outcome;
 use crate::rl::run::{self as policy_run, EvalReport};
@@ -89,6 +96,14 @@ pub struct PolicyStage {
     pub config: Option<PathBuf>,
     /// Environment steps (overrides the base; the paper: 1M).
     pub env_steps: Option<u64>,
+    /// In place of `config`: a `learner policy distill` configuration. The
+    /// student observes the variant's z means, and the search teacher's
+    /// probe (`[search_teacher.probe]`) reads the same representation, so
+    /// each variant's teacher knows the opening only as well as its z tells
+    /// it. For the ground-truth variant the probe is dropped: the search is
+    /// told the hole with the configuration's `hole_error_m`. The policy
+    /// evaluated is the last round's (DAgger has no best-logged update).
+    pub distill: Option<PathBuf>,
 }
 
 /// The evaluation of every policy.
@@ -124,6 +139,13 @@ pub struct Variant {
     /// The representation's training configuration; absent: the policy
     /// observes the privileged ground truth (a reference, not in the paper).
     pub representation: Option<PathBuf>,
+    /// A representation already trained with `representation`'s
+    /// configuration on `data.dataset` (its exported model directory): used
+    /// as it is instead of training the variant's own. It must have the
+    /// experiment's epochs for the comparison to be fair; its `model.json`
+    /// must exist.
+    #[serde(default)]
+    pub model: Option<PathBuf>,
     /// The paper's completed-insertion share for it, where the paper's text
     /// gives one (0..1).
     pub paper_completed: Option<f64>,
@@ -170,6 +192,13 @@ impl ExperimentConfig {
     pub fn validate(&self) -> Result<()> {
         ensure!(!self.variant.is_empty(), "variant: at least one is needed");
         ensure!(self.eval.episodes > 0, "eval.episodes: must be at least 1");
+        if self.policy.distill.is_some() {
+            ensure!(
+                self.policy.config.is_none() && self.policy.env_steps.is_none(),
+                "policy.distill: give either a distillation (distill = …, its length its \
+                 dagger.rounds) or a training configuration (config, env_steps), not both"
+            );
+        }
         for (i, v) in self.variant.iter().enumerate() {
             ensure!(
                 !v.name.is_empty()
@@ -181,6 +210,12 @@ impl ExperimentConfig {
                  dot (it names a directory)",
                 v.name
             );
+            if v.model.is_some() && v.representation.is_none() {
+                bail!(
+                    "variant[{i}].model: needs the representation configuration it was trained \
+                     with (representation = …)"
+                );
+            }
             if let Some(p) = v.paper_completed {
                 ensure!(
                     (0.0..=1.0).contains(&p),
@@ -224,19 +259,29 @@ pub fn run(
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut log = StageLog::open(out);
-    let base_policy = match &cfg.policy.config {
-        Some(p) => policy_run::read_config(p)?,
-        None => policy_run::TrainConfig::default(),
+    let route = match &cfg.policy.distill {
+        Some(p) => {
+            let d = distill::read_config(p)?;
+            ensure!(
+                d.search_teacher.is_some() && d.teacher.is_none(),
+                "policy.distill {}: the experiment distils from the touch search \
+                 ([search_teacher]); a checkpoint teacher observes its own representation, not the \
+                 variant's",
+                p.display()
+            );
+            Route::Distill(Box::new(d))
+        }
+        None => Route::Train(Box::new(match &cfg.policy.config {
+            Some(p) => policy_run::read_config(p)?,
+            None => policy_run::TrainConfig::default(),
+        })),
+    };
+    let env = match &route {
+        Route::Train(t) => &t.env,
+        Route::Distill(d) => &d.student.env,
     };
     let uses_representation = cfg.variant.iter().any(|v| v.representation.is_some());
-    let data = ensure_dataset(
-        &cfg.data,
-        &base_policy.env,
-        uses_representation,
-        out,
-        &mut log,
-        stop,
-    )?;
+    let data = ensure_dataset(&cfg.data, env, uses_representation, out, &mut log, stop)?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
         if !opts.only.is_empty() && !opts.only.contains(&v.name) {
@@ -254,36 +299,21 @@ pub fn run(
             bail!("stopped; run the same command again to resume");
         }
         let policy_dir = dir.join("policy");
-        let mut pcfg = base_policy.clone();
-        // The ground truth's channels are scaled by hand, and normalised
-        // its free-space wrench noise is as loud as the position (docs/rl.md,
-        // "Observation normalisation"): the reference runs without it.
-        if observation == ObservationKind::GroundTruth {
-            pcfg.policy.normalise_observations = false;
-        }
-        pcfg.observation = observation;
-        if let Some(n) = cfg.policy.env_steps {
-            pcfg.env_steps = n;
-        }
-        let trained = policy_run::checkpoint_path(&policy_dir);
-        let done = trained.exists()
-            && policy_run::read_checkpoint(&trained)?.state.env_steps >= pcfg.env_steps;
-        if !done {
-            log.start(&format!("{}: policy ({} steps)", v.name, pcfg.env_steps));
-            let c = policy_run::train(pcfg.clone(), &policy_dir, true, stop)?;
-            if c.state.env_steps < pcfg.env_steps {
-                bail!(
-                    "stopped during the policy of {}; run the same command again to resume",
-                    v.name
-                );
-            }
-            log.end()?;
-        }
-        let ckpt = policy_run::read_checkpoint(&trained)?;
+        let (ckpt, last) = match &route {
+            Route::Train(base) => (
+                train_policy(cfg, base, v, observation, &policy_dir, &mut log, stop)?,
+                false,
+            ),
+            Route::Distill(base) => (
+                distill_policy(base, v, observation, &policy_dir, &mut log, stop)?,
+                true,
+            ),
+        };
         let trained_peg = ckpt.config.env.world.task.peg;
-        // The best validated policy when the policy configuration validates,
-        // otherwise the best logged in training (the paper's protocol).
-        let chosen = ckpt.chosen_policy(false);
+        // TRPO/PPO: the best validated policy when the policy configuration
+        // validates, otherwise the best logged in training (the paper's
+        // protocol). DAgger: the last round's.
+        let chosen = ckpt.chosen_policy(last);
         let pegs = if cfg.eval.pegs.is_empty() {
             vec![trained_peg]
         } else {
@@ -353,6 +383,97 @@ pub fn run(
     }
     write_results(out, &rows)?;
     Ok(rows)
+}
+
+/// How the variants' policies learn.
+enum Route {
+    /// `learner policy train` from this base configuration.
+    Train(Box<policy_run::TrainConfig>),
+    /// `learner policy distill` from this base configuration.
+    Distill(Box<DistillConfig>),
+}
+
+/// Trains (or resumes, or finds finished) a variant's policy by TRPO/PPO
+/// on `observation`; returns its checkpoint.
+fn train_policy(
+    cfg: &ExperimentConfig,
+    base: &policy_run::TrainConfig,
+    v: &Variant,
+    observation: ObservationKind,
+    dir: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<policy_run::Checkpoint> {
+    let mut pcfg = base.clone();
+    // The ground truth's channels are scaled by hand, and normalised
+    // its free-space wrench noise is as loud as the position (docs/rl.md,
+    // "Observation normalisation"): the reference runs without it.
+    if observation == ObservationKind::GroundTruth {
+        pcfg.policy.normalise_observations = false;
+    }
+    pcfg.observation = observation;
+    if let Some(n) = cfg.policy.env_steps {
+        pcfg.env_steps = n;
+    }
+    let trained = policy_run::checkpoint_path(dir);
+    let done = trained.exists()
+        && policy_run::read_checkpoint(&trained)?.state.env_steps >= pcfg.env_steps;
+    if !done {
+        log.start(&format!("{}: policy ({} steps)", v.name, pcfg.env_steps));
+        let c = policy_run::train(pcfg.clone(), dir, true, stop)?;
+        if c.state.env_steps < pcfg.env_steps {
+            bail!(
+                "stopped during the policy of {}; run the same command again to resume",
+                v.name
+            );
+        }
+        log.end()?;
+    }
+    Ok(policy_run::read_checkpoint(&trained)?)
+}
+
+/// Distils (or resumes, or finds finished) a variant's policy: DAgger from
+/// the touch search told by a probe of the variant's representation (the
+/// truth with the configured error for the ground truth); returns its
+/// checkpoint.
+fn distill_policy(
+    base: &DistillConfig,
+    v: &Variant,
+    observation: ObservationKind,
+    dir: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<policy_run::Checkpoint> {
+    let mut d = base.clone();
+    if let Some(search) = d.search_teacher.as_mut() {
+        match &observation {
+            ObservationKind::Representation(model) => {
+                if let Some(p) = search.probe.as_mut() {
+                    p.representation = model.clone();
+                }
+            }
+            _ => search.probe = None,
+        }
+    }
+    d.student.observation = observation;
+    let trained = policy_run::checkpoint_path(dir);
+    let rounds = d.dagger.rounds;
+    let done = trained.exists() && policy_run::read_checkpoint(&trained)?.state.iteration >= rounds;
+    if !done {
+        log.start(&format!(
+            "{}: policy (DAgger, {rounds} rounds of {} steps)",
+            v.name, d.dagger.steps_per_round
+        ));
+        let c = distill::distill(d, dir, trained.exists(), stop)?;
+        if c.state.iteration < rounds {
+            bail!(
+                "stopped during the policy of {}; run the same command again to resume",
+                v.name
+            );
+        }
+        log.end()?;
+    }
+    Ok(policy_run::read_checkpoint(&trained)?)
 }
 
 /// The dataset: opened where it is, or collected and built there in the
@@ -454,6 +575,16 @@ fn representation(
     stop: &(dyn Fn() -> bool + Sync),
     log: &mut StageLog,
 ) -> Result<PathBuf> {
+    if let Some(m) = &v.model {
+        ensure!(
+            m.join("model.json").exists(),
+            "variant {}: model {}: no model.json there (an exported model directory, a run's \
+             model/)",
+            v.name,
+            m.display()
+        );
+        return Ok(m.clone());
+    }
     let out = dir.join("repr");
     let model = out.join(train::run::files::MODEL_DIR);
     if model.join("model.json").exists() {
@@ -657,5 +788,34 @@ mod tests {
         assert!(e.to_string().contains("cuda"), "{e}");
         let r: ReprStage = toml::from_str("device = \"vulkan\"").unwrap();
         assert_eq!(r.device, DeviceKind::Vulkan);
+    }
+
+    /// A distillation beside a training configuration, and a trained model
+    /// without the configuration it was trained with, are refused by name.
+    #[test]
+    fn contradictory_policy_and_model_settings_are_refused() {
+        let base = "[data]\ndataset = \"d\"\n\n[[variant]]\nname = \"Full\"\n";
+        for (extra, field) in [
+            (
+                "[policy]\ndistill = \"a.toml\"\nconfig = \"b.toml\"\n",
+                "policy.distill",
+            ),
+            (
+                "[policy]\ndistill = \"a.toml\"\nenv_steps = 5\n",
+                "policy.distill",
+            ),
+            ("", "variant[0].model"),
+        ] {
+            let mut text = format!("{extra}{base}");
+            if extra.is_empty() {
+                text += "model = \"m\"\n";
+            }
+            let cfg: ExperimentConfig = toml::from_str(&text).unwrap();
+            let e = cfg.validate().unwrap_err();
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
+        let ok: ExperimentConfig =
+            toml::from_str(&format!("[policy]\ndistill = \"a.toml\"\n{base}")).unwrap();
+        ok.validate().unwrap();
     }
 }

@@ -735,3 +735,126 @@ fn an_experiment_runs_every_stage_and_resumes() {
     .unwrap_err();
     assert!(e.to_string().contains("Fu11"), "{e}");
 }
+
+/// `learner experiment` through DAgger (`[policy] distill`): each variant's
+/// student observes its own z, and its teacher's probe reads the same
+/// representation (the ground truth's teacher is told the truth, no probe);
+/// a variant given an already trained `model` trains none; the evaluated
+/// policy is the last round's; a second invocation redoes nothing.
+#[test]
+fn an_experiment_distils_from_each_variants_own_probe() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    use learner::rl::distill::DistillConfig;
+    let dir = test_support::scratch_dir("experiment-distill");
+    let repr = dir.join("repr.toml");
+    std::fs::write(
+        &repr,
+        format!(
+            "[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n\
+             depth_convs_per_stage = 1\n\n[train]\nbatch = 32\nepochs = 3\nlr = 1e-3\n\
+             test_fraction = 0.25\nshuffle_blocks = 4\n"
+        ),
+    )
+    .unwrap();
+    // The probe's band reaches the start (below_m 1 m), so that 20-step
+    // episodes give it states to fit.
+    let distill = dir.join("distill.toml");
+    std::fs::write(
+        &distill,
+        format!(
+            "[search_teacher.probe]\nrepresentation = \"replaced\"\nfit_episodes = 1\n\
+             below_m = 1.0\n\n\
+             [student]\nnum_envs = 2\nthreads = 2\n\n[student.env]\nmax_steps = 20\n\n\
+             [student.env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+             [student.policy]\nhidden = [8]\n\n[student.validation]\nepisodes = 1\n\n\
+             [dagger]\nrounds = 2\nsteps_per_round = 40\nepochs = 2\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let model = out.join("Full/repr/model");
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
+             [policy]\ndistill = {:?}\n\n[eval]\nepisodes = 2\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\npaper_completed = 0.78\n\n\
+             [[variant]]\nname = \"ground-truth\"\n\n\
+             [[variant]]\nname = \"reused\"\nrepresentation = {repr:?}\nmodel = {model:?}\n",
+            dataset(),
+            distill,
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    let opts = RunOptions::default();
+    let rows = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(rows.len(), 3, "three variants on the training peg");
+    assert_eq!(rows[0].paper_completed, Some(0.78));
+    for r in &rows {
+        assert_eq!(r.report.episodes, 2);
+    }
+    let recorded = |v: &str| -> DistillConfig {
+        let text = std::fs::read(out.join(v).join("policy/distill-config.json")).unwrap();
+        serde_json::from_slice(&text).unwrap()
+    };
+    let probe_of = |v: &str| {
+        recorded(v)
+            .search_teacher
+            .unwrap()
+            .probe
+            .map(|p| p.representation)
+    };
+    // Full's teacher and student read Full's model, and so do the reused
+    // variant's, which trained no representation of its own.
+    assert_eq!(probe_of("Full"), Some(model.clone()));
+    assert_eq!(probe_of("reused"), Some(model.clone()));
+    assert!(!out.join("reused/repr").exists());
+    assert_eq!(probe_of("ground-truth"), None);
+    for (v, dim) in [
+        ("Full", 16),
+        ("reused", 16),
+        ("ground-truth", learner::rl::observe::GROUND_TRUTH_DIM),
+    ] {
+        let c =
+            learner::rl::run::read_checkpoint(&out.join(v).join("policy/checkpoint.json")).unwrap();
+        assert_eq!(c.state.iteration, 2, "{v}: both rounds");
+        assert_eq!(c.state.policy.sizes[0], dim, "{v}");
+        assert!(
+            out.join(v).join("policy/rounds/round-001.bin").exists(),
+            "{v}"
+        );
+        // The last round's policy was evaluated.
+        let e: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join(v).join("eval-square.json")).unwrap())
+                .unwrap();
+        assert_eq!(e["policy_iteration"], 2, "{v}");
+    }
+    assert!(out.join("Full/policy/search-probe.json").exists());
+    let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    // Full: representation, policy, evaluation; the others: policy and
+    // evaluation.
+    assert_eq!(stages.lines().count(), 3 + 2 + 2, "{stages}");
+    assert_eq!(stages.matches("DAgger, 2 rounds").count(), 3, "{stages}");
+    let again = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(again, rows);
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        stages
+    );
+    // A model that is not there is named before anything runs for it.
+    let mut missing = cfg.clone();
+    missing.variant[2].model = Some(dir.join("nowhere"));
+    let e = run(
+        &missing,
+        &out,
+        &RunOptions {
+            only: vec!["reused".into()],
+            ..Default::default()
+        },
+        &|| false,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("nowhere"), "{e}");
+}
