@@ -932,6 +932,150 @@ fn x_backward_phased(g: &Geometry, sh: Shifted, w: &[f32], dy: &[f32], dx: &mut 
         );
 }
 
+/// One phase of a strided layer's input gradient ([`x_backward_split`]):
+/// the input positions `(qy·s + a − pad, qx·s + b − pad)` for `qy` in `qy`
+/// and `qx` in `qx`, and the taps `(ky, kx) = (a + s·i, b + s·j)` that
+/// reach them, as `(i, j)`.
+struct Phase {
+    a: usize,
+    b: usize,
+    qy: Range<usize>,
+    qx: Range<usize>,
+    taps: Vec<(usize, usize)>,
+}
+
+impl Phase {
+    /// The `s²` phases of `g`'s input.
+    fn all(g: &Geometry) -> Vec<Phase> {
+        let s = g.stride;
+        // q with q·s + a − pad inside 0..n.
+        let along = |a: usize, n: usize| {
+            let lo = g.pad.saturating_sub(a).div_ceil(s);
+            let hi = (n + g.pad).saturating_sub(a).div_ceil(s);
+            lo..hi.max(lo)
+        };
+        let taps = |a: usize| (g.k.saturating_sub(a)).div_ceil(s);
+        let mut out = Vec::with_capacity(s * s);
+        for a in 0..s {
+            for b in 0..s {
+                out.push(Phase {
+                    a,
+                    b,
+                    qy: along(a, g.h),
+                    qx: along(b, g.w),
+                    taps: (0..taps(a))
+                        .flat_map(|i| (0..taps(b)).map(move |j| (i, j)))
+                        .collect(),
+                });
+            }
+        }
+        out
+    }
+}
+
+/// Whether a strided layer's input gradient takes [`x_backward_split`]:
+/// [`conv_direct::forward`] covers each phase (the layer's `Cin` a multiple
+/// of 4, each phase's rows of input positions a multiple of 16 wide).
+fn split_direct(g: &Geometry) -> bool {
+    !products_only()
+        && g.stride > 1
+        && g.k >= g.stride
+        && Phase::all(g)
+            .iter()
+            .all(|ph| conv_direct::covers(g.cin, ph.qx.len()))
+}
+
+/// [`x_backward`] for a strided layer as `s²` stride-1 convolutions of
+/// `dy`, one per phase of the input (every s-th row and column from `(a,
+/// b)`), each by the taps that reach that phase, flipped, with the
+/// channels swapped: [`conv_direct::forward`] adds every tap into
+/// registers and writes each input position's gradient once, where
+/// [`x_backward_phased`]'s products added `k²` transposed products into
+/// views of the whole split input.
+///
+/// Phase `(a, b)`'s gradient at `(qy, qx)` is `Σ_(i, j) Σ_co W[co, ci, a +
+/// s·i, b + s·j] · dy[co, qy − i, qx − j]` (zero outside `dy`); `dy` is
+/// read from a copy with `m = ⌈k/s⌉ − 1` rows and columns of zeros before
+/// it, so that tap `(i, j)` reads it from `(qy + m − i, qx + m − j)`.
+fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+    let (s, k) = (g.stride, g.k);
+    let m = k.div_ceil(s) - 1;
+    let phases = Phase::all(g);
+    let qy_end = phases.iter().map(|p| p.qy.end).max().unwrap_or(0);
+    let qx_end = phases.iter().map(|p| p.qx.end).max().unwrap_or(0);
+    // Wide and high enough that no read leaves its row or its channel.
+    let wq = (qx_end.max(g.wo) + m).max(1);
+    let plane = (qy_end.max(g.ho) + m) * wq;
+    let packed: Vec<Vec<f32>> = phases
+        .iter()
+        .map(|ph| {
+            conv_direct::pack(g.cin, g.cout, ph.taps.len(), |t, ci, co| {
+                let (i, j) = ph.taps[t];
+                w[((co * g.cin + ci) * k + ph.a + s * i) * k + ph.b + s * j]
+            })
+        })
+        .collect();
+    let offsets: Vec<Vec<usize>> = phases
+        .iter()
+        .map(|ph| {
+            ph.taps
+                .iter()
+                .map(|&(i, j)| (ph.qy.start + m - i) * wq + ph.qx.start + m - j)
+                .collect()
+        })
+        .collect();
+    let largest = phases
+        .iter()
+        .map(|p| p.qy.len() * p.qx.len())
+        .max()
+        .unwrap_or(0);
+    let zero = vec![0.0f32; g.cin];
+    let (outs, image) = (g.outs(), g.h * g.w);
+    dx.par_chunks_mut(g.cin * image)
+        .zip(dy.par_chunks(g.cout * outs))
+        .with_min_len(per_task(g.batch))
+        .for_each_init(
+            // The margins are zeros from here on: only `dy`'s positions are
+            // written, sample after sample.
+            || (vec![0.0f32; g.cout * plane], vec![0.0f32; g.cin * largest]),
+            |(dyp, part), (dxs, dys)| {
+                for (co, src) in dys.chunks_exact(outs).enumerate() {
+                    for (oy, row) in src.chunks_exact(g.wo).enumerate() {
+                        dyp[co * plane + (oy + m) * wq + m..][..g.wo].copy_from_slice(row);
+                    }
+                }
+                for ((ph, packed), offsets) in phases.iter().zip(&packed).zip(&offsets) {
+                    let (ny, nx) = (ph.qy.len(), ph.qx.len());
+                    if ny == 0 || nx == 0 {
+                        continue;
+                    }
+                    let views = conv_direct::Views {
+                        plane,
+                        wq,
+                        taps: offsets,
+                    };
+                    let part = &mut part[..g.cin * ny * nx];
+                    conv_direct::forward(dyp, views, g.cout, packed, &zero, ny, nx, part);
+                    // Into every s-th row and column of dx from the phase's
+                    // first input position.
+                    let (iy0, ix0) = (
+                        ph.qy.start * s + ph.a - g.pad,
+                        ph.qx.start * s + ph.b - g.pad,
+                    );
+                    for (ci, src) in part.chunks_exact(ny * nx).enumerate() {
+                        let dst = &mut dxs[ci * image..][..image];
+                        for (r, row) in src.chunks_exact(nx).enumerate() {
+                            let to = &mut dst[(iy0 + r * s) * g.w + ix0..];
+                            for (d, &v) in to.iter_mut().step_by(s).zip(row) {
+                                *d = v;
+                            }
+                        }
+                    }
+                }
+            },
+        );
+}
+
 /// [`wb_backward`] for a [`Shifted`] convolution.
 fn wb_backward_shifted(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let (kk, outs) = (g.k * g.k, g.outs());
@@ -1046,6 +1190,7 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) 
 fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
     match Shifted::of(g) {
         Some(_) if g.stride == 1 && g.pad < g.k => x_backward_shifted(g, w, dy, dx),
+        Some(_) if g.stride > 1 && split_direct(g) => x_backward_split(g, w, dy, dx),
         Some(sh) if g.stride > 1 => x_backward_phased(g, sh, w, dy, dx),
         _ => x_backward_banded(g, w, dy, dx),
     }
@@ -1578,7 +1723,7 @@ mod tests {
     #[test]
     fn shifted_paths_match_im2col() {
         assert!(!products_only(), "LEARNER_CONV=products is set");
-        let (mut direct_passes, mut weight_grads) = (0, 0);
+        let (mut direct_passes, mut weight_grads, mut splits) = (0, 0, 0);
         for (i, &(b, cin, cout, side, k, s, p)) in [
             (2, 4, 3, 7, 3, 1, 1),
             (1, 2, 3, 5, 3, 1, 0),
@@ -1599,6 +1744,12 @@ mod tests {
             (1, 8, 8, 13, 3, 1, 1),
             // And strided on the split input: 16×16 out of 32×32, k 5.
             (1, 8, 12, 32, 5, 2, 2),
+            // The strided input gradient by phases (x_backward_split):
+            // 29 rows (phases of 14 and 15, or 15 and 14) × 32 columns
+            // (16 per phase), k 3 and 5; and k 4, the up-convolutions'.
+            (1, 8, 6, 29, 3, 2, 1),
+            (2, 16, 5, 32, 4, 2, 1),
+            (1, 12, 3, 29, 5, 2, 2),
         ]
         .iter()
         .enumerate()
@@ -1635,6 +1786,13 @@ mod tests {
             }
             x_backward_banded(&g, &w, &dy, &mut dx2);
             near(&dx1, &dx2, "dx");
+            if s > 1 && split_direct(&g) {
+                // NaN where nothing is written: every position must be.
+                let mut dx3 = vec![f32::NAN; x.len()];
+                x_backward_split(&g, &w, &dy, &mut dx3);
+                near(&dx3, &dx2, "dx by phases");
+                splits += 1;
+            }
             let ((dw1, db1), (dw2, db2)) = (
                 wb_backward_shifted(&g, sh, &x, &dy),
                 wb_backward_banded(&g, &x, &dy),
@@ -1649,6 +1807,9 @@ mod tests {
         // The weight-gradient kernel runs on those three and the 8-wide
         // strided case (12×15, k 5); the three are routed to it.
         assert_eq!(weight_grads, if conv_direct::cpu() { 3 } else { 0 });
+        // The strided input gradient by phases: the 32-wide strided cases
+        // with input channels of 4.
+        assert_eq!(splits, if conv_direct::cpu() { 4 } else { 0 });
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
