@@ -11,7 +11,7 @@
 //! a positive slope both have the same sign, and the output is the tensor
 //! the next layer keeps for its own backward pass anyway.
 
-use super::conv_train::{f32s, flex_tensor};
+use super::conv_train::{f32s, flex_tensor, written};
 use burn::backend::autodiff::{
     Autodiff,
     checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
@@ -21,6 +21,7 @@ use burn::backend::autodiff::{
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Elementwise leaky ReLU, differentiable.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
@@ -70,18 +71,22 @@ impl ActTrain for Flex {
             return composed::<Flex>(x, slope);
         };
         let (src, a) = (xc.storage::<f32>(), slope as f32);
-        let mut y = vec![0.0f32; src.len()];
-        y.par_chunks_mut(CHUNK)
-            .zip(src.par_chunks(CHUNK))
-            .for_each(move |(d, s)| {
-                // A select, not a branch, and `a` a local of the closure: a
-                // branch per value (random signs) or `a` read through a
-                // reference kept this loop scalar (perf annotate). Not
-                // `max`/`min`, which would turn NaN into 0.
-                for (d, &v) in d.iter_mut().zip(s) {
-                    *d = v * if v > 0.0 { 1.0 } else { a };
-                }
-            });
+        let fill = |y: &mut [MaybeUninit<f32>]| {
+            y.par_chunks_mut(CHUNK)
+                .zip(src.par_chunks(CHUNK))
+                .for_each(move |(d, s)| {
+                    // A select, not a branch, and `a` a local of the closure:
+                    // a branch per value (random signs) or `a` read through a
+                    // reference kept this loop scalar (perf annotate). Not
+                    // `max`/`min`, which would turn NaN into 0.
+                    for (d, &v) in d.iter_mut().zip(s) {
+                        d.write(v * if v > 0.0 { 1.0 } else { a });
+                    }
+                })
+        };
+        // SAFETY: the chunks of `y` and `src` pair up whole, and every
+        // value of each is written.
+        let y = unsafe { written(src.len(), fill) };
         flex_tensor(y, x.shape().to_vec())
     }
 
@@ -90,14 +95,23 @@ impl ActTrain for Flex {
             return composed_backward::<Flex>(y, grad, slope);
         };
         let (ys, gs, a) = (yc.storage::<f32>(), gc.storage::<f32>(), slope as f32);
-        let mut dx = vec![0.0f32; gs.len()];
-        dx.par_chunks_mut(CHUNK)
-            .zip(ys.par_chunks(CHUNK).zip(gs.par_chunks(CHUNK)))
-            .for_each(move |(d, (y, g))| {
-                for ((d, &y), &g) in d.iter_mut().zip(y).zip(g) {
-                    *d = g * if y > 0.0 { 1.0 } else { a };
-                }
-            });
+        let fill = |dx: &mut [MaybeUninit<f32>]| {
+            dx.par_chunks_mut(CHUNK)
+                .zip(ys.par_chunks(CHUNK).zip(gs.par_chunks(CHUNK)))
+                .for_each(move |(d, (y, g))| {
+                    for ((d, &y), &g) in d.iter_mut().zip(y).zip(g) {
+                        d.write(g * if y > 0.0 { 1.0 } else { a });
+                    }
+                })
+        };
+        assert_eq!(
+            ys.len(),
+            gs.len(),
+            "leaky_train_backward: the output and its gradient differ in size"
+        );
+        // SAFETY: the chunks of `dx`, `ys` and `gs` pair up whole (the same
+        // length, checked), and every value of each is written.
+        let dx = unsafe { written(gs.len(), fill) };
         flex_tensor(dx, grad.shape().to_vec())
     }
 }

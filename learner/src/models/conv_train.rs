@@ -53,6 +53,7 @@ use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::prelude::*;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::ops::Range;
 
 use super::conv_direct;
@@ -274,6 +275,34 @@ fn products_only() -> bool {
 
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
 impl ConvTrain for burn::backend::Cube {}
+
+/// `v` zeroed, as the initialised values it then is. Each pass's output is
+/// allocated without zeroing and every task zeroes its own part just before
+/// it writes it, in its cache: `vec![0.0; n]` zeroed the whole output on
+/// the calling thread first, about 2 % of a training step in a profile
+/// (burn's tensors own their buffers, so none is reused).
+pub(crate) fn zeroed(v: &mut [MaybeUninit<f32>]) -> &mut [f32] {
+    for x in v.iter_mut() {
+        x.write(0.0);
+    }
+    // SAFETY: every value was just written, and `MaybeUninit<f32>` has
+    // `f32`'s layout.
+    unsafe { &mut *(v as *mut [MaybeUninit<f32>] as *mut [f32]) }
+}
+
+/// A vector of `n` values written by `fill`, which is given them
+/// uninitialised.
+///
+/// # Safety
+/// `fill` writes every one of them (each of this module's passes does: its
+/// tasks [`zeroed`] their part first).
+pub(crate) unsafe fn written(n: usize, fill: impl FnOnce(&mut [MaybeUninit<f32>])) -> Vec<f32> {
+    let mut v = Vec::with_capacity(n);
+    fill(&mut v.spare_capacity_mut()[..n]);
+    // SAFETY: the caller's contract: `fill` wrote all `n`.
+    unsafe { v.set_len(n) };
+    v
+}
 
 /// The shapes of one convolution.
 #[derive(Clone, Copy, Debug)]
@@ -726,7 +755,7 @@ fn forward_shifted(
     x: &[f32],
     kernel: Kernel<'_>,
     b: &[f32],
-    y: &mut [f32],
+    y: &mut [MaybeUninit<f32>],
 ) {
     let outs = g.outs();
     let kk = g.k * g.k;
@@ -744,6 +773,7 @@ fn forward_shifted(
                 (vec![0.0f32; sh.len(g)], vec![0.0f32; n])
             },
             |(xp, yp), (ys, xs)| {
+                let ys = zeroed(ys);
                 sh.pad(g, xs, xp);
                 if let Some(packed) = &packed {
                     conv_direct::forward(xp, views, g.cin, packed, b, g.ho, g.wo, ys);
@@ -800,7 +830,14 @@ fn stack_band(g: &Geometry, sh: Shifted, xp: &[f32], oy: &Range<usize>, col: &mu
 
 /// [`forward`] for a [`Shifted::stacked`] layer: per band, one product of
 /// the `[Cout, Cin·k·k]` weights with the stacked tile.
-fn forward_stacked(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+fn forward_stacked(
+    g: &Geometry,
+    sh: Shifted,
+    x: &[f32],
+    w: &[f32],
+    b: &[f32],
+    y: &mut [MaybeUninit<f32>],
+) {
     let (taps, rows) = (g.taps(), stacked_rows(g, sh));
     let wm = MatRef::from_row_major_slice(w, g.cout, taps);
     y.par_chunks_mut(g.cout * g.outs())
@@ -816,6 +853,7 @@ fn forward_stacked(g: &Geometry, sh: Shifted, x: &[f32], w: &[f32], b: &[f32], y
                 )
             },
             |(xp, col, yb), (ys, xs)| {
+                let ys = zeroed(ys);
                 sh.pad(g, xs, xp);
                 for i in 0..g.ho.div_ceil(rows) {
                     let oy = band(g, rows, i);
@@ -894,7 +932,7 @@ fn spread(g: &Geometry, sh: Shifted, dy: &[f32], dyp: &mut [f32]) {
 /// products (or [`conv_direct`]'s kernel) only read strided views; the
 /// gradient is written once, not accumulated tap by tap as strided layers
 /// do into writable views ([`x_backward_phased`]).
-fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) {
     let k = g.k;
     let gt = Geometry::new(
         &[g.batch, g.cout, g.ho, g.wo],
@@ -912,7 +950,13 @@ fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
 /// transposed product `W_tᵀ·dy` added into the tap's view of the split
 /// input's gradient, which is then gathered back without its padding. (The
 /// discarded output positions of `dy` are zeros and add nothing.)
-fn x_backward_phased(g: &Geometry, sh: Shifted, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+fn x_backward_phased(
+    g: &Geometry,
+    sh: Shifted,
+    w: &[f32],
+    dy: &[f32],
+    dx: &mut [MaybeUninit<f32>],
+) {
     let wt = taps_major(g, w);
     let outs = g.outs();
     dx.par_chunks_mut(g.cin * g.h * g.w)
@@ -921,6 +965,7 @@ fn x_backward_phased(g: &Geometry, sh: Shifted, w: &[f32], dy: &[f32], dx: &mut 
         .for_each_init(
             || (vec![0.0f32; sh.len(g)], vec![0.0f32; g.cout * sh.n]),
             |(xp, dyp), (dxs, dys)| {
+                let dxs = zeroed(dxs);
                 spread(g, sh, dys, dyp);
                 xp.fill(0.0);
                 let dym = MatRef::from_row_major_slice(dyp, g.cout, sh.n);
@@ -997,7 +1042,7 @@ fn split_direct(g: &Geometry) -> bool {
 /// s·i, b + s·j] · dy[co, qy − i, qx − j]` (zero outside `dy`); `dy` is
 /// read from a copy with `m = ⌈k/s⌉ − 1` rows and columns of zeros before
 /// it, so that tap `(i, j)` reads it from `(qy + m − i, qx + m − j)`.
-fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) {
     let (s, k) = (g.stride, g.k);
     let m = k.div_ceil(s) - 1;
     let phases = Phase::all(g);
@@ -1039,6 +1084,7 @@ fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
             // written, sample after sample.
             || (vec![0.0f32; g.cout * plane], vec![0.0f32; g.cin * largest]),
             |(dyp, part), (dxs, dys)| {
+                let dxs = zeroed(dxs);
                 for (co, src) in dys.chunks_exact(outs).enumerate() {
                     for (oy, row) in src.chunks_exact(g.wo).enumerate() {
                         dyp[co * plane + (oy + m) * wq + m..][..g.wo].copy_from_slice(row);
@@ -1141,7 +1187,7 @@ fn wb_backward_direct(g: &Geometry, sh: Shifted, x: &[f32], dy: &[f32]) -> (Vec<
 }
 
 /// The forward pass on contiguous f32 arrays.
-fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f32>]) {
     // A stacked layer the kernel covers reads its views tap by tap too.
     let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct(g)));
     if let Some(sh) = by_taps {
@@ -1154,7 +1200,7 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
 }
 
 /// [`forward`] through im2col in row bands (or none, for a 1×1).
-fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) {
+fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f32>]) {
     let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
     let wm = MatRef::from_row_major_slice(w, g.cout, taps);
     y.par_chunks_mut(g.cout * outs)
@@ -1163,6 +1209,7 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) 
         .for_each_init(
             || vec![0.0f32; taps * rows * g.wo],
             |col, (ys, xs)| {
+                let ys = zeroed(ys);
                 let mut ym = MatMut::from_row_major_slice_mut(ys, g.cout, outs);
                 if g.is_pointwise() {
                     gemm(ym, wm, MatRef::from_row_major_slice(xs, taps, outs), false);
@@ -1187,7 +1234,7 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32]) 
 }
 
 /// The input gradient on contiguous f32 arrays.
-fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) {
     match Shifted::of(g) {
         Some(_) if g.stride == 1 && g.pad < g.k => x_backward_shifted(g, w, dy, dx),
         Some(_) if g.stride > 1 && split_direct(g) => x_backward_split(g, w, dy, dx),
@@ -1197,7 +1244,7 @@ fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
 }
 
 /// [`x_backward`] through col2im in row bands (or none, for a 1×1).
-fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
+fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) {
     let (taps, outs, rows) = (g.taps(), g.outs(), band_rows(g));
     let wt = MatRef::from_row_major_slice(w, g.cout, taps).transpose();
     dx.par_chunks_mut(g.cin * g.h * g.w)
@@ -1206,13 +1253,13 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [f32]) {
         .for_each_init(
             || vec![0.0f32; taps * rows * g.wo],
             |col, (dxs, dys)| {
+                let dxs = zeroed(dxs);
                 let dym = MatRef::from_row_major_slice(dys, g.cout, outs);
                 if g.is_pointwise() {
                     let dxm = MatMut::from_row_major_slice_mut(dxs, taps, outs);
                     gemm(dxm, wt, dym, false);
                     return;
                 }
-                dxs.fill(0.0);
                 for i in 0..g.ho.div_ceil(rows) {
                     let oy = band(g, rows, i);
                     let n = oy.len() * g.wo;
@@ -1298,14 +1345,13 @@ impl ConvTrain for Flex {
             return Flex::conv2d(x, weight, Some(bias), options(stride, pad));
         };
         let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
-        let mut y = vec![0.0f32; g.batch * g.cout * g.outs()];
-        forward(
-            &g,
+        let (xs, ws, bs) = (
             xc.storage::<f32>(),
             wc.storage::<f32>(),
             bc.storage::<f32>(),
-            &mut y,
         );
+        // SAFETY: `forward` writes every value.
+        let y = unsafe { written(g.batch * g.cout * g.outs(), |y| forward(&g, xs, ws, bs, y)) };
         flex_tensor(y, vec![g.batch, g.cout, g.ho, g.wo])
     }
 
@@ -1320,8 +1366,13 @@ impl ConvTrain for Flex {
             return Flex::conv2d_x_backward(x, weight, grad, options(stride, pad));
         };
         let g = Geometry::new(&x.shape(), &weight.shape(), stride, pad);
-        let mut dx = vec![0.0f32; g.batch * g.cin * g.h * g.w];
-        x_backward(&g, wc.storage::<f32>(), dyc.storage::<f32>(), &mut dx);
+        let (ws, dys) = (wc.storage::<f32>(), dyc.storage::<f32>());
+        // SAFETY: `x_backward` writes every value.
+        let dx = unsafe {
+            written(g.batch * g.cin * g.h * g.w, |dx| {
+                x_backward(&g, ws, dys, dx)
+            })
+        };
         flex_tensor(dx, vec![g.batch, g.cin, g.h, g.w])
     }
 
@@ -1354,8 +1405,9 @@ impl ConvTrain for Flex {
             return Flex::conv_transpose2d(x, weight, Some(bias), transposed_options(stride, pad));
         };
         let g = Geometry::transposed(&x.shape(), &weight.shape(), stride, pad);
-        let mut y = vec![0.0f32; g.batch * g.cin * g.h * g.w];
-        x_backward(&g, wc.storage::<f32>(), xc.storage::<f32>(), &mut y);
+        let (ws, xs) = (wc.storage::<f32>(), xc.storage::<f32>());
+        // SAFETY: `x_backward` writes every value.
+        let mut y = unsafe { written(g.batch * g.cin * g.h * g.w, |y| x_backward(&g, ws, xs, y)) };
         let plane = g.h * g.w;
         let b = bc.storage::<f32>();
         y.par_chunks_mut(g.cin * plane).for_each(|sample| {
@@ -1381,15 +1433,14 @@ impl ConvTrain for Flex {
             );
         };
         let g = Geometry::transposed(&x.shape(), &weight.shape(), stride, pad);
-        let mut dx = vec![0.0f32; g.batch * g.cout * g.outs()];
         let zero = vec![0.0f32; g.cout];
-        forward(
-            &g,
-            dyc.storage::<f32>(),
-            wc.storage::<f32>(),
-            &zero,
-            &mut dx,
-        );
+        let (dys, ws) = (dyc.storage::<f32>(), wc.storage::<f32>());
+        // SAFETY: `forward` writes every value.
+        let dx = unsafe {
+            written(g.batch * g.cout * g.outs(), |dx| {
+                forward(&g, dys, ws, &zero, dx)
+            })
+        };
         flex_tensor(dx, vec![g.batch, g.cout, g.ho, g.wo])
     }
 
@@ -1711,6 +1762,12 @@ mod tests {
     }
 
     /// `a` against `b`, value by value, within 1e-4.
+    /// One pass's output of `n` values, as the layers allocate it.
+    fn pass(n: usize, f: impl FnOnce(&mut [MaybeUninit<f32>])) -> Vec<f32> {
+        // SAFETY: each of the passes tested writes every value.
+        unsafe { written(n, f) }
+    }
+
     fn near(a: &[f32], b: &[f32], label: &str) {
         assert_eq!(a.len(), b.len(), "{label}: sizes");
         for (i, (u, v)) in a.iter().zip(b).enumerate() {
@@ -1774,22 +1831,23 @@ mod tests {
             let what =
                 format!("b {b} cin {cin} cout {cout} {side}×{width} k {k} stride {s} pad {p}");
             let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
-            let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
-            forward_shifted(&g, sh, &x, Kernel::Own(&taps_major(&g, &w)), &bias, &mut y1);
-            forward_banded(&g, &x, &w, &bias, &mut y2);
+            let wt = taps_major(&g, &w);
+            let y1 = pass(dy.len(), |y| {
+                forward_shifted(&g, sh, &x, Kernel::Own(&wt), &bias, y)
+            });
+            let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &w, &bias, y));
             near(&y1, &y2, "y");
-            let (mut dx1, mut dx2) = (vec![0.0; x.len()], vec![0.0; x.len()]);
-            if s == 1 {
-                x_backward_shifted(&g, &w, &dy, &mut dx1);
-            } else {
-                x_backward_phased(&g, sh, &w, &dy, &mut dx1);
-            }
-            x_backward_banded(&g, &w, &dy, &mut dx2);
+            let dx1 = pass(x.len(), |dx| {
+                if s == 1 {
+                    x_backward_shifted(&g, &w, &dy, dx);
+                } else {
+                    x_backward_phased(&g, sh, &w, &dy, dx);
+                }
+            });
+            let dx2 = pass(x.len(), |dx| x_backward_banded(&g, &w, &dy, dx));
             near(&dx1, &dx2, "dx");
             if s > 1 && split_direct(&g) {
-                // NaN where nothing is written: every position must be.
-                let mut dx3 = vec![f32::NAN; x.len()];
-                x_backward_split(&g, &w, &dy, &mut dx3);
+                let dx3 = pass(x.len(), |dx| x_backward_split(&g, &w, &dy, dx));
                 near(&dx3, &dx2, "dx by phases");
                 splits += 1;
             }
@@ -1872,9 +1930,8 @@ mod tests {
             );
             let dy = uniform(&mut rng, b * cout * g.outs());
             let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
-            let (mut y1, mut y2) = (vec![0.0; dy.len()], vec![0.0; dy.len()]);
-            forward_stacked(&g, sh, &x, &wt, &bias, &mut y1);
-            forward_banded(&g, &x, &wt, &bias, &mut y2);
+            let y1 = pass(dy.len(), |y| forward_stacked(&g, sh, &x, &wt, &bias, y));
+            let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &wt, &bias, y));
             near(&y1, &y2, "y");
             let ((dw1, db1), (dw2, db2)) = (
                 wb_backward_stacked(&g, sh, &x, &dy),
