@@ -6,7 +6,8 @@
 //! three layers, the first layers of both):
 //!
 //! - [`forward`], the forward pass (and the stride-1 input gradient, itself
-//!   such a convolution). Through faer a layer was k² products with an
+//!   such a convolution, and each phase of a strided layer's input
+//!   gradient, `conv_train::x_backward_split`). Through faer a layer was k² products with an
 //!   inner dimension of `Cin` (16–64), each reading and adding into the
 //!   whole output: the 16-channel layers ran at about 27 GFLOP/s where wider
 //!   products reach 50 (docs/performance.md). Here each block of 6 (or 4)
