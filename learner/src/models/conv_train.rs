@@ -722,24 +722,44 @@ fn tap<'a>(g: &Geometry, wt: &'a [f32], t: usize) -> MatRef<'a, f32> {
     MatRef::from_row_major_slice(&wt[t * g.cout * g.cin..][..g.cout * g.cin], g.cout, g.cin)
 }
 
-/// Which kernel [`forward_shifted`] applies.
+/// Which kernel [`forward_shifted`] applies, given by a layer's own
+/// `[Cout, Cin, k, k]` weights (packed for [`conv_direct`] straight from
+/// them; put in [`taps_major`]'s layout only for faer's products).
 #[derive(Clone, Copy)]
 enum Kernel<'a> {
-    /// The layer's own, in [`taps_major`]'s layout.
+    /// The layer's own.
     Own(&'a [f32]),
     /// The kernel flipped with its input and output channels swapped, of
-    /// the layer whose [`taps_major`] layout this is (the stride-1 input
-    /// gradient, [`x_backward_shifted`]): tap `t` is that layer's tap `k² −
-    /// 1 − t`, transposed.
+    /// the layer whose weights these are (the stride-1 input gradient,
+    /// [`x_backward_shifted`]): tap `t` is that layer's tap `k² − 1 − t`,
+    /// transposed.
     Flipped(&'a [f32]),
 }
 
 impl Kernel<'_> {
-    /// Tap `t`'s `[Cout, Cin]` matrix for the convolution `g` applies.
-    fn tap(&self, g: &Geometry, t: usize) -> MatRef<'_, f32> {
+    /// The weights as given.
+    fn weights(&self) -> &[f32] {
         match *self {
-            Kernel::Own(wt) => tap(g, wt, t),
-            Kernel::Flipped(wt) => {
+            Kernel::Own(w) | Kernel::Flipped(w) => w,
+        }
+    }
+
+    /// Tap `t`'s weight from input channel `ci` to output channel `co` of
+    /// the convolution `g` applies.
+    fn at(&self, g: &Geometry, t: usize, co: usize, ci: usize) -> f32 {
+        let kk = g.k * g.k;
+        match *self {
+            Kernel::Own(w) => w[(co * g.cin + ci) * kk + t],
+            Kernel::Flipped(w) => w[(ci * g.cout + co) * kk + kk - 1 - t],
+        }
+    }
+
+    /// Tap `t`'s `[Cout, Cin]` matrix for the convolution `g` applies, from
+    /// `wt`, [`taps_major`] of [`Kernel::weights`].
+    fn tap<'b>(&self, g: &Geometry, wt: &'b [f32], t: usize) -> MatRef<'b, f32> {
+        match *self {
+            Kernel::Own(_) => tap(g, wt, t),
+            Kernel::Flipped(_) => {
                 let n = g.cout * g.cin;
                 let at = (g.k * g.k - 1 - t) * n;
                 MatRef::from_column_major_slice(&wt[at..][..n], g.cout, g.cin)
@@ -760,8 +780,11 @@ fn forward_shifted(
     let outs = g.outs();
     let kk = g.k * g.k;
     let direct = direct(g);
-    let packed = direct
-        .then(|| conv_direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.tap(g, t)[(co, ci)]));
+    let packed =
+        direct.then(|| conv_direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.at(g, t, co, ci)));
+    // (Both layouts hold Cout·Cin per tap, so the flipped layer's is built
+    // with `g`'s shape too.)
+    let wt = (!direct).then(|| taps_major(g, kernel.weights()));
     let offsets = sh.tap_offsets(g);
     let views = sh.views(&offsets);
     y.par_chunks_mut(g.cout * outs)
@@ -779,9 +802,10 @@ fn forward_shifted(
                     conv_direct::forward(xp, views, g.cin, packed, b, g.ho, g.wo, ys);
                     return;
                 }
+                let wt = wt.as_deref().expect("the products' taps-major weights");
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
                 for t in 0..g.k * g.k {
-                    gemm(ypm.as_mut(), kernel.tap(g, t), sh.view(g, xp, t), t > 0);
+                    gemm(ypm.as_mut(), kernel.tap(g, wt, t), sh.view(g, xp, t), t > 0);
                 }
                 unspread_rows(g, sh, yp, 0..g.ho, b, ys);
             },
@@ -941,9 +965,8 @@ fn x_backward_shifted(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit
         k - 1 - g.pad,
     );
     debug_assert_eq!((gt.ho, gt.wo), (g.h, g.w));
-    let wt = taps_major(g, w);
     let sh = Shifted::of(&gt).expect("stride 1");
-    forward_shifted(&gt, sh, dy, Kernel::Flipped(&wt), &vec![0.0; g.cin], dx);
+    forward_shifted(&gt, sh, dy, Kernel::Flipped(w), &vec![0.0; g.cin], dx);
 }
 
 /// [`x_backward`] for a strided [`Shifted`] convolution: tap by tap, the
@@ -1191,7 +1214,7 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f
     // A stacked layer the kernel covers reads its views tap by tap too.
     let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct(g)));
     if let Some(sh) = by_taps {
-        forward_shifted(g, sh, x, Kernel::Own(&taps_major(g, w)), b, y)
+        forward_shifted(g, sh, x, Kernel::Own(w), b, y)
     } else if let Some(sh) = Shifted::stacked(g) {
         forward_stacked(g, sh, x, w, b, y)
     } else {
@@ -1831,9 +1854,8 @@ mod tests {
             let what =
                 format!("b {b} cin {cin} cout {cout} {side}×{width} k {k} stride {s} pad {p}");
             let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
-            let wt = taps_major(&g, &w);
             let y1 = pass(dy.len(), |y| {
-                forward_shifted(&g, sh, &x, Kernel::Own(&wt), &bias, y)
+                forward_shifted(&g, sh, &x, Kernel::Own(&w), &bias, y)
             });
             let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &w, &bias, y));
             near(&y1, &y2, "y");
