@@ -269,6 +269,20 @@ pub fn run(
                  variant's",
                 p.display()
             );
+            // Refused now rather than when the variant's turn comes, hours in.
+            let probe = d.search_teacher.as_ref().and_then(|t| t.probe.as_ref());
+            ensure!(
+                probe.is_some() || cfg.variant.iter().all(|v| v.representation.is_none()),
+                "policy.distill {}: no [search_teacher.probe]: every variant's teacher would be \
+                 told the hole by the truth rather than by its own z",
+                p.display()
+            );
+            ensure!(
+                !d.dagger.plant_probes || cfg.variant.iter().all(|v| v.representation.is_some()),
+                "policy.distill {}: dagger.plant_probes needs each teacher's probe of z, which \
+                 the ground-truth variant has not",
+                p.display()
+            );
             Route::Distill(Box::new(d))
         }
         None => Route::Train(Box::new(match &cfg.policy.config {
@@ -580,6 +594,12 @@ fn representation(
             m.join("model.json").exists(),
             "variant {}: model {}: no model.json there (an exported model directory, a run's \
              model/)",
+            v.name,
+            m.display()
+        );
+        eprintln!(
+            "experiment: {}: the representation in {} (trained apart: its epochs and dataset are \
+             not checked against the experiment's)",
             v.name,
             m.display()
         );

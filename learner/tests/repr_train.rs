@@ -843,18 +843,43 @@ fn an_experiment_distils_from_each_variants_own_probe() {
         std::fs::read_to_string(out.join("stages.log")).unwrap(),
         stages
     );
+    // The last round is what is evaluated, whatever validated best: a
+    // checkpoint whose best validation names round 1 is evaluated again at
+    // round 2.
+    let ckpt = out.join("reused/policy/checkpoint.json");
+    let mut c = learner::rl::run::read_checkpoint(&ckpt).unwrap();
+    c.best_validated.as_mut().unwrap().validation.iteration = 1;
+    std::fs::write(&ckpt, serde_json::to_vec(&c).unwrap()).unwrap();
+    std::fs::remove_file(out.join("reused/eval-square.json")).unwrap();
+    let only_reused = RunOptions {
+        only: vec!["reused".into()],
+        ..Default::default()
+    };
+    run(&cfg, &out, &only_reused, &|| false).unwrap();
+    let e: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("reused/eval-square.json")).unwrap())
+            .unwrap();
+    assert_eq!(e["policy_iteration"], 2);
+    // A distillation without a probe, and one that plants the probes while
+    // a variant observes the ground truth, are refused before anything runs.
+    let text = std::fs::read_to_string(&distill).unwrap();
+    let unprobed = "[search_teacher]\n\n".to_string() + &text[text.find("[student]").unwrap()..];
+    let planting = text.replacen("[dagger]\n", "[dagger]\nplant_probes = true\n", 1);
+    for (edited, why) in [
+        (unprobed, "no [search_teacher.probe]"),
+        (planting, "plant_probes"),
+    ] {
+        let bad = dir.join("bad-distill.toml");
+        std::fs::write(&bad, edited).unwrap();
+        let mut c = cfg.clone();
+        c.policy.distill = Some(bad);
+        let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
+        assert!(e.to_string().contains(why), "{e}");
+        assert!(!dir.join("refused/Full").exists(), "nothing ran");
+    }
     // A model that is not there is named before anything runs for it.
     let mut missing = cfg.clone();
     missing.variant[2].model = Some(dir.join("nowhere"));
-    let e = run(
-        &missing,
-        &out,
-        &RunOptions {
-            only: vec!["reused".into()],
-            ..Default::default()
-        },
-        &|| false,
-    )
-    .unwrap_err();
+    let e = run(&missing, &out, &only_reused, &|| false).unwrap_err();
     assert!(e.to_string().contains("nowhere"), "{e}");
 }
