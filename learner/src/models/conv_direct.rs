@@ -21,6 +21,8 @@
 //! says where each tap's view starts; other geometries and other CPUs keep
 //! `conv_train`'s products.
 
+use std::mem::MaybeUninit;
+
 /// Output channels per register block.
 const CO: usize = 4;
 /// Output positions per register block (two 8-wide vectors).
@@ -104,7 +106,8 @@ pub(crate) struct Views<'a> {
 }
 
 /// One sample: `y [Cout, Ho·Wo] = Σ_t W_t · view_t(xp) + b`, with `packed`
-/// from [`pack`].
+/// from [`pack`]. Every value of `y` is written (its blocks cover all
+/// channels, its rows every position), so `y` may come uninitialised.
 ///
 /// # Panics
 /// If a view reaches past `xp`, the buffers do not match the shapes, or
@@ -118,7 +121,7 @@ pub(crate) fn forward(
     b: &[f32],
     ho: usize,
     wo: usize,
-    y: &mut [f32],
+    y: &mut [MaybeUninit<f32>],
 ) {
     let cout = b.len();
     assert!(cin > 0 && ho > 0 && wo > 0, "conv_direct: an empty layer");
@@ -232,7 +235,7 @@ fn last_read(views: Views<'_>, cin: usize, ho: usize, wo: usize) -> usize {
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::{CO, GX, PX, Views, WIDE};
+    use super::{CO, GX, MaybeUninit, PX, Views, WIDE};
     use std::arch::x86_64::*;
 
     /// [`super::forward`]'s loops.
@@ -251,7 +254,7 @@ mod avx {
         b: &[f32],
         ho: usize,
         wo: usize,
-        y: &mut [f32],
+        y: &mut [MaybeUninit<f32>],
     ) {
         let (kk, outs) = (views.taps.len(), ho * wo);
         for (first, c) in super::blocks(b.len()) {
@@ -290,7 +293,7 @@ mod avx {
         w: &[f32],
         bias: &[f32],
         at: usize,
-        y: &mut [f32],
+        y: &mut [MaybeUninit<f32>],
         outs: usize,
         to: usize,
     ) {
@@ -315,11 +318,12 @@ mod avx {
         }
         for (j, a) in acc.iter().enumerate() {
             let bj = _mm256_set1_ps(bias[j]);
-            let out = &mut y[to + j * outs..][..PX];
-            // SAFETY: `out` is 16 values long (a checked slice).
+            let out = y[to + j * outs..][..PX].as_mut_ptr().cast::<f32>();
+            // SAFETY: `out` points at 16 values (a checked slice), of
+            // `MaybeUninit<f32>`'s layout, which is `f32`'s.
             unsafe {
-                _mm256_storeu_ps(out.as_mut_ptr(), _mm256_add_ps(a[0], bj));
-                _mm256_storeu_ps(out.as_mut_ptr().add(8), _mm256_add_ps(a[1], bj));
+                _mm256_storeu_ps(out, _mm256_add_ps(a[0], bj));
+                _mm256_storeu_ps(out.add(8), _mm256_add_ps(a[1], bj));
             }
         }
     }
@@ -486,8 +490,12 @@ mod tests {
             let b: Vec<f32> = (0..cout).map(|_| rng.f32()).collect();
             let wat = |co: usize, ci: usize, t: usize| w[(co * cin + ci) * kk + t];
             let packed = pack(cout, cin, kk, |t, co, ci| wat(co, ci, t));
-            let mut y = vec![0.0; cout * outs];
-            forward(&xp, views, cin, &packed, &b, ho, wo, &mut y);
+            // SAFETY: `forward` writes every value.
+            let y = unsafe {
+                crate::models::conv_train::written(cout * outs, |y| {
+                    forward(&xp, views, cin, &packed, &b, ho, wo, y)
+                })
+            };
             let dy: Vec<f32> = (0..cout * outs).map(|_| rng.f32() - 0.5).collect();
             let mut dw = vec![0.0; cout * cin * kk];
             weight_grad(&xp, views, cin, &dy, ho, wo, &mut dw);

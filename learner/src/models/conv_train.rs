@@ -280,8 +280,9 @@ fn products_only() -> bool {
 impl ConvTrain for burn::backend::Cube {}
 
 /// `v` zeroed, as the initialised values it then is. Each pass's output is
-/// allocated without zeroing and every task zeroes its own part just before
-/// it writes it, in its cache: `vec![0.0; n]` zeroed the whole output on
+/// allocated without zeroing; a task whose kernel writes every value of its
+/// part leaves it so, the others zero their own part just before writing
+/// it, in their cache: `vec![0.0; n]` zeroed the whole output on
 /// the calling thread first (with the leaky ReLU's, 4.6 % of a one-thread
 /// training step in a profile; burn's tensors own their buffers, so none
 /// is reused).
@@ -294,12 +295,23 @@ pub(crate) fn zeroed(v: &mut [MaybeUninit<f32>]) -> &mut [f32] {
     unsafe { &mut *(v as *mut [MaybeUninit<f32>] as *mut [f32]) }
 }
 
+/// `v` seen as values that may be written uninitialised.
+///
+/// # Safety
+/// Only initialised values are written through the result (a kernel that
+/// writes `f32`s), never `MaybeUninit::uninit()`.
+unsafe fn as_uninit(v: &mut [f32]) -> &mut [MaybeUninit<f32>] {
+    // SAFETY: the same layout; the caller's contract keeps `v` initialised.
+    unsafe { &mut *(v as *mut [f32] as *mut [MaybeUninit<f32>]) }
+}
+
 /// A vector of `n` values written by `fill`, which is given them
 /// uninitialised.
 ///
 /// # Safety
 /// `fill` writes every one of them (each of this module's passes does: its
-/// tasks [`zeroed`] their part first).
+/// tasks write their part through [`conv_direct::forward`], which covers
+/// it, or [`zeroed`] it first).
 pub(crate) unsafe fn written(n: usize, fill: impl FnOnce(&mut [MaybeUninit<f32>])) -> Vec<f32> {
     let mut v = Vec::with_capacity(n);
     fill(&mut v.spare_capacity_mut()[..n]);
@@ -800,12 +812,13 @@ fn forward_shifted(
                 (vec![0.0f32; sh.len(g)], vec![0.0f32; n])
             },
             |(xp, yp), (ys, xs)| {
-                let ys = zeroed(ys);
                 sh.pad(g, xs, xp);
                 if let Some(packed) = &packed {
+                    // It writes every value: no zeroing.
                     conv_direct::forward(xp, views, g.cin, packed, b, g.ho, g.wo, ys);
                     return;
                 }
+                let ys = zeroed(ys);
                 let wt = wt.as_deref().expect("the products' taps-major weights");
                 let mut ypm = MatMut::from_row_major_slice_mut(yp, g.cout, sh.n);
                 for t in 0..g.k * g.k {
@@ -1073,6 +1086,17 @@ fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f
     let (s, k) = (g.stride, g.k);
     let m = k.div_ceil(s) - 1;
     let phases = Phase::all(g);
+    // The phases are disjoint (each a residue class of rows and columns
+    // mod s): covering h·w positions between them, they write every one
+    // of dx's, which comes uninitialised.
+    assert_eq!(
+        phases
+            .iter()
+            .map(|p| p.qy.len() * p.qx.len())
+            .sum::<usize>(),
+        g.h * g.w,
+        "x_backward_split: the phases do not cover the input"
+    );
     let qy_end = phases.iter().map(|p| p.qy.end).max().unwrap_or(0);
     let qx_end = phases.iter().map(|p| p.qx.end).max().unwrap_or(0);
     // Wide and high enough that no read leaves its row or its channel.
@@ -1111,7 +1135,6 @@ fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f
             // written, sample after sample.
             || (vec![0.0f32; g.cout * plane], vec![0.0f32; g.cin * largest]),
             |(dyp, part), (dxs, dys)| {
-                let dxs = zeroed(dxs);
                 for (co, src) in dys.chunks_exact(outs).enumerate() {
                     for (oy, row) in src.chunks_exact(g.wo).enumerate() {
                         dyp[co * plane + (oy + m) * wq + m..][..g.wo].copy_from_slice(row);
@@ -1128,7 +1151,10 @@ fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f
                         taps: offsets,
                     };
                     let part = &mut part[..g.cin * ny * nx];
-                    conv_direct::forward(dyp, views, g.cout, packed, &zero, ny, nx, part);
+                    // SAFETY: the kernel writes only values, never
+                    // uninitialised ones, through the view.
+                    let out = unsafe { as_uninit(part) };
+                    conv_direct::forward(dyp, views, g.cout, packed, &zero, ny, nx, out);
                     // Into every s-th row and column of dx from the phase's
                     // first input position.
                     let (iy0, ix0) = (
@@ -1140,7 +1166,7 @@ fn x_backward_split(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f
                         for (r, row) in src.chunks_exact(nx).enumerate() {
                             let to = &mut dst[(iy0 + r * s) * g.w + ix0..];
                             for (d, &v) in to.iter_mut().step_by(s).zip(row) {
-                                *d = v;
+                                d.write(v);
                             }
                         }
                     }
