@@ -141,9 +141,9 @@ pub struct Variant {
     pub representation: Option<PathBuf>,
     /// A representation already trained with `representation`'s
     /// configuration on `data.dataset` (its exported model directory): used
-    /// as it is instead of training the variant's own. It must have the
-    /// experiment's epochs for the comparison to be fair; its `model.json`
-    /// must exist.
+    /// as it is instead of training the variant's own. Its `model.json`'s
+    /// epochs, architecture and dataset must be the variant's (checked), for
+    /// the comparison to be fair.
     #[serde(default)]
     pub model: Option<PathBuf>,
     /// The paper's completed-insertion share for it, where the paper's text
@@ -590,18 +590,48 @@ fn representation(
     log: &mut StageLog,
 ) -> Result<PathBuf> {
     if let Some(m) = &v.model {
+        let meta_path = m.join("model.json");
         ensure!(
-            m.join("model.json").exists(),
+            meta_path.exists(),
             "variant {}: model {}: no model.json there (an exported model directory, a run's \
              model/)",
             v.name,
             m.display()
         );
-        eprintln!(
-            "experiment: {}: the representation in {} (trained apart: its epochs and dataset are \
-             not checked against the experiment's)",
+        let text = std::fs::read(&meta_path)
+            .with_context(|| format!("reading {}", meta_path.display()))?;
+        let meta: train::checkpoint::ExportMeta = serde_json::from_slice(&text)
+            .with_context(|| format!("variant {}: {}", v.name, meta_path.display()))?;
+        // The comparison is fair only for a model trained as the variant's
+        // own would be.
+        let tcfg = train::TrainConfig::from_file(repr_cfg)
+            .with_context(|| format!("variant {}", v.name))?;
+        let epochs = cfg.representation.epochs.unwrap_or(tcfg.train.epochs);
+        ensure!(
+            meta.epochs == epochs,
+            "variant {}: model {}: trained {} epochs, the experiment's representations {epochs}",
             v.name,
-            m.display()
+            m.display(),
+            meta.epochs
+        );
+        ensure!(
+            meta.model == tcfg.model,
+            "variant {}: model {}: its model configuration is not {}'s",
+            v.name,
+            m.display(),
+            repr_cfg.display()
+        );
+        let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => a == b,
+        };
+        ensure!(
+            same(Path::new(&meta.dataset), data),
+            "variant {}: model {}: trained on {}, the experiment's dataset is {}",
+            v.name,
+            m.display(),
+            meta.dataset,
+            data.display()
         );
         return Ok(m.clone());
     }

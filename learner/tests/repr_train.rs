@@ -877,6 +877,24 @@ fn an_experiment_distils_from_each_variants_own_probe() {
         assert!(e.to_string().contains(why), "{e}");
         assert!(!dir.join("refused/Full").exists(), "nothing ran");
     }
+    // A model trained otherwise than the variant's own would be is refused:
+    // more epochs, or another architecture.
+    let mut longer = cfg.clone();
+    longer.representation.epochs = Some(2);
+    let e = run(&longer, &out, &only_reused, &|| false).unwrap_err();
+    assert!(e.to_string().contains("trained 1 epochs"), "{e}");
+    let other = dir.join("repr-d8.toml");
+    std::fs::write(
+        &other,
+        std::fs::read_to_string(&repr)
+            .unwrap()
+            .replace("latent_dim = 16", "latent_dim = 8"),
+    )
+    .unwrap();
+    let mut narrower = cfg.clone();
+    narrower.variant[2].representation = Some(other);
+    let e = run(&narrower, &out, &only_reused, &|| false).unwrap_err();
+    assert!(e.to_string().contains("model configuration"), "{e}");
     // A model that is not there is named before anything runs for it.
     let mut missing = cfg.clone();
     missing.variant[2].model = Some(dir.join("nowhere"));
