@@ -241,8 +241,10 @@ impl Chart {
     }
 
     /// The y range: from 0 (or the lowest value) to a little above the
-    /// highest; on a log axis from half the smallest positive value to
-    /// twice the largest.
+    /// highest (a quarter of the range above it for bar charts of
+    /// categories, whose legend in the upper right would otherwise cover the
+    /// tallest bars' labels); on a log axis from half the smallest positive
+    /// value to twice the largest.
     fn y_range(&self) -> (f64, f64) {
         let ys = self
             .series
@@ -259,7 +261,8 @@ impl Chart {
             (lo / 2.0, hi * 2.0)
         } else {
             let r = widen(lo.min(0.0), hi.max(0.0));
-            (r.start, r.end + 0.05 * (r.end - r.start))
+            let head = if self.categories.is_empty() { 0.05 } else { 0.25 };
+            (r.start, r.end + head * (r.end - r.start))
         }
     }
 }
