@@ -261,7 +261,11 @@ impl Chart {
             (lo / 2.0, hi * 2.0)
         } else {
             let r = widen(lo.min(0.0), hi.max(0.0));
-            let head = if self.categories.is_empty() { 0.05 } else { 0.25 };
+            let head = if self.categories.is_empty() {
+                0.05
+            } else {
+                0.25
+            };
             (r.start, r.end + head * (r.end - r.start))
         }
     }
