@@ -429,21 +429,17 @@ fn train_policy(
     if let Some(n) = cfg.policy.env_steps {
         pcfg.env_steps = n;
     }
-    let trained = policy_run::checkpoint_path(dir);
-    let done = trained.exists()
-        && policy_run::read_checkpoint(&trained)?.state.env_steps >= pcfg.env_steps;
-    if !done {
-        log.start(&format!("{}: policy ({} steps)", v.name, pcfg.env_steps));
-        let c = policy_run::train(pcfg.clone(), dir, true, stop)?;
-        if c.state.env_steps < pcfg.env_steps {
-            bail!(
-                "stopped during the policy of {}; run the same command again to resume",
-                v.name
-            );
-        }
-        log.end()?;
-    }
-    Ok(policy_run::read_checkpoint(&trained)?)
+    let what = format!("{}: policy ({} steps)", v.name, pcfg.env_steps);
+    let target = pcfg.env_steps;
+    policy_stage(
+        v,
+        dir,
+        what,
+        target,
+        |c| c.state.env_steps,
+        log,
+        || policy_run::train(pcfg, dir, true, stop),
+    )
 }
 
 /// Distils (or resumes, or finds finished) a variant's policy: DAgger from
@@ -470,23 +466,52 @@ fn distill_policy(
         }
     }
     d.student.observation = observation;
-    let trained = policy_run::checkpoint_path(dir);
+    let what = format!(
+        "{}: policy (DAgger, {} rounds of {} steps)",
+        v.name, d.dagger.rounds, d.dagger.steps_per_round
+    );
     let rounds = d.dagger.rounds;
-    let done = trained.exists() && policy_run::read_checkpoint(&trained)?.state.iteration >= rounds;
-    if !done {
-        log.start(&format!(
-            "{}: policy (DAgger, {rounds} rounds of {} steps)",
-            v.name, d.dagger.steps_per_round
-        ));
-        let c = distill::distill(d, dir, trained.exists(), stop)?;
-        if c.state.iteration < rounds {
-            bail!(
-                "stopped during the policy of {}; run the same command again to resume",
-                v.name
-            );
+    let resume = policy_run::checkpoint_path(dir).exists();
+    policy_stage(
+        v,
+        dir,
+        what,
+        rounds,
+        |c| c.state.iteration,
+        log,
+        || distill::distill(d, dir, resume, stop),
+    )
+}
+
+/// A variant's policy stage, either route: the checkpoint in `dir` as it is
+/// when its `progress` has reached `target`; otherwise `what` is logged and
+/// `run` trains (or resumes) it, and a run stopped short of `target` is
+/// reported as stopped.
+fn policy_stage(
+    v: &Variant,
+    dir: &Path,
+    what: String,
+    target: u64,
+    progress: impl Fn(&policy_run::Checkpoint) -> u64,
+    log: &mut StageLog,
+    run: impl FnOnce() -> std::result::Result<policy_run::Checkpoint, policy_run::RunError>,
+) -> Result<policy_run::Checkpoint> {
+    let trained = policy_run::checkpoint_path(dir);
+    if trained.exists() {
+        let c = policy_run::read_checkpoint(&trained)?;
+        if progress(&c) >= target {
+            return Ok(c);
         }
-        log.end()?;
     }
+    log.start(&what);
+    let c = run()?;
+    if progress(&c) < target {
+        bail!(
+            "stopped during the policy of {}; run the same command again to resume",
+            v.name
+        );
+    }
+    log.end()?;
     Ok(policy_run::read_checkpoint(&trained)?)
 }
 

@@ -607,14 +607,10 @@ fn an_experiment_collects_through_the_policys_camera() {
     assert!(!dir.join("out2/Full/repr").exists());
 }
 
-/// `learner experiment` end to end at a tiny scale: a representation
-/// variant and the ground-truth reference, each trained and evaluated on
-/// two pegs (one of them a transfer); a second invocation finds every stage
-/// done and redoes none.
-#[test]
-fn an_experiment_runs_every_stage_and_resumes() {
-    use learner::experiment::{ExperimentConfig, RunOptions, run};
-    let dir = test_support::scratch_dir("experiment");
+/// A Full Model of d = 16 at the test images' size, one depth convolution
+/// per stage, written as `repr.toml` in `dir`: the experiments' tests'
+/// representation.
+fn tiny_repr_config(dir: &Path) -> PathBuf {
     let repr = dir.join("repr.toml");
     std::fs::write(
         &repr,
@@ -625,6 +621,18 @@ fn an_experiment_runs_every_stage_and_resumes() {
         ),
     )
     .unwrap();
+    repr
+}
+
+/// `learner experiment` end to end at a tiny scale: a representation
+/// variant and the ground-truth reference, each trained and evaluated on
+/// two pegs (one of them a transfer); a second invocation finds every stage
+/// done and redoes none.
+#[test]
+fn an_experiment_runs_every_stage_and_resumes() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    let dir = test_support::scratch_dir("experiment");
+    let repr = tiny_repr_config(&dir);
     let policy = dir.join("policy.toml");
     std::fs::write(
         &policy,
@@ -746,16 +754,7 @@ fn an_experiment_distils_from_each_variants_own_probe() {
     use learner::experiment::{ExperimentConfig, RunOptions, run};
     use learner::rl::distill::DistillConfig;
     let dir = test_support::scratch_dir("experiment-distill");
-    let repr = dir.join("repr.toml");
-    std::fs::write(
-        &repr,
-        format!(
-            "[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n\
-             depth_convs_per_stage = 1\n\n[train]\nbatch = 32\nepochs = 3\nlr = 1e-3\n\
-             test_fraction = 0.25\nshuffle_blocks = 4\n"
-        ),
-    )
-    .unwrap();
+    let repr = tiny_repr_config(&dir);
     // The probe's band reaches the start (below_m 1 m), so that 20-step
     // episodes give it states to fit.
     let distill = dir.join("distill.toml");
