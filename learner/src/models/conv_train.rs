@@ -26,6 +26,9 @@
 //!   each phase of its input is a multiple of 16 wide, as s² stride-1
 //!   convolutions of `dy` through the same forward kernel
 //!   ([`x_backward_split`]);
+//! - layers with small output maps (4² and 2²) as one product per group
+//!   of samples per pass over an im2col matrix of the group
+//!   ([`forward_grouped`]);
 //! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
 //!   layers read their input as the matrix; the bias's `db = Σ dy`;
 //! - transposed convolutions (the flow decoder's up-convolutions,
@@ -432,14 +435,15 @@ fn band(g: &Geometry, rows: usize, i: usize) -> Range<usize> {
 }
 
 /// One sample's `x [Cin, H, W]` → the im2col tile of the output rows `oy`:
-/// `col [Cin·k·k, oy.len()·Wo]`, zeros where a tap falls in the padding.
-fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32]) {
+/// `col [Cin·k·k, oy.len()·Wo]` with rows `ld` apart, zeros where a tap
+/// falls in the padding.
+fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32], ld: usize) {
     let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
     for c in 0..g.cin {
         let plane = &x[c * g.h * g.w..][..g.h * g.w];
         for ky in 0..k {
             for kx in 0..k {
-                let row = &mut col[((c * k + ky) * k + kx) * n..][..n];
+                let row = &mut col[((c * k + ky) * k + kx) * ld..][..n];
                 let cols = g.inside(kx);
                 for (r, y) in oy.clone().enumerate() {
                     let dst = &mut row[r * g.wo..][..g.wo];
@@ -467,15 +471,15 @@ fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32]) {
 }
 
 /// The adjoint of [`im2col`]: adds each tap of the tile `col` of the
-/// output rows `oy` back onto the input position it was read from, into
-/// `dx [Cin, H, W]`.
-fn col2im(g: &Geometry, col: &[f32], oy: Range<usize>, dx: &mut [f32]) {
+/// output rows `oy` (rows `ld` apart) back onto the input position it was
+/// read from, into `dx [Cin, H, W]`.
+fn col2im(g: &Geometry, col: &[f32], oy: Range<usize>, dx: &mut [f32], ld: usize) {
     let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
     for c in 0..g.cin {
         let plane = &mut dx[c * g.h * g.w..][..g.h * g.w];
         for ky in 0..k {
             for kx in 0..k {
-                let row = &col[((c * k + ky) * k + kx) * n..][..n];
+                let row = &col[((c * k + ky) * k + kx) * ld..][..n];
                 let cols = g.inside(kx);
                 if cols.is_empty() {
                     continue;
@@ -1253,7 +1257,9 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f
     );
     // A stacked layer the kernel covers reads its views tap by tap too.
     let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct(g)));
-    if let Some(sh) = by_taps {
+    if grouped(g) {
+        forward_grouped(g, x, w, b, y)
+    } else if let Some(sh) = by_taps {
         forward_shifted(g, sh, x, Kernel::Own(w), b, y)
     } else if let Some(sh) = Shifted::stacked(g) {
         forward_stacked(g, sh, x, w, b, y)
@@ -1280,7 +1286,7 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeU
                     for i in 0..g.ho.div_ceil(rows) {
                         let oy = band(g, rows, i);
                         let n = oy.len() * g.wo;
-                        im2col(g, xs, oy.clone(), &mut col[..taps * n]);
+                        im2col(g, xs, oy.clone(), &mut col[..taps * n], n);
                         gemm(
                             ym.as_mut().subcols_mut(oy.start * g.wo, n),
                             wm,
@@ -1306,6 +1312,7 @@ fn x_backward(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) 
         "conv2d input gradient: the output gradient or weight does not match the layer's shape"
     );
     match Shifted::of(g) {
+        _ if grouped(g) => x_backward_grouped(g, w, dy, dx),
         Some(_) if g.stride == 1 && g.pad < g.k => x_backward_shifted(g, w, dy, dx),
         Some(_) if g.stride > 1 && split_direct(g) => x_backward_split(g, w, dy, dx),
         Some(sh) if g.stride > 1 => x_backward_phased(g, sh, w, dy, dx),
@@ -1335,7 +1342,7 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<
                     let n = oy.len() * g.wo;
                     let colm = MatMut::from_row_major_slice_mut(&mut col[..taps * n], taps, n);
                     gemm(colm, wt, columns(dym, g, &oy), false);
-                    col2im(g, &col[..taps * n], oy, dxs);
+                    col2im(g, &col[..taps * n], oy, dxs, n);
                 }
             },
         );
@@ -1344,7 +1351,9 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<
 /// The weight and bias gradients on contiguous f32 arrays.
 fn wb_backward(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let views = Shifted::of(g).or_else(|| Shifted::stacked(g));
-    if let Some(sh) = views.filter(|_| direct_weight_grad(g)) {
+    if grouped(g) {
+        wb_backward_grouped(g, x, dy)
+    } else if let Some(sh) = views.filter(|_| direct_weight_grad(g)) {
         wb_backward_direct(g, sh, x, dy)
     } else if let Some(sh) = Shifted::of(g) {
         wb_backward_shifted(g, sh, x, dy)
@@ -1379,7 +1388,7 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
                 for i in 0..g.ho.div_ceil(rows) {
                     let oy = band(g, rows, i);
                     let n = oy.len() * g.wo;
-                    im2col(g, xs, oy.clone(), &mut col[..taps * n]);
+                    im2col(g, xs, oy.clone(), &mut col[..taps * n], n);
                     let colm = MatRef::from_row_major_slice(&col[..taps * n], taps, n);
                     let dwm = MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps);
                     gemm(dwm, columns(dym, g, &oy), colm.transpose(), true);
@@ -1389,6 +1398,222 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
             (col, dw, db)
         })
         .map(|(_, dw, db)| (dw, db));
+    sum_grads(folds, g.cout * taps, g.cout)
+}
+
+/// Output maps of at most this many positions (the encoders' 4² and 2²
+/// outputs, the flow decoder's first two up-convolutions) run each pass as
+/// one product over a group of samples. Per sample a tap's product has
+/// only a few dozen columns, where faer ran at 10–36 GFLOP/s and PyTorch's
+/// layers of these shapes about twice as fast as ours. The 8² maps (64
+/// positions) measured no faster grouped (docs/performance.md).
+const GROUPED_OUTS: usize = 16;
+
+/// Values of a group's im2col matrix at most (1 MB of f32), unless a single
+/// sample's is larger.
+const GROUP_TILE: usize = 256 * 1024;
+
+/// Whether `g` runs through the grouped passes ([`forward_grouped`]).
+fn grouped(g: &Geometry) -> bool {
+    !g.is_pointwise() && g.outs() <= grouped_outs()
+}
+
+/// [`GROUPED_OUTS`], or `LEARNER_CONV_GROUPED_OUTS` where set (0: no layer
+/// grouped; the A/B switch of the benchmarks).
+fn grouped_outs() -> usize {
+    static OUTS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *OUTS.get_or_init(|| {
+        std::env::var("LEARNER_CONV_GROUPED_OUTS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(GROUPED_OUTS)
+    })
+}
+
+/// `(samples per group, groups per rayon task)`: each thread's share of the
+/// batch ([`per_task`]) cut into equal groups whose im2col matrix stays
+/// within [`GROUP_TILE`].
+fn group(g: &Geometry) -> (usize, usize) {
+    let task = per_task(g.batch);
+    let cap = (GROUP_TILE / (g.taps() * g.outs()).max(1)).max(1);
+    let groups = task.div_ceil(cap);
+    (task.div_ceil(groups), groups)
+}
+
+/// For each tap `t` and output position `o` of one sample, the input
+/// position (`iy·W + ix`) that tap reads there, or `usize::MAX` in the
+/// padding: `[k·k][Ho·Wo]`. A map of a few positions per row made
+/// [`im2col`]'s row-by-row copies cost as much as the product.
+fn tap_table(g: &Geometry) -> Vec<usize> {
+    let mut table = Vec::with_capacity(g.k * g.k * g.outs());
+    for ky in 0..g.k {
+        for kx in 0..g.k {
+            for oy in 0..g.ho {
+                for ox in 0..g.wo {
+                    let iy = (oy * g.stride + ky).checked_sub(g.pad).filter(|&v| v < g.h);
+                    let ix = (ox * g.stride + kx).checked_sub(g.pad).filter(|&v| v < g.w);
+                    table.push(match (iy, ix) {
+                        (Some(iy), Some(ix)) => iy * g.w + ix,
+                        _ => usize::MAX,
+                    });
+                }
+            }
+        }
+    }
+    table
+}
+
+/// One group's samples `xs [m][Cin, H, W]` → its im2col matrix `col [Cin·k·k,
+/// m·Ho·Wo]`, sample after sample along the columns; returns `m·Ho·Wo`.
+fn im2col_group(g: &Geometry, table: &[usize], xs: &[f32], col: &mut [f32]) -> usize {
+    let (hw, outs, kk) = (g.h * g.w, g.outs(), g.k * g.k);
+    let n = xs.len() / (g.cin * hw) * outs;
+    for (j, xj) in xs.chunks_exact(g.cin * hw).enumerate() {
+        for (c, plane) in xj.chunks_exact(hw).enumerate() {
+            for (t, idx) in table.chunks_exact(outs).enumerate() {
+                let row = &mut col[(c * kk + t) * n + j * outs..][..outs];
+                for (d, &i) in row.iter_mut().zip(idx) {
+                    *d = plane.get(i).copied().unwrap_or(0.0);
+                }
+            }
+        }
+    }
+    n
+}
+
+/// The adjoint of [`im2col_group`]: adds `dcol [Cin·k·k, m·Ho·Wo]` onto
+/// `dxs [m][Cin, H, W]`.
+fn col2im_group(g: &Geometry, table: &[usize], dcol: &[f32], dxs: &mut [f32]) {
+    let (hw, outs, kk) = (g.h * g.w, g.outs(), g.k * g.k);
+    let n = dxs.len() / (g.cin * hw) * outs;
+    for (j, dxj) in dxs.chunks_exact_mut(g.cin * hw).enumerate() {
+        for (c, plane) in dxj.chunks_exact_mut(hw).enumerate() {
+            for (t, idx) in table.chunks_exact(outs).enumerate() {
+                let row = &dcol[(c * kk + t) * n + j * outs..][..outs];
+                for (&v, &i) in row.iter().zip(idx) {
+                    if let Some(d) = plane.get_mut(i) {
+                        *d += v;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One group's output gradients `dys [m][Cout, Ho·Wo]` → `dyg [Cout,
+/// m·Ho·Wo]`, the columns as [`im2col_group`] orders them.
+fn gather_group(g: &Geometry, dys: &[f32], dyg: &mut [f32]) -> usize {
+    let (yl, outs) = (g.cout * g.outs(), g.outs());
+    let n = dys.len() / yl * outs;
+    for (j, dyj) in dys.chunks_exact(yl).enumerate() {
+        for (co, src) in dyj.chunks_exact(outs).enumerate() {
+            dyg[co * n + j * outs..][..outs].copy_from_slice(src);
+        }
+    }
+    n
+}
+
+/// [`forward`] as one product per group of samples: `Y = W · col` with
+/// `col` [`im2col_group`]'s.
+fn forward_grouped(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f32>]) {
+    let (taps, outs, (m, groups)) = (g.taps(), g.outs(), group(g));
+    let (xl, yl) = (g.cin * g.h * g.w, g.cout * outs);
+    let wm = MatRef::from_row_major_slice(w, g.cout, taps);
+    let table = tap_table(g);
+    y.par_chunks_mut(m * yl)
+        .zip(x.par_chunks(m * xl))
+        .with_min_len(groups)
+        .for_each_init(
+            || {
+                (
+                    vec![0.0f32; taps * m * outs],
+                    vec![0.0f32; g.cout * m * outs],
+                )
+            },
+            |(col, yg), (ys, xs)| {
+                let n = im2col_group(g, &table, xs, col);
+                let ym = MatMut::from_row_major_slice_mut(&mut yg[..g.cout * n], g.cout, n);
+                gemm(
+                    ym,
+                    wm,
+                    MatRef::from_row_major_slice(&col[..taps * n], taps, n),
+                    false,
+                );
+                for (j, yj) in ys.chunks_exact_mut(yl).enumerate() {
+                    let rows = yj.chunks_exact_mut(outs).zip(yg.chunks_exact(n)).zip(b);
+                    for ((row, src), &bias) in rows {
+                        for (d, &v) in row.iter_mut().zip(&src[j * outs..][..outs]) {
+                            d.write(v + bias);
+                        }
+                    }
+                }
+            },
+        );
+}
+
+/// [`x_backward`] as one product per group: `dcol = Wᵀ · dY`, then col2im
+/// sample by sample.
+fn x_backward_grouped(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<f32>]) {
+    let (taps, outs, (m, groups)) = (g.taps(), g.outs(), group(g));
+    let (xl, yl) = (g.cin * g.h * g.w, g.cout * outs);
+    let wt = MatRef::from_row_major_slice(w, g.cout, taps).transpose();
+    let table = tap_table(g);
+    dx.par_chunks_mut(m * xl)
+        .zip(dy.par_chunks(m * yl))
+        .with_min_len(groups)
+        .for_each_init(
+            || {
+                (
+                    vec![0.0f32; taps * m * outs],
+                    vec![0.0f32; g.cout * m * outs],
+                )
+            },
+            |(col, dyg), (dxs, dys)| {
+                let n = gather_group(g, dys, dyg);
+                let colm = MatMut::from_row_major_slice_mut(&mut col[..taps * n], taps, n);
+                gemm(
+                    colm,
+                    wt,
+                    MatRef::from_row_major_slice(&dyg[..g.cout * n], g.cout, n),
+                    false,
+                );
+                col2im_group(g, &table, &col[..taps * n], zeroed(dxs));
+            },
+        );
+}
+
+/// [`wb_backward`] as one product per group: `dW += dY · colᵀ`.
+fn wb_backward_grouped(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let (taps, outs, (m, groups)) = (g.taps(), g.outs(), group(g));
+    let (xl, yl) = (g.cin * g.h * g.w, g.cout * outs);
+    let zero = || {
+        (
+            vec![0.0f32; taps * m * outs],
+            vec![0.0f32; g.cout * m * outs],
+            vec![0.0f32; g.cout * taps],
+            vec![0.0f32; g.cout],
+        )
+    };
+    let table = tap_table(g);
+    let folds = x
+        .par_chunks(m * xl)
+        .zip(dy.par_chunks(m * yl))
+        .with_min_len(groups)
+        .fold(zero, |(mut col, mut dyg, mut dw, mut db), (xs, dys)| {
+            let n = im2col_group(g, &table, xs, &mut col);
+            gather_group(g, dys, &mut dyg);
+            gemm(
+                MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps),
+                MatRef::from_row_major_slice(&dyg[..g.cout * n], g.cout, n),
+                MatRef::from_row_major_slice(&col[..taps * n], taps, n).transpose(),
+                true,
+            );
+            for dyj in dys.chunks_exact(yl) {
+                add_bias_grad(&mut db, dyj, outs);
+            }
+            (col, dyg, dw, db)
+        })
+        .map(|(_, _, dw, db)| (dw, db));
     sum_grads(folds, g.cout * taps, g.cout)
 }
 
@@ -1944,6 +2169,52 @@ mod tests {
         // The RGB encoder's first layer (3 channels) is not Shifted.
         let g = Geometry::new(&[1, 3, 16, 16], &[4, 3, 7, 7], 2, 3);
         assert!(Shifted::of(&g).is_none());
+    }
+
+    /// The grouped passes (one product per group of samples) against the
+    /// im2col path, on raw arrays: the small maps they are routed, strided
+    /// and padded, an up-convolution's k 4, a side where the last taps fall
+    /// off the edge, and a batch cut into groups whose last one is short.
+    #[test]
+    fn grouped_paths_match_im2col() {
+        let mut short_last = 0;
+        for &(b, cin, cout, h, w, k, s, p) in &[
+            // (batch, cin, cout, height, width, k, stride, pad)
+            (3, 8, 4, 2, 2, 3, 1, 1),
+            (2, 6, 5, 4, 4, 3, 2, 1),
+            (2, 5, 3, 8, 8, 4, 2, 1),
+            (1, 4, 2, 5, 3, 3, 2, 0),
+            (3, 3, 4, 4, 3, 3, 1, 1),
+            // 18 432 im2col values a sample: groups of at most 14.
+            (31, 128, 6, 4, 4, 3, 1, 1),
+        ] {
+            let g = Geometry::new(&[b, cin, h, w], &[cout, cin, k, k], s, p);
+            let (m, _) = group(&g);
+            short_last += usize::from(!b.is_multiple_of(m));
+            assert!(g.outs() <= GROUPED_OUTS && grouped(&g), "{g:?} is grouped");
+            let mut rng = fastrand::Rng::with_seed(11);
+            let (x, wt, bias) = (
+                uniform(&mut rng, b * cin * h * w),
+                uniform(&mut rng, cout * cin * k * k),
+                uniform(&mut rng, cout),
+            );
+            let dy = uniform(&mut rng, b * cout * g.outs());
+            let what = format!("{g:?}");
+            let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
+            let y1 = pass(dy.len(), |y| forward_grouped(&g, &x, &wt, &bias, y));
+            let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &wt, &bias, y));
+            near(&y1, &y2, "y");
+            let dx1 = pass(x.len(), |dx| x_backward_grouped(&g, &wt, &dy, dx));
+            let dx2 = pass(x.len(), |dx| x_backward_banded(&g, &wt, &dy, dx));
+            near(&dx1, &dx2, "dx");
+            let ((dw1, db1), (dw2, db2)) = (
+                wb_backward_grouped(&g, &x, &dy),
+                wb_backward_banded(&g, &x, &dy),
+            );
+            near(&dw1, &dw2, "dw");
+            near(&db1, &db2, "db");
+        }
+        assert!(short_last > 0, "no batch left a short last group");
     }
 
     /// [`Shifted::pad`] writes every image position and nothing else: a
