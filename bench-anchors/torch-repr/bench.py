@@ -218,19 +218,28 @@ def main():
     times = []
     if what == "train":
         opt = torch.optim.Adam(model.parameters(), lr=1e-4, betas=(0.5, 0.999))
+        # Forward with losses, backward, optimiser: exact on the CPU (eager);
+        # on a GPU only the total counts.
+        phases = []
         for i in range(steps + 2):
             t = time.perf_counter()
             opt.zero_grad()
             loss = losses(model(*x, action, eps), y)
+            t_fwd = time.perf_counter()
             loss.backward()
+            t_bwd = time.perf_counter()
             opt.step()
             sync()
             if i >= 2:
-                times.append(time.perf_counter() - t)
+                end = time.perf_counter()
+                times.append(end - t)
+                phases.append((t_fwd - t, t_bwd - t_fwd, end - t_bwd))
         step = median(times)
+        phase = lambda k: round(1e3 * median([p[k] for p in phases]), 1)
         print(json.dumps({"side": side, "what": "train", "batch": b, "threads": threads,
                           "step_s": step, "samples_per_s": b / step, "steps": steps,
-                          "torch": torch.__version__}))
+                          "torch": torch.__version__, "forward_ms": phase(0),
+                          "backward_ms": phase(1), "optimiser_ms": phase(2)}))
     else:
         model.eval()
         with torch.no_grad():

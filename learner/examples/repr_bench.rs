@@ -82,6 +82,9 @@ fn main() {
         let eps = tensor(randn(b * d), [b, d], &dev);
         let w = LossWeights::default();
         let mut optim = AdamConfig::new().with_beta_1(0.5).with_epsilon(1e-8).init();
+        // Forward with losses, backward, optimiser: exact on the CPU, where
+        // burn runs each operation eagerly; on a GPU only the total counts.
+        let mut phases: Vec<[f64; 3]> = Vec::new();
         for i in 0..steps + 2 {
             let t = Instant::now();
             let out = net.forward(
@@ -92,16 +95,22 @@ fn main() {
                 Modalities::ALL,
             );
             let l = losses(&out, &y, &x.proprio, &w);
+            let t_fwd = t.elapsed().as_secs_f64();
             let grads = GradientsParams::from_grads(l.total.backward(), &net);
+            let t_bwd = t.elapsed().as_secs_f64();
             net = optim.step(1e-4, net, grads);
             // Reading the loss back waits for the step to finish (on a GPU
             // too: the timed step includes its kernels).
             let _ = l.total.into_scalar::<f32>();
+
             if i >= 2 {
-                times.push(t.elapsed().as_secs_f64());
+                let all = t.elapsed().as_secs_f64();
+                times.push(all);
+                phases.push([t_fwd, t_bwd - t_fwd, all - t_bwd]);
             }
         }
         let step = median(times);
+        let phase = |k: usize| 1e3 * median(phases.iter().map(|p| p[k]).collect());
         // `LEARNER_CONV=burn`: burn's own convolution (learner::models::conv_train).
         let side = if let Some(g) = gpu_side {
             g
@@ -111,9 +120,12 @@ fn main() {
             "ours-conv"
         };
         println!(
-            "{{\"side\": \"{side}\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}}}",
+            "{{\"side\": \"{side}\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}, \"forward_ms\": {:.1}, \"backward_ms\": {:.1}, \"optimiser_ms\": {:.1}}}",
             b as f64 / step,
-            cfg.depth_convs_per_stage
+            cfg.depth_convs_per_stage,
+            phase(0),
+            phase(1),
+            phase(2)
         );
     } else {
         let fast =
