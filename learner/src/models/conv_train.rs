@@ -435,15 +435,14 @@ fn band(g: &Geometry, rows: usize, i: usize) -> Range<usize> {
 }
 
 /// One sample's `x [Cin, H, W]` → the im2col tile of the output rows `oy`:
-/// `col [Cin·k·k, oy.len()·Wo]` with rows `ld` apart, zeros where a tap
-/// falls in the padding.
-fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32], ld: usize) {
+/// `col [Cin·k·k, oy.len()·Wo]`, zeros where a tap falls in the padding.
+fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32]) {
     let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
     for c in 0..g.cin {
         let plane = &x[c * g.h * g.w..][..g.h * g.w];
         for ky in 0..k {
             for kx in 0..k {
-                let row = &mut col[((c * k + ky) * k + kx) * ld..][..n];
+                let row = &mut col[((c * k + ky) * k + kx) * n..][..n];
                 let cols = g.inside(kx);
                 for (r, y) in oy.clone().enumerate() {
                     let dst = &mut row[r * g.wo..][..g.wo];
@@ -471,15 +470,15 @@ fn im2col(g: &Geometry, x: &[f32], oy: Range<usize>, col: &mut [f32], ld: usize)
 }
 
 /// The adjoint of [`im2col`]: adds each tap of the tile `col` of the
-/// output rows `oy` (rows `ld` apart) back onto the input position it was
-/// read from, into `dx [Cin, H, W]`.
-fn col2im(g: &Geometry, col: &[f32], oy: Range<usize>, dx: &mut [f32], ld: usize) {
+/// output rows `oy` back onto the input position it was read from, into
+/// `dx [Cin, H, W]`.
+fn col2im(g: &Geometry, col: &[f32], oy: Range<usize>, dx: &mut [f32]) {
     let (k, s, n) = (g.k, g.stride, oy.len() * g.wo);
     for c in 0..g.cin {
         let plane = &mut dx[c * g.h * g.w..][..g.h * g.w];
         for ky in 0..k {
             for kx in 0..k {
-                let row = &col[((c * k + ky) * k + kx) * ld..][..n];
+                let row = &col[((c * k + ky) * k + kx) * n..][..n];
                 let cols = g.inside(kx);
                 if cols.is_empty() {
                     continue;
@@ -1286,7 +1285,7 @@ fn forward_banded(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeU
                     for i in 0..g.ho.div_ceil(rows) {
                         let oy = band(g, rows, i);
                         let n = oy.len() * g.wo;
-                        im2col(g, xs, oy.clone(), &mut col[..taps * n], n);
+                        im2col(g, xs, oy.clone(), &mut col[..taps * n]);
                         gemm(
                             ym.as_mut().subcols_mut(oy.start * g.wo, n),
                             wm,
@@ -1342,7 +1341,7 @@ fn x_backward_banded(g: &Geometry, w: &[f32], dy: &[f32], dx: &mut [MaybeUninit<
                     let n = oy.len() * g.wo;
                     let colm = MatMut::from_row_major_slice_mut(&mut col[..taps * n], taps, n);
                     gemm(colm, wt, columns(dym, g, &oy), false);
-                    col2im(g, &col[..taps * n], oy, dxs, n);
+                    col2im(g, &col[..taps * n], oy, dxs);
                 }
             },
         );
@@ -1388,7 +1387,7 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
                 for i in 0..g.ho.div_ceil(rows) {
                     let oy = band(g, rows, i);
                     let n = oy.len() * g.wo;
-                    im2col(g, xs, oy.clone(), &mut col[..taps * n], n);
+                    im2col(g, xs, oy.clone(), &mut col[..taps * n]);
                     let colm = MatRef::from_row_major_slice(&col[..taps * n], taps, n);
                     let dwm = MatMut::from_row_major_slice_mut(&mut dw, g.cout, taps);
                     gemm(dwm, columns(dym, g, &oy), colm.transpose(), true);
