@@ -102,7 +102,6 @@ fn main() {
             // Reading the loss back waits for the step to finish (on a GPU
             // too: the timed step includes its kernels).
             let _ = l.total.into_scalar::<f32>();
-
             if i >= 2 {
                 let all = t.elapsed().as_secs_f64();
                 times.push(all);

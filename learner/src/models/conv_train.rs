@@ -6,9 +6,13 @@
 //! convolution with batch and channels swapped), with layout conversions
 //! around each. A profile of a training step put most of its time there
 //! (docs/performance.md). [`ConvTrain`] is a burn backend extension that
-//! gives `flex` its own three passes, per sample and split over rayon's
-//! threads:
+//! gives `flex` its own three passes, per sample (per group of samples for
+//! the small maps) and split over rayon's threads:
 //!
+//! - layers with small output maps (4² and 2², [`GROUPED_OUTS`]; for an
+//!   up-convolution its input's) before any route below: one product per
+//!   group of samples per pass over the group's im2col matrix
+//!   ([`forward_grouped`]);
 //! - stride-1 layers, without im2col ([`Shifted`]): k² products of each
 //!   tap's weights with a view of the zero-padded input; the input gradient
 //!   is the same kind of convolution of `dy` with the kernel flipped;
@@ -26,9 +30,6 @@
 //!   each phase of its input is a multiple of 16 wide, as s² stride-1
 //!   convolutions of `dy` through the same forward kernel
 //!   ([`x_backward_split`]);
-//! - layers with small output maps (4² and 2²) as one product per group
-//!   of samples per pass over an im2col matrix of the group
-//!   ([`forward_grouped`]);
 //! - other layers through im2col in bands, `dx = col2im(Wᵀ · dy)`; 1×1
 //!   layers read their input as the matrix; the bias's `db = Σ dy`;
 //! - transposed convolutions (the flow decoder's up-convolutions,
@@ -314,7 +315,7 @@ unsafe fn as_uninit(v: &mut [f32]) -> &mut [MaybeUninit<f32>] {
 /// # Safety
 /// `fill` writes every one of them (each of this module's passes does: its
 /// tasks write their part through [`conv_direct::forward`], which covers
-/// it, or [`zeroed`] it first).
+/// it, write each value ([`forward_grouped`]), or [`zeroed`] it first).
 pub(crate) unsafe fn written(n: usize, fill: impl FnOnce(&mut [MaybeUninit<f32>])) -> Vec<f32> {
     let mut v = Vec::with_capacity(n);
     fill(&mut v.spare_capacity_mut()[..n]);
@@ -1401,7 +1402,8 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
 }
 
 /// Output maps of at most this many positions (the encoders' 4² and 2²
-/// outputs, the flow decoder's first two up-convolutions) run each pass as
+/// outputs, the flow decoder's first two up-convolutions, the
+/// Reconstruction Model decoder's first layer) run each pass as
 /// one product over a group of samples. Per sample a tap's product has
 /// only a few dozen columns, where faer ran at 10–36 GFLOP/s and PyTorch's
 /// layers of these shapes about twice as fast as ours. The 8² maps (64
@@ -2176,44 +2178,54 @@ mod tests {
     /// off the edge, and a batch cut into groups whose last one is short.
     #[test]
     fn grouped_paths_match_im2col() {
-        let mut short_last = 0;
-        for &(b, cin, cout, h, w, k, s, p) in &[
-            // (batch, cin, cout, height, width, k, stride, pad)
-            (3, 8, 4, 2, 2, 3, 1, 1),
-            (2, 6, 5, 4, 4, 3, 2, 1),
-            (2, 5, 3, 8, 8, 4, 2, 1),
-            (1, 4, 2, 5, 3, 3, 2, 0),
-            (3, 3, 4, 4, 3, 3, 1, 1),
-            // 18 432 im2col values a sample: groups of at most 14.
-            (31, 128, 6, 4, 4, 3, 1, 1),
-        ] {
-            let g = Geometry::new(&[b, cin, h, w], &[cout, cin, k, k], s, p);
-            let (m, _) = group(&g);
-            short_last += usize::from(!b.is_multiple_of(m));
-            assert!(g.outs() <= GROUPED_OUTS && grouped(&g), "{g:?} is grouped");
-            let mut rng = fastrand::Rng::with_seed(11);
-            let (x, wt, bias) = (
-                uniform(&mut rng, b * cin * h * w),
-                uniform(&mut rng, cout * cin * k * k),
-                uniform(&mut rng, cout),
-            );
-            let dy = uniform(&mut rng, b * cout * g.outs());
-            let what = format!("{g:?}");
-            let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
-            let y1 = pass(dy.len(), |y| forward_grouped(&g, &x, &wt, &bias, y));
-            let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &wt, &bias, y));
-            near(&y1, &y2, "y");
-            let dx1 = pass(x.len(), |dx| x_backward_grouped(&g, &wt, &dy, dx));
-            let dx2 = pass(x.len(), |dx| x_backward_banded(&g, &wt, &dy, dx));
-            near(&dx1, &dx2, "dx");
-            let ((dw1, db1), (dw2, db2)) = (
-                wb_backward_grouped(&g, &x, &dy),
-                wb_backward_banded(&g, &x, &dy),
-            );
-            near(&dw1, &dw2, "dw");
-            near(&db1, &db2, "db");
-        }
-        assert!(short_last > 0, "no batch left a short last group");
+        // The groups follow the threads (each thread's share of the batch is
+        // cut into groups): two, this project's machine's, wherever it runs.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build();
+        pool.expect("a thread pool").install(|| {
+            let (mut short_last, mut tiled) = (0, 0);
+            for &(b, cin, cout, h, w, k, s, p) in &[
+                // (batch, cin, cout, height, width, k, stride, pad)
+                (3, 8, 4, 2, 2, 3, 1, 1),
+                (2, 6, 5, 4, 4, 3, 2, 1),
+                (2, 5, 3, 8, 8, 4, 2, 1),
+                (1, 4, 2, 5, 3, 3, 2, 0),
+                (3, 3, 4, 4, 3, 3, 1, 1),
+                // 18 432 im2col values a sample: groups of at most 14.
+                (31, 128, 6, 4, 4, 3, 1, 1),
+            ] {
+                let g = Geometry::new(&[b, cin, h, w], &[cout, cin, k, k], s, p);
+                let (m, groups) = group(&g);
+                short_last += usize::from(!b.is_multiple_of(m));
+                tiled += usize::from(groups > 1);
+                assert!(
+                    g.outs() <= GROUPED_OUTS && grouped(&g),
+                    "{g:?} is not grouped: LEARNER_CONV_GROUPED_OUTS set?"
+                );
+                let mut rng = fastrand::Rng::with_seed(11);
+                let (x, wt, bias) = (
+                    uniform(&mut rng, b * cin * h * w),
+                    uniform(&mut rng, cout * cin * k * k),
+                    uniform(&mut rng, cout),
+                );
+                let dy = uniform(&mut rng, b * cout * g.outs());
+                let what = format!("{g:?}");
+                let near = |a: &[f32], b: &[f32], pass: &str| near(a, b, &format!("{what} {pass}"));
+                let y1 = pass(dy.len(), |y| forward_grouped(&g, &x, &wt, &bias, y));
+                let y2 = pass(dy.len(), |y| forward_banded(&g, &x, &wt, &bias, y));
+                near(&y1, &y2, "y");
+                let dx1 = pass(x.len(), |dx| x_backward_grouped(&g, &wt, &dy, dx));
+                let dx2 = pass(x.len(), |dx| x_backward_banded(&g, &wt, &dy, dx));
+                near(&dx1, &dx2, "dx");
+                let ((dw1, db1), (dw2, db2)) = (
+                    wb_backward_grouped(&g, &x, &dy),
+                    wb_backward_banded(&g, &x, &dy),
+                );
+                near(&dw1, &dw2, "dw");
+                near(&db1, &db2, "db");
+            }
+            assert!(short_last > 0, "no batch left a short last group");
+            assert!(tiled > 0, "no thread's share cut into several groups");
+        });
     }
 
     /// [`Shifted::pad`] writes every image position and nothing else: a
