@@ -2003,6 +2003,9 @@ mod tests {
         let cases = [
             // (batch, cin, cout, side, k, stride, pad)
             (2, 16, 8, 1, 4, 2, 1),
+            // up1's and up2's input maps (2² and 4²): the grouped passes.
+            (3, 8, 6, 2, 4, 2, 1),
+            (2, 12, 6, 4, 4, 2, 1),
             (2, 12, 9, 5, 4, 2, 1),
             (1, 24, 8, 16, 4, 2, 1),
             (2, 5, 3, 7, 3, 1, 1),
