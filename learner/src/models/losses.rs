@@ -7,8 +7,11 @@
 //! pairing loss is over every sample; the KL over every posterior.
 
 use super::config::LossWeights;
+use super::conv_train::burns_own;
 use super::inputs::LabelArrays;
+use super::loss_train::LossTrain;
 use super::net::{Outputs, tensor};
+use burn::backend::Dispatch;
 use burn::prelude::*;
 
 /// Keeps the endpoint error's square root differentiable at zero flow.
@@ -68,18 +71,29 @@ impl LabelTensors {
 }
 
 /// Binary cross-entropy of `logits` against 0/1 `targets`, elementwise,
-/// in the stable form max(x, 0) − x·y + ln(1 + e^−|x|).
+/// in the stable form max(x, 0) − x·y + ln(1 + e^−|x|), as one operation
+/// with its own backward pass ([`super::loss_train`]); the targets get no
+/// gradient. With `LEARNER_CONV=burn` (the benchmark's A/B switch) it is
+/// the same form of burn's primitives.
 pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) -> Tensor<D> {
-    let softplus_neg_abs = logits.clone().abs().neg().exp().add_scalar(1.0).log();
-    logits.clone().clamp_min(0.0) - logits * targets + softplus_neg_abs
+    if burns_own() {
+        let softplus_neg_abs = logits.clone().abs().neg().exp().add_scalar(1.0).log();
+        return logits.clone().clamp_min(0.0) - logits * targets + softplus_neg_abs;
+    }
+    Tensor::from_dispatch(<Dispatch as LossTrain>::bce_train(
+        logits.into_dispatch(),
+        targets.into_dispatch(),
+    ))
 }
 
 /// Per-sample average endpoint error of `pred` against `target`, both
 /// `[B, 2, S, S]`: the mean over pixels of the flow vectors' distance, `[B]`.
 pub fn endpoint_error(pred: Tensor<4>, target: Tensor<4>) -> Tensor<1> {
     let [b, _, _, _] = pred.dims();
-    (pred - target)
-        .powf_scalar(2.0)
+    // A square as a product: `powf` is a transcendental call per value,
+    // forward and again backward.
+    let d = pred - target;
+    (d.clone() * d)
         .sum_dim(1)
         .add_scalar(EPE_EPS)
         .sqrt()

@@ -27,6 +27,7 @@ pub mod fast;
 pub mod fusion;
 pub mod init;
 pub mod inputs;
+pub mod loss_train;
 pub mod losses;
 pub mod net;
 
