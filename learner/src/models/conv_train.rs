@@ -1405,9 +1405,9 @@ fn wb_backward_banded(g: &Geometry, x: &[f32], dy: &[f32]) -> (Vec<f32>, Vec<f32
 /// outputs, the flow decoder's first two up-convolutions, the
 /// Reconstruction Model decoder's first layer) run each pass as
 /// one product over a group of samples. Per sample a tap's product has
-/// only a few dozen columns, where faer ran at 10–36 GFLOP/s and PyTorch's
-/// layers of these shapes about twice as fast as ours. The 8² maps (64
-/// positions) measured no faster grouped (docs/performance.md).
+/// only 6–24 columns, where faer ran at 9–36 GFLOP/s and PyTorch's layers
+/// of these shapes about twice as fast as ours. The 8² maps (64 positions)
+/// measured slower grouped (docs/performance.md).
 const GROUPED_OUTS: usize = 16;
 
 /// Values of a group's im2col matrix at most (1 MB of f32), unless a single
