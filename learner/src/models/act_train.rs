@@ -62,8 +62,9 @@ fn composed_backward<B: Backend>(
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
 impl ActTrain for burn::backend::Cube {}
 
-/// Values per rayon task: large enough that a task is worth its start.
-const CHUNK: usize = 1 << 15;
+/// Values per rayon task: large enough that a task is worth its start
+/// (this file's passes and [`super::loss_train`]'s).
+pub(super) const CHUNK: usize = 1 << 15;
 
 impl ActTrain for Flex {
     fn leaky_train(x: FlexTensor, slope: f64) -> FlexTensor {

@@ -10,6 +10,7 @@
 //! backends (burn's `Cube`) keep the composition through the trait's default
 //! bodies. The targets are data: no gradient flows to them.
 
+use super::act_train::CHUNK;
 use super::conv_train::{f32s, flex_tensor, written};
 use burn::backend::autodiff::{
     Autodiff,
@@ -63,9 +64,6 @@ fn composed_backward<B: Backend>(
 
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
 impl LossTrain for burn::backend::Cube {}
-
-/// Values per rayon task: large enough that a task is worth its start.
-const CHUNK: usize = 1 << 15;
 
 /// One value's cross-entropy, the stable form.
 fn bce(x: f32, y: f32) -> f32 {
