@@ -43,13 +43,14 @@ pub trait LossTrain: Backend {
 }
 
 /// The stable form of `B`'s primitives: the GPU backends' cross-entropy,
-/// and flex's for other dtypes than f32.
-fn composed<B: Backend>(x: FloatTensor<B>, y: FloatTensor<B>) -> FloatTensor<B> {
+/// flex's for other dtypes than f32, and the model's under
+/// `LEARNER_CONV=burn` (where autodiff tracks each primitive).
+pub(super) fn composed<B: Backend>(x: FloatTensor<B>, y: FloatTensor<B>) -> FloatTensor<B> {
     let softplus = B::float_log(B::float_add_scalar(
         B::float_exp(B::float_neg(B::float_abs(x.clone()))),
         1.0.into(),
     ));
-    let pos = B::relu(x.clone());
+    let pos = B::float_clamp_min(x.clone(), 0.0.into());
     B::float_add(B::float_sub(pos, B::float_mul(x, y)), softplus)
 }
 

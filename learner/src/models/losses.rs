@@ -9,7 +9,7 @@
 use super::config::LossWeights;
 use super::conv_train::burns_own;
 use super::inputs::LabelArrays;
-use super::loss_train::LossTrain;
+use super::loss_train::{self, LossTrain};
 use super::net::{Outputs, tensor};
 use burn::backend::Dispatch;
 use burn::prelude::*;
@@ -76,14 +76,12 @@ impl LabelTensors {
 /// gradient. With `LEARNER_CONV=burn` (the benchmark's A/B switch) it is
 /// the same form of burn's primitives.
 pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) -> Tensor<D> {
-    if burns_own() {
-        let softplus_neg_abs = logits.clone().abs().neg().exp().add_scalar(1.0).log();
-        return logits.clone().clamp_min(0.0) - logits * targets + softplus_neg_abs;
-    }
-    Tensor::from_dispatch(<Dispatch as LossTrain>::bce_train(
-        logits.into_dispatch(),
-        targets.into_dispatch(),
-    ))
+    let (x, y) = (logits.into_dispatch(), targets.into_dispatch());
+    Tensor::from_dispatch(if burns_own() {
+        loss_train::composed::<Dispatch>(x, y)
+    } else {
+        <Dispatch as LossTrain>::bce_train(x, y)
+    })
 }
 
 /// Per-sample average endpoint error of `pred` against `target`, both
