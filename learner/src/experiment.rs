@@ -623,9 +623,7 @@ fn representation(
             v.name,
             m.display()
         );
-        let text = std::fs::read(&meta_path)
-            .with_context(|| format!("reading {}", meta_path.display()))?;
-        let meta: train::checkpoint::ExportMeta = serde_json::from_slice(&text)
+        let meta = train::checkpoint::read_meta(m)
             .with_context(|| format!("variant {}: {}", v.name, meta_path.display()))?;
         // The comparison is fair only for a model trained as the variant's
         // own would be.

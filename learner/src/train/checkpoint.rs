@@ -133,8 +133,9 @@ pub fn export(dir: &Path, net: &ReprNet, meta: &ExportMeta) -> Result<()> {
     std::fs::write(&j, json).map_err(io_err(&j))
 }
 
-/// Reads an exported model from `dir` onto `device`.
-pub fn import(dir: &Path, device: &burn::prelude::Device) -> Result<(ReprNet, ExportMeta)> {
+/// Reads and checks an exported model's `model.json` in `dir`, without its
+/// weights.
+pub fn read_meta(dir: &Path) -> Result<ExportMeta> {
     let j = dir.join(EXPORT_META);
     let text = std::fs::read(&j).map_err(io_err(&j))?;
     let bad = |what: String| TrainError::BadFile {
@@ -144,6 +145,12 @@ pub fn import(dir: &Path, device: &burn::prelude::Device) -> Result<(ReprNet, Ex
     let meta: ExportMeta = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
     meta.model.validate().map_err(|e| bad(e.to_string()))?;
     meta.normaliser.validate().map_err(bad)?;
+    Ok(meta)
+}
+
+/// Reads an exported model from `dir` onto `device`.
+pub fn import(dir: &Path, device: &burn::prelude::Device) -> Result<(ReprNet, ExportMeta)> {
+    let meta = read_meta(dir)?;
     let m = dir.join(MODEL);
     let net = ReprNet::new(&meta.model, device)
         .try_load_file(&m)
