@@ -59,7 +59,7 @@ pub struct DataStage {
     /// The built dataset (used as it is when it opens).
     pub dataset: PathBuf,
     /// When it is absent: collect this many 20 Hz states on the fast path
-    /// (all pegs, the default heuristic/random mix, in the policy
+    /// (`collect_pegs`, the default heuristic/random mix, in the policy
     /// configuration's world and controller) and build it. 0: a missing
     /// dataset is an error.
     #[serde(default)]
@@ -67,6 +67,11 @@ pub struct DataStage {
     /// Seed of the collection's first episode.
     #[serde(default = "one")]
     pub collect_seed: u64,
+    /// The pegs collected, taken in turn (empty: all four). One peg gives
+    /// the paper's transfer experiments a representation that has never
+    /// seen the others.
+    #[serde(default)]
+    pub collect_pegs: Vec<PegShape>,
 }
 
 fn one() -> u64 {
@@ -561,7 +566,11 @@ fn ensure_dataset(
         states: d.collect_states,
         episodes: None,
         episode_actions: 100,
-        pegs: PegShape::ALL.to_vec(),
+        pegs: if d.collect_pegs.is_empty() {
+            PegShape::ALL.to_vec()
+        } else {
+            d.collect_pegs.clone()
+        },
         seed: d.collect_seed,
         workers,
         world: env.world.clone(),

@@ -48,6 +48,11 @@ struct EpisodeArgs {
     /// through one, is loaded from the path its run was configured with).
     #[arg(long)]
     policy: Option<PathBuf>,
+    /// With --policy: the checkpoint's last policy (a distillation's last
+    /// round, as `policy eval --last`) instead of its best validated or best
+    /// logged one.
+    #[arg(long, requires = "policy")]
+    last: bool,
 }
 
 /// A task the user calibrated instead of a simulator's report (a robot,
@@ -1058,7 +1063,7 @@ fn run(cli: Cli) -> Result<()> {
                     cfg.mix.is_none(),
                     "--policy and --mix-heuristic-fraction exclude each other"
                 );
-                let (p, which) = learner::rl::TrainedPolicy::load(path, false)?;
+                let (p, which) = learner::rl::TrainedPolicy::load(path, a.last)?;
                 p.check_world(&cfg.world)?;
                 eprintln!("learner: acting with {which} of {}", path.display());
                 if p.trained_peg() != a.peg {
@@ -1125,11 +1130,14 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(p) = &a.policy {
                 // Fail here, before any process starts, on a bad file or a
                 // representation model that does not load.
-                learner::rl::TrainedPolicy::load(p, false)?
+                learner::rl::TrainedPolicy::load(p, a.last)?
                     .0
                     .check_world(&world)?;
                 run_args.push("--policy".into());
                 run_args.push(p.display().to_string());
+                if a.last {
+                    run_args.push("--last".into());
+                }
             }
             let exit = stack::run(&StackConfig {
                 hardware: stack::Hardware::Sim,

@@ -549,7 +549,8 @@ fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
 
 /// An experiment without its dataset collects it in the policy
 /// configuration's world: the representation learns the camera the policy
-/// will see through.
+/// will see through. Only the pegs `collect_pegs` names are collected (the
+/// transfer experiments' representation that has seen one peg).
 #[test]
 fn an_experiment_collects_through_the_policys_camera() {
     use learner::experiment::{ExperimentConfig, RunOptions, run};
@@ -574,7 +575,8 @@ fn an_experiment_collects_through_the_policys_camera() {
     std::fs::write(
         &cfg_path,
         format!(
-            "[data]\ndataset = {data:?}\ncollect_states = 30\n\n\
+            "[data]\ndataset = {data:?}\ncollect_states = 120\n\
+             collect_pegs = [\"hexagon\", \"triangle\"]\n\n\
              [policy]\nconfig = {policy:?}\n\n\
              [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n"
         ),
@@ -590,6 +592,17 @@ fn an_experiment_collects_through_the_policys_camera() {
     let camera = ds.meta.camera.expect("kept");
     assert!(camera.same_camera(&pcfg.env.world.camera.calibration()));
     assert!(!camera.same_camera(&hw_sim::config::CameraConfig::default().calibration()));
+    let manifest = std::fs::read_to_string(dir.join("out/collect/manifest.jsonl")).unwrap();
+    // Taken in turn by episode number (workers may finish out of order).
+    let episodes: Vec<serde_json::Value> = manifest
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(episodes.len() >= 2, "{manifest}");
+    for e in &episodes {
+        let i = e["episode"].as_u64().unwrap() as usize;
+        assert_eq!(e["peg"], ["hexagon", "triangle"][i % 2], "{manifest}");
+    }
     // The dataset, now there, under a policy with another camera: refused
     // before any training, naming the dataset.
     std::fs::write(
