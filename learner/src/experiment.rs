@@ -72,6 +72,12 @@ pub struct DataStage {
     /// seen the others.
     #[serde(default)]
     pub collect_pegs: Vec<PegShape>,
+    /// A hw-sim world file to collect in instead of the policy
+    /// configuration's world, whose camera it must share (a dataset of the
+    /// box turned for a policy trained with it square, or of noisy
+    /// sensors). Relative to the working directory.
+    #[serde(default)]
+    pub collect_world: Option<PathBuf>,
 }
 
 fn one() -> u64 {
@@ -522,8 +528,8 @@ fn policy_stage(
 
 /// The dataset: opened where it is, or collected and built there in the
 /// policy's environment `env` (its world, camera included, and its
-/// controller), so that the representation learns the scene the policy
-/// will see.
+/// controller; `collect_world` in place of the world, with the same camera),
+/// so that the representation learns the scene the policy will see.
 fn ensure_dataset(
     d: &DataStage,
     env: &crate::rl::RlEnvConfig,
@@ -558,6 +564,22 @@ fn ensure_dataset(
         "data.dataset {}: no dataset there, and data.collect_states is 0",
         d.dataset.display()
     );
+    let world = match &d.collect_world {
+        None => env.world.clone(),
+        Some(p) => {
+            let w = hw_sim::WorldConfig::from_file(p)
+                .with_context(|| format!("data.collect_world {}", p.display()))?;
+            ensure!(
+                w.camera
+                    .calibration()
+                    .same_camera(&env.world.camera.calibration()),
+                "data.collect_world {}: its camera is not the policy's world's; a representation \
+                 of its images would be refused by the policy",
+                p.display()
+            );
+            w
+        }
+    };
     let logs = out.join("collect");
     log.start(&format!("dataset: collecting {} states", d.collect_states));
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -573,7 +595,7 @@ fn ensure_dataset(
         },
         seed: d.collect_seed,
         workers,
-        world: env.world.clone(),
+        world,
         controller: env.controller.clone(),
         mix: Mix::default(),
         log: LogOptions {

@@ -250,6 +250,9 @@ enum PolicyCmd {
         /// F/T force noise, N (standard deviation per reading).
         #[arg(long)]
         force_noise_n: Option<f64>,
+        /// F/T moment noise, N·m (standard deviation per reading).
+        #[arg(long)]
+        torque_noise_nm: Option<f64>,
         /// Depth noise, m (standard deviation per pixel).
         #[arg(long)]
         depth_noise_m: Option<f64>,
@@ -475,6 +478,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             pushes,
             occlusions,
             force_noise_n,
+            torque_noise_nm,
             depth_noise_m,
             rgb_noise,
             hole_error_mm,
@@ -518,6 +522,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             }
             for (v, field) in [
                 (force_noise_n, &mut world.noise.force_std_n),
+                (torque_noise_nm, &mut world.noise.torque_std_nm),
                 (depth_noise_m, &mut world.noise.depth_std_m),
                 (rgb_noise, &mut world.noise.rgb_std),
             ] {

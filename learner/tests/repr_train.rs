@@ -571,12 +571,24 @@ fn an_experiment_collects_through_the_policys_camera() {
     )
     .unwrap();
     let data = dir.join("data");
+    // The collection's own world: the policy's camera, the box turned by at
+    // most 0.05 rad (the policy's world keeps the default 0.26).
+    let world = dir.join("world.toml");
+    let camera = format!(
+        "[camera]\nwidth = {SIDE}\nheight = {SIDE}\neye_m = [0.9, -0.24, 0.77]\n\
+         target_m = [0.58, 0.0, 0.2]\n"
+    );
+    std::fs::write(
+        &world,
+        format!("{camera}\n[task]\nbox_yaw_range_rad = 0.05\n"),
+    )
+    .unwrap();
     let cfg_path = dir.join("experiment.toml");
     std::fs::write(
         &cfg_path,
         format!(
             "[data]\ndataset = {data:?}\ncollect_states = 120\n\
-             collect_pegs = [\"hexagon\", \"triangle\"]\n\n\
+             collect_pegs = [\"hexagon\", \"triangle\"]\ncollect_world = {world:?}\n\n\
              [policy]\nconfig = {policy:?}\n\n\
              [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n"
         ),
@@ -603,6 +615,26 @@ fn an_experiment_collects_through_the_policys_camera() {
         let i = e["episode"].as_u64().unwrap() as usize;
         assert_eq!(e["peg"], ["hexagon", "triangle"][i % 2], "{manifest}");
     }
+    let log = learner::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
+    let logged = &log.read_config(None).unwrap()[0].1;
+    assert_eq!(
+        logged.world.task.box_yaw_range_rad, 0.05,
+        "collected in collect_world"
+    );
+    assert_eq!(pcfg.env.world.task.box_yaw_range_rad, 0.26);
+    // A collection world with another camera is refused before anything
+    // runs, naming the field.
+    std::fs::write(&world, "[task]\nbox_yaw_range_rad = 0.05\n").unwrap();
+    let mut other = cfg.clone();
+    other.data.dataset = dir.join("data2");
+    let e = run(&other, &dir.join("out3"), &RunOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("data.collect_world") && e.contains("camera"),
+        "{e}"
+    );
+    assert!(!dir.join("out3/collect").exists());
     // The dataset, now there, under a policy with another camera: refused
     // before any training, naming the dataset.
     std::fs::write(

@@ -176,6 +176,8 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert_ne!(calm.normalised, pushed.normalised, "pushes");
     let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
     assert_ne!(calm.normalised, noisy.normalised, "force noise");
+    let twisted = eval(&["--torque-noise-nm", "0.05"], "twisted.json");
+    assert_ne!(calm.normalised, twisted.normalised, "moment noise");
     // The box square to the peg's start instead of turned up to 0.26 rad.
     let square = eval(&["--box-yaw-range-rad", "0"], "square.json");
     assert_ne!(calm.normalised, square.normalised, "box yaw");
@@ -193,6 +195,8 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert!(err.contains("--box-yaw-range-rad -0.1"), "{err}");
     let err = refused("--force-noise-n=-1");
     assert!(err.contains("force_std_n"), "{err}");
+    let err = refused("--torque-noise-nm=-1");
+    assert!(err.contains("torque_std_nm"), "{err}");
 }
 
 #[test]

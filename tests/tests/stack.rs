@@ -862,6 +862,49 @@ fn a_trained_policy_drives_the_stack_live() {
         last < 0.003 && last < 0.2 * first,
         "the policy centred the tip over the hole: {first} → {last}"
     );
+    // `--last` takes the checkpoint's last policy over its best: here a
+    // zero policy (every action 0) after the centring one as the best.
+    let mut c = learner::rl::run::read_checkpoint(&policy).unwrap();
+    let centring = c.state.policy.clone();
+    c.best = Some(learner::rl::run::BestPolicy {
+        iteration: 1,
+        env_steps: 0,
+        mean_normalised: 1.0,
+        policy: centring,
+    });
+    c.state.policy.net.iter_mut().for_each(|w| *w = 0.0);
+    let both = dir.path().join("best-and-last.json");
+    std::fs::write(&both, serde_json::to_vec(&c).unwrap()).unwrap();
+    let out = Command::new(tests::stack_bins().join("learner"))
+        .args(["stack", "--lockstep", "--episodes", "1", "--seed", "4"])
+        .args(["--episode-timeout-s", "1", "--namespace"])
+        .arg(tests::unique_namespace("policy-last"))
+        .arg("--log-dir")
+        .arg(dir.path().join("last-logs"))
+        .arg("--policy")
+        .arg(&both)
+        .arg("--last")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr) + String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{said}");
+    assert!(said.contains("acting with the last policy"), "{said}");
+    let log = std::fs::read_dir(dir.path().join("last-logs"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the episode's log");
+    let actions = learner::log::LogReader::open(&log)
+        .unwrap()
+        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .unwrap();
+    assert!(actions.len() >= 15, "{} actions", actions.len());
+    assert!(
+        actions.iter().all(|a| a.delta_pos_m == [0.0; 3]),
+        "the last (zero) policy acted: {:?}",
+        actions[0].delta_pos_m
+    );
 }
 
 /// A representation policy live: an untrained Full Model (d = 16, the
