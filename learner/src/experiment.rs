@@ -526,6 +526,25 @@ fn policy_stage(
     Ok(policy_run::read_checkpoint(&trained)?)
 }
 
+/// Refuses `field`'s file at `path` when its camera (`other`; none: no
+/// check) is not the policy's world's `camera`, naming both and `advice`.
+fn policy_camera(
+    camera: &hw_sim::config::CameraConfig,
+    other: Option<shared_mem_schema::CameraCalibration>,
+    field: &str,
+    path: &Path,
+    advice: &str,
+) -> Result<()> {
+    match crate::rl::observe::check_calibration(camera, other) {
+        Ok(()) => Ok(()),
+        Err(crate::rl::RlEnvError::Camera { world, model }) => bail!(
+            "{field} {}: its camera ({model}) is not the policy's world's ({world}); {advice}",
+            path.display()
+        ),
+        Err(e) => Err(e.into()),
+    }
+}
+
 /// The dataset: opened where it is, or collected and built there in the
 /// policy's environment `env` (its world, camera included, and its
 /// controller; `collect_world` in place of the world, with the same camera),
@@ -546,16 +565,14 @@ fn ensure_dataset(
         // variant with a representation uses the dataset.)
         env.world.camera.validate()?;
         if uses_representation {
-            match crate::rl::observe::check_calibration(&env.world.camera, ds.meta.camera) {
-                Ok(()) => {}
-                Err(crate::rl::RlEnvError::Camera { world, model }) => bail!(
-                    "data.dataset {}: its camera ({model}) is not the policy's world's ({world}); \
-                     give data.dataset a new path to collect one through the policy's camera, or \
-                     set the policy configuration's [env.world.camera] to the dataset's",
-                    d.dataset.display()
-                ),
-                Err(e) => return Err(e.into()),
-            }
+            policy_camera(
+                &env.world.camera,
+                ds.meta.camera,
+                "data.dataset",
+                &d.dataset,
+                "give data.dataset a new path to collect one through the policy's camera, or set \
+                 the policy configuration's [env.world.camera] to the dataset's",
+            )?;
         }
         return Ok(d.dataset.clone());
     }
@@ -569,14 +586,13 @@ fn ensure_dataset(
         Some(p) => {
             let w = hw_sim::WorldConfig::from_file(p)
                 .with_context(|| format!("data.collect_world {}", p.display()))?;
-            ensure!(
-                w.camera
-                    .calibration()
-                    .same_camera(&env.world.camera.calibration()),
-                "data.collect_world {}: its camera is not the policy's world's; a representation \
-                 of its images would be refused by the policy",
-                p.display()
-            );
+            policy_camera(
+                &env.world.camera,
+                Some(w.camera.calibration()),
+                "data.collect_world",
+                p,
+                "a representation of its images would be refused by the policy",
+            )?;
             w
         }
     };

@@ -555,13 +555,14 @@ fn the_command_killed_mid_epoch_resumes_from_its_checkpoint() {
 fn an_experiment_collects_through_the_policys_camera() {
     use learner::experiment::{ExperimentConfig, RunOptions, run};
     let dir = test_support::scratch_dir("experiment-camera");
+    // The policy's camera, which the collection's own world shares.
+    let camera = format!(
+        "width = {SIDE}\nheight = {SIDE}\neye_m = [0.9, -0.24, 0.77]\ntarget_m = [0.58, 0.0, 0.2]\n"
+    );
     let policy = dir.join("policy.toml");
     std::fs::write(
         &policy,
-        format!(
-            "num_envs = 2\nenv_steps = 400\n\n[env.world.camera]\nwidth = {SIDE}\n\
-             height = {SIDE}\neye_m = [0.9, -0.24, 0.77]\ntarget_m = [0.58, 0.0, 0.2]\n"
-        ),
+        format!("num_envs = 2\nenv_steps = 400\n\n[env.world.camera]\n{camera}"),
     )
     .unwrap();
     let repr = dir.join("repr.toml");
@@ -574,13 +575,9 @@ fn an_experiment_collects_through_the_policys_camera() {
     // The collection's own world: the policy's camera, the box turned by at
     // most 0.05 rad (the policy's world keeps the default 0.26).
     let world = dir.join("world.toml");
-    let camera = format!(
-        "[camera]\nwidth = {SIDE}\nheight = {SIDE}\neye_m = [0.9, -0.24, 0.77]\n\
-         target_m = [0.58, 0.0, 0.2]\n"
-    );
     std::fs::write(
         &world,
-        format!("{camera}\n[task]\nbox_yaw_range_rad = 0.05\n"),
+        format!("[camera]\n{camera}\n[task]\nbox_yaw_range_rad = 0.05\n"),
     )
     .unwrap();
     let cfg_path = dir.join("experiment.toml");

@@ -24,6 +24,23 @@ fn learner() -> Command {
     Command::new(env!("CARGO_BIN_EXE_learner"))
 }
 
+/// `learner policy eval --checkpoint ck [extra…] --json json` to its end;
+/// returns the report it wrote and what it printed.
+fn eval_report(ck: &Path, extra: &[&str], json: &Path) -> (learner::rl::run::EvalReport, String) {
+    let o = learner()
+        .args(["policy", "eval"])
+        .args(extra)
+        .arg("--json")
+        .arg(json)
+        .arg("--checkpoint")
+        .arg(ck)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap();
+    (report, String::from_utf8_lossy(&o.stdout).to_string())
+}
+
 /// `learner policy train [extra…] --config cfg --out out` to its end.
 fn train(extra: &[&str], cfg: &Path, out: &Path) -> Output {
     learner()
@@ -150,21 +167,9 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     // 60 steps in one batch: 2 epochs of 4 minibatches of ≤ 16.
     assert_eq!(c.state.adam.t, 8);
     let eval = |extra: &[&str], json: &str| {
-        let path = dir.path().join(json);
-        let o = learner()
-            .args(["policy", "eval", "--episodes", "1", "--peg", "triangle"])
-            .args(extra)
-            .arg("--json")
-            .arg(&path)
-            .arg("--checkpoint")
-            .arg(out.join("checkpoint.json"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        let args = [&["--episodes", "1", "--peg", "triangle"][..], extra].concat();
+        let (r, text) = eval_report(&out.join("checkpoint.json"), &args, &dir.path().join(json));
         assert!(text.contains("triangle peg, trained on square"), "{text}");
-        let r: learner::rl::run::EvalReport =
-            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
         assert_eq!(r.episodes, 1);
         r
     };
@@ -365,20 +370,10 @@ fn the_camera_perturbations_reach_a_representation_policy() {
     let o = train(&[], &cfg, &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let eval = |extra: &[&str], json: &str| {
-        let path = dir.path().join(json);
-        let o = learner()
-            .args(["policy", "eval", "--episodes", "1"])
-            .args(extra)
-            .arg("--json")
-            .arg(&path)
-            .arg("--checkpoint")
-            .arg(out.join("checkpoint.json"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let r: learner::rl::run::EvalReport =
-            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
-        r.normalised
+        let args = [&["--episodes", "1"][..], extra].concat();
+        eval_report(&out.join("checkpoint.json"), &args, &dir.path().join(json))
+            .0
+            .normalised
     };
     // The policy's actions follow z, so a perturbation of what the camera
     // gives changes the episode; the same seed, nothing else differs.
