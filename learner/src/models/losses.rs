@@ -86,7 +86,16 @@ pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) ->
 
 /// Per-sample average endpoint error of `pred` against `target`, both
 /// `[B, 2, S, S]`: the mean over pixels of the flow vectors' distance, `[B]`.
+/// One operation with its own backward pass ([`super::loss_train`]); with
+/// `LEARNER_CONV=burn` the same formula of burn's primitives.
 pub fn endpoint_error(pred: Tensor<4>, target: Tensor<4>) -> Tensor<1> {
+    if !burns_own() {
+        return Tensor::from_dispatch(<Dispatch as LossTrain>::epe_train(
+            pred.into_dispatch(),
+            target.into_dispatch(),
+            EPE_EPS as f32,
+        ));
+    }
     let [b, _, _, _] = pred.dims();
     // A square as a product: `powf` is a transcendental call per value,
     // forward and again backward.
