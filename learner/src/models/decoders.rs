@@ -3,8 +3,10 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
-use super::conv_train::{conv_transpose2d, conv2d};
+use super::conv_train::{burns_own, conv_transpose2d, conv2d};
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
+use super::resize_train::{ResizeTrain, interpolation_matrix_t};
+use burn::backend::Dispatch;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
@@ -65,13 +67,19 @@ fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
         .init(device)
 }
 
-/// Bilinear upsampling by `factor` with aligned corners, written as two
-/// products with constant interpolation matrices (`U_h · X · U_wᵀ`) rather
-/// than burn's `interpolate`: burn's GPU backends have no backward pass for
-/// bilinear interpolation, and a product differentiates on every backend.
-/// The same map as `interpolate(.., Bilinear, align_corners)`, tested
-/// against it.
+/// Bilinear upsampling by `factor` with aligned corners, one operation with
+/// its own backward pass ([`super::resize_train`]; on the GPU backends two
+/// products with constant interpolation matrices, `U_h · X · U_wᵀ`: burn's
+/// GPU backends have no backward pass for `interpolate`). With
+/// `LEARNER_CONV=burn` the products of burn's tensor operations. The same
+/// map as `interpolate(.., Bilinear, align_corners)`, tested against it.
 fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
+    if !burns_own() {
+        return Tensor::from_dispatch(<Dispatch as ResizeTrain>::upsample_train(
+            x.into_dispatch(),
+            factor,
+        ));
+    }
     let [b, c, h, w] = x.dims();
     let (ho, wo) = (h * factor, w * factor);
     let device = x.device();
@@ -88,26 +96,6 @@ fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
     x.reshape([b * c, wo, ho])
         .swap_dims(1, 2)
         .reshape([b, c, ho, wo])
-}
-
-/// `Uᵀ`, row-major `[n_in, n_out]`, of linear interpolation from `n_in` to
-/// `n_out` samples with aligned corners: output `i` sits at input
-/// coordinate `i (n_in − 1) / (n_out − 1)`.
-fn interpolation_matrix_t(n_in: usize, n_out: usize) -> Vec<f32> {
-    let mut u = vec![0.0f32; n_in * n_out];
-    for i in 0..n_out {
-        let src = if n_out > 1 {
-            i as f64 * (n_in - 1) as f64 / (n_out - 1) as f64
-        } else {
-            0.0
-        };
-        let i0 = (src.floor() as usize).min(n_in - 1);
-        let i1 = (i0 + 1).min(n_in - 1);
-        let frac = (src - i0 as f64) as f32;
-        u[i0 * n_out + i] += 1.0 - frac;
-        u[i1 * n_out + i] += frac;
-    }
-    u
 }
 
 /// Channels of the up-convolutions, coarsest first.

@@ -30,6 +30,7 @@ pub mod inputs;
 pub mod loss_train;
 pub mod losses;
 pub mod net;
+pub mod resize_train;
 
 pub use config::{EeTarget, LossWeights, Modalities, ModelConfig, ModelKind};
 pub use encoder::Encoder;
