@@ -3,6 +3,7 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
+use super::cat_train::CatTrain;
 use super::conv_train::{burns_own, conv_transpose2d, conv2d};
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
 use super::resize_train::{ResizeTrain, interpolation_matrix_t};
@@ -65,6 +66,19 @@ fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
         .with_stride([2, 2])
         .with_padding([1, 1])
         .init(device)
+}
+
+/// `a` and `b` joined along the channels: one operation with its own
+/// backward pass ([`super::cat_train`]), or burn's `cat` under
+/// `LEARNER_CONV=burn`.
+fn join(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
+    if burns_own() {
+        return Tensor::cat(vec![a, b], 1);
+    }
+    Tensor::from_dispatch(<Dispatch as CatTrain>::cat_channels_train(
+        a.into_dispatch(),
+        b.into_dispatch(),
+    ))
 }
 
 /// Bilinear upsampling by `factor` with aligned corners, one operation with
@@ -156,13 +170,10 @@ impl FlowDecoder {
         let coarsest = &maps[5];
         let [b, d, s, _] = coarsest.dims();
         let tiled = feature.reshape([b, d, 1, 1]).expand([b, d, s, s]);
-        let mut x = act(conv2d(
-            &self.entry,
-            Tensor::cat(vec![coarsest.clone(), tiled], 1),
-        ));
+        let mut x = act(conv2d(&self.entry, join(coarsest.clone(), tiled)));
         for (i, u) in self.ups.iter().enumerate() {
             x = act(conv_transpose2d(u, x));
-            x = Tensor::cat(vec![x, maps[4 - i].clone()], 1);
+            x = join(x, maps[4 - i].clone());
         }
         let mask_logits = conv2d(&self.mask, x.clone());
         let flow = conv2d(&self.flow, x) * sigmoid(mask_logits.clone());

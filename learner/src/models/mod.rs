@@ -17,6 +17,7 @@
 //! nothing here reads files except the exported model's loader.
 
 pub mod act_train;
+pub mod cat_train;
 pub mod config;
 mod conv_direct;
 pub mod conv_train;
