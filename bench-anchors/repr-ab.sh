@@ -28,7 +28,7 @@ for r in $(seq 1 "$ROUNDS"); do
             new) line=$(RAYON_NUM_THREADS=$THREADS "$NEW" train "$BATCH" "$STEPS") ;;
             torch) line=$($PY train "$BATCH" "$STEPS" "$THREADS" 2>/dev/null) ;;
         esac
-        echo "{\"round\": $r, \"bin\": \"$side\", ${line#\{}" | tee -a "$OUT"
+        echo "{\"round\": $r, \"bin\": \"$side\", \"at\": \"$(date -u +%FT%TZ)\", ${line#\{}" | tee -a "$OUT"
     done
 done
 python3 bench-anchors/repr_ab_table.py "$OUT"

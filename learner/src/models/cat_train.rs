@@ -56,10 +56,7 @@ impl CatTrain for burn::backend::Cube {}
 
 /// A `[B, C, H, W]` shape, checked.
 fn dims4(what: &str, shape: &[usize]) -> [usize; 4] {
-    match *shape {
-        [b, c, h, w] => [b, c, h, w],
-        _ => panic!("channel concatenation: {what} of shape {shape:?}, not [B, C, H, W]"),
-    }
+    super::conv_train::dims4("channel concatenation", what, shape)
 }
 
 /// `dst` written from `src`, value by value (the same length).
@@ -146,8 +143,11 @@ impl<B: Backend + CatTrain, C: CheckpointStrategy> CatTrain for Autodiff<B, C> {
             }
         }
 
-        let channels = |t: &FloatTensor<Self>| t.shape().to_vec().get(1).copied().unwrap_or(0);
-        let (ca, cb) = (channels(&a), channels(&b));
+        let channels = |what, t: &FloatTensor<Self>| dims4(what, &t.shape().to_vec())[1];
+        let (ca, cb) = (
+            channels("the first map", &a),
+            channels("the second map", &b),
+        );
         match CatBackward
             .prepare::<C>([a.node(), b.node()])
             .compute_bound()

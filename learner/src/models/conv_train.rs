@@ -1658,6 +1658,14 @@ pub(crate) fn f32s(t: &FlexTensor) -> Option<FlexTensor> {
     (t.dtype() == DType::F32).then(|| t.to_contiguous())
 }
 
+/// A `[B, C, H, W]` shape, or a panic naming `what` in `op`.
+pub(crate) fn dims4(op: &str, what: &str, shape: &[usize]) -> [usize; 4] {
+    match *shape {
+        [b, c, h, w] => [b, c, h, w],
+        _ => panic!("{op}: {what} of shape {shape:?}, not [B, C, H, W]"),
+    }
+}
+
 /// A contiguous f32 flex tensor of `shape` holding `values`.
 pub(crate) fn flex_tensor(values: Vec<f32>, shape: Vec<usize>) -> FlexTensor {
     FlexTensor::from_data(burn::tensor::TensorData::new(values, shape))

@@ -6,7 +6,7 @@
 use super::cat_train::CatTrain;
 use super::conv_train::{burns_own, conv_transpose2d, conv2d};
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
-use super::resize_train::{ResizeTrain, interpolation_matrix_t};
+use super::resize_train::{self, ResizeTrain};
 use burn::backend::Dispatch;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
@@ -85,31 +85,16 @@ fn join(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
 /// its own backward pass ([`super::resize_train`]; on the GPU backends two
 /// products with constant interpolation matrices, `U_h · X · U_wᵀ`: burn's
 /// GPU backends have no backward pass for `interpolate`). With
-/// `LEARNER_CONV=burn` the products of burn's tensor operations. The same
-/// map as `interpolate(.., Bilinear, align_corners)`, tested against it.
+/// `LEARNER_CONV=burn` those products of burn's operations, tracked one by
+/// one. The same map as `interpolate(.., Bilinear, align_corners)`, tested
+/// against it.
 fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
-    if !burns_own() {
-        return Tensor::from_dispatch(<Dispatch as ResizeTrain>::upsample_train(
-            x.into_dispatch(),
-            factor,
-        ));
-    }
-    let [b, c, h, w] = x.dims();
-    let (ho, wo) = (h * factor, w * factor);
-    let device = x.device();
-    // [B·C·H, W] · U_wᵀ [W, Wo] → rows upsampled.
-    let uw = super::net::tensor(interpolation_matrix_t(w, wo), [w, wo], &device);
-    let x = x.reshape([b * c * h, w]).matmul(uw);
-    // Columns: bring H last, [B·C·Wo, H] · U_hᵀ [H, Ho].
-    let uh = super::net::tensor(interpolation_matrix_t(h, ho), [h, ho], &device);
-    let x = x
-        .reshape([b * c, h, wo])
-        .swap_dims(1, 2)
-        .reshape([b * c * wo, h])
-        .matmul(uh);
-    x.reshape([b * c, wo, ho])
-        .swap_dims(1, 2)
-        .reshape([b, c, ho, wo])
+    let x = x.into_dispatch();
+    Tensor::from_dispatch(if burns_own() {
+        resize_train::products::<Dispatch>(x, factor, false)
+    } else {
+        <Dispatch as ResizeTrain>::upsample_train(x, factor)
+    })
 }
 
 /// Channels of the up-convolutions, coarsest first.
@@ -291,7 +276,8 @@ mod tests {
             .fold(0.0, f32::max)
     }
 
-    /// The product form is burn's bilinear interpolation, in value and in
+    /// Our upsampling (`resize_train` on flex) is burn's bilinear
+    /// interpolation, in value and in
     /// gradient, on a non-square map at both factors the decoders use, and
     /// on maps one pixel high and one pixel square (the reconstruction
     /// decoder starts at side / 64: 1×1 for 64 px images).

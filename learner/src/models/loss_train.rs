@@ -26,8 +26,8 @@ use burn::tensor::Shape;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
-/// Elementwise binary cross-entropy of logits against targets,
-/// differentiable in the logits.
+/// Elementwise binary cross-entropy of logits against targets, and the
+/// flow's endpoint error, each differentiable in its prediction.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
 pub trait LossTrain: Backend {
     /// `max(x, 0) − x·y + ln(1 + e^−|x|)` for logits `x` and targets `y`.
@@ -69,9 +69,9 @@ pub trait LossTrain: Backend {
 
 /// A flow's `[B, 2, H, W]`, checked.
 fn flow_dims(shape: &[usize]) -> [usize; 3] {
-    match *shape {
+    match super::conv_train::dims4("endpoint error", "a flow", shape) {
         [b, 2, h, w] => [b, h, w],
-        _ => panic!("endpoint error: a flow of shape {shape:?}, not [B, 2, H, W]"),
+        _ => panic!("endpoint error: a flow of shape {shape:?}, not two channels"),
     }
 }
 
@@ -88,7 +88,7 @@ fn epe_norms<B: Backend>(
 
 /// The endpoint error of `B`'s primitives: the GPU backends', and flex's
 /// for other dtypes than f32.
-fn epe_composed<B: Backend>(
+pub(super) fn epe_composed<B: Backend>(
     pred: FloatTensor<B>,
     target: FloatTensor<B>,
     eps: f32,
@@ -160,16 +160,15 @@ fn epe_sample(p: &[f32], t: &[f32], n: usize, eps: f32) -> f32 {
     sum / n as f32
 }
 
-/// The flow's prediction, target and (backward) gradient as contiguous f32
-/// values, or `None` for another dtype.
+/// The flow's prediction and target as contiguous f32 values (their shapes
+/// checked equal), or `None` for another dtype.
 fn epe_inputs(pred: &FlexTensor, target: &FlexTensor) -> Option<(FlexTensor, FlexTensor)> {
-    let (p, t) = (f32s(pred)?, f32s(target)?);
     assert_eq!(
         pred.shape().to_vec(),
         target.shape().to_vec(),
         "endpoint error: prediction and target differ in shape"
     );
-    Some((p, t))
+    Some((f32s(pred)?, f32s(target)?))
 }
 
 impl LossTrain for Flex {

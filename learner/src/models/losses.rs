@@ -15,7 +15,7 @@ use burn::backend::Dispatch;
 use burn::prelude::*;
 
 /// Keeps the endpoint error's square root differentiable at zero flow.
-const EPE_EPS: f64 = 1e-8;
+const EPE_EPS: f32 = 1e-8;
 
 /// A batch's labels as tensors.
 #[derive(Debug, Clone)]
@@ -89,24 +89,12 @@ pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) ->
 /// One operation with its own backward pass ([`super::loss_train`]); with
 /// `LEARNER_CONV=burn` the same formula of burn's primitives.
 pub fn endpoint_error(pred: Tensor<4>, target: Tensor<4>) -> Tensor<1> {
-    if !burns_own() {
-        return Tensor::from_dispatch(<Dispatch as LossTrain>::epe_train(
-            pred.into_dispatch(),
-            target.into_dispatch(),
-            EPE_EPS as f32,
-        ));
-    }
-    let [b, _, _, _] = pred.dims();
-    // A square as a product: `powf` is a transcendental call per value,
-    // forward and again backward.
-    let d = pred - target;
-    (d.clone() * d)
-        .sum_dim(1)
-        .add_scalar(EPE_EPS)
-        .sqrt()
-        .reshape([b as i32, -1])
-        .mean_dim(1)
-        .squeeze_dim(1)
+    let (p, t, eps) = (pred.into_dispatch(), target.into_dispatch(), EPE_EPS);
+    Tensor::from_dispatch(if burns_own() {
+        loss_train::epe_composed::<Dispatch>(p, t, eps)
+    } else {
+        <Dispatch as LossTrain>::epe_train(p, t, eps)
+    })
 }
 
 fn per_sample_mean<const D: usize>(t: Tensor<D>) -> Tensor<1> {

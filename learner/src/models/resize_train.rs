@@ -45,7 +45,7 @@ impl ResizeTrain for burn::backend::Cube {}
 
 /// `Uᵀ`, row-major `[n_in, n_out]`, of linear interpolation from `n_in` to
 /// `n_out` samples with aligned corners (its columns are [`taps`]).
-pub(crate) fn interpolation_matrix_t(n_in: usize, n_out: usize) -> Vec<f32> {
+fn interpolation_matrix_t(n_in: usize, n_out: usize) -> Vec<f32> {
     let mut u = vec![0.0f32; n_in * n_out];
     for (i, (i0, i1, frac)) in taps(n_in, n_out).into_iter().enumerate() {
         u[i0 * n_out + i] += 1.0 - frac;
@@ -72,21 +72,32 @@ fn taps(n_in: usize, n_out: usize) -> Vec<(usize, usize, f32)> {
         .collect()
 }
 
-/// A `[B, C, H, W]` shape, checked.
-fn dims4(shape: &[usize]) -> [usize; 4] {
-    match *shape {
-        [b, c, h, w] => [b, c, h, w],
-        _ => panic!("upsampling: a tensor of shape {shape:?}, not [B, C, H, W]"),
-    }
+/// A `[B, C, H, W]` shape and a factor of at least 1, checked.
+fn dims4(shape: &[usize], factor: usize) -> [usize; 4] {
+    assert!(factor >= 1, "upsampling: a factor of 0");
+    let dims = super::conv_train::dims4("upsampling", "a tensor", shape);
+    assert!(
+        dims.iter().all(|&d| d > 0),
+        "upsampling: an empty tensor of shape {shape:?}"
+    );
+    dims
 }
 
 /// The products form of `B`'s primitives: `x [B, C, H, W]` upsampled by
 /// `factor` (`U_h · X · U_wᵀ` per plane), or with `adjoint` a gradient
 /// `[B, C, H·f, W·f]` taken back (`U_hᵀ · G · U_w`). The GPU backends' both
 /// ways, and flex's for other dtypes than f32.
-fn products<B: Backend>(x: FloatTensor<B>, factor: usize, adjoint: bool) -> FloatTensor<B> {
-    let [b, c, h, w] = dims4(&x.shape().to_vec());
+pub(super) fn products<B: Backend>(
+    x: FloatTensor<B>,
+    factor: usize,
+    adjoint: bool,
+) -> FloatTensor<B> {
+    let [b, c, h, w] = dims4(&x.shape().to_vec(), factor);
     let (ho, wo) = if adjoint {
+        assert!(
+            h.is_multiple_of(factor) && w.is_multiple_of(factor),
+            "upsampling: a gradient of {h}×{w} for a factor of {factor}"
+        );
         (h / factor, w / factor)
     } else {
         (h * factor, w * factor)
@@ -126,7 +137,7 @@ fn products<B: Backend>(x: FloatTensor<B>, factor: usize, adjoint: bool) -> Floa
 
 impl ResizeTrain for Flex {
     fn upsample_train(x: FlexTensor, factor: usize) -> FlexTensor {
-        let [b, c, h, w] = dims4(&x.shape().to_vec());
+        let [b, c, h, w] = dims4(&x.shape().to_vec(), factor);
         let Some(xc) = f32s(&x) else {
             return products::<Flex>(x, factor, false);
         };
@@ -162,7 +173,7 @@ impl ResizeTrain for Flex {
     }
 
     fn upsample_train_backward(grad: FlexTensor, factor: usize) -> FlexTensor {
-        let [b, c, ho, wo] = dims4(&grad.shape().to_vec());
+        let [b, c, ho, wo] = dims4(&grad.shape().to_vec(), factor);
         assert!(
             ho.is_multiple_of(factor) && wo.is_multiple_of(factor),
             "upsampling: a gradient of {ho}×{wo} for a factor of {factor}"
