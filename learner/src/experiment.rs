@@ -389,25 +389,40 @@ pub fn run(
                 paper_completed: v.paper_completed.filter(|_| peg == trained_peg),
             });
         }
+        // The table so far after each variant: a run of many hours shows
+        // each row as it comes.
+        write_results(out, &with_others(cfg, opts, out, &rows))?;
     }
-    // A partial invocation (--only) keeps the other variants' rows on file.
-    if !opts.only.is_empty()
-        && let Ok(text) = std::fs::read(out.join("results.json"))
-        && let Ok(old) = serde_json::from_slice::<Vec<ResultRow>>(&text)
-    {
-        let mut merged = Vec::new();
-        for v in &cfg.variant {
-            let from: &[ResultRow] = if opts.only.contains(&v.name) {
-                &rows
-            } else {
-                &old
-            };
-            merged.extend(from.iter().filter(|r| r.variant == v.name).cloned());
-        }
-        rows = merged;
-    }
+    let rows = with_others(cfg, opts, out, &rows);
     write_results(out, &rows)?;
     Ok(rows)
+}
+
+/// `rows` of this invocation, and for a partial one (`--only`) the other
+/// variants' rows on file, in the configuration's order.
+fn with_others(
+    cfg: &ExperimentConfig,
+    opts: &RunOptions,
+    out: &Path,
+    rows: &[ResultRow],
+) -> Vec<ResultRow> {
+    if opts.only.is_empty() {
+        return rows.to_vec();
+    }
+    let old: Vec<ResultRow> = std::fs::read(out.join("results.json"))
+        .ok()
+        .and_then(|text| serde_json::from_slice(&text).ok())
+        .unwrap_or_default();
+    let mut merged = Vec::new();
+    for v in &cfg.variant {
+        let from = if opts.only.contains(&v.name) {
+            rows
+        } else {
+            &old[..]
+        };
+        merged.extend(from.iter().filter(|r| r.variant == v.name).cloned());
+    }
+    merged
 }
 
 /// How the variants' policies learn.

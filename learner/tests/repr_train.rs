@@ -762,6 +762,25 @@ fn an_experiment_runs_every_stage_and_resumes() {
     assert_eq!(stages2.lines().count(), 7 + 2, "{stages2}");
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert_eq!(md.lines().count(), 2 + 4, "{md}");
+    // Stopped after the first variant (a new evaluation seed, Ctrl-C once
+    // its last evaluation is on file): that variant's rows are in the
+    // results already, the second's not.
+    let mut seed9 = cfg.clone();
+    seed9.eval.seed = 9;
+    let full_seed = || {
+        std::fs::read(out.join("Full/eval-hexagon.json"))
+            .ok()
+            .and_then(|t| serde_json::from_slice::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["seed"].as_u64())
+    };
+    let e = run(&seed9, &out, &opts, &|| full_seed() == Some(9)).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 2, "{md}");
+    assert!(
+        md.contains("| Full | square |") && !md.contains("ground-truth"),
+        "{md}"
+    );
     // The paper's number belongs to the training peg, not to transfer.
     assert_eq!(rows[1].peg, hw_sim::PegShape::Hexagon);
     assert_eq!(rows[1].paper_completed, None);
