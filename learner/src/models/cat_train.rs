@@ -59,13 +59,6 @@ fn dims4(what: &str, shape: &[usize]) -> [usize; 4] {
     super::conv_train::dims4("channel concatenation", what, shape)
 }
 
-/// `dst` written from `src`, value by value (the same length).
-fn copy(dst: &mut [MaybeUninit<f32>], src: &[f32]) {
-    for (d, &v) in dst.iter_mut().zip(src) {
-        d.write(v);
-    }
-}
-
 impl CatTrain for Flex {
     fn cat_channels_train(a: FlexTensor, b: FlexTensor) -> FlexTensor {
         let [n, ca, h, w] = dims4("the first map", &a.shape().to_vec());
@@ -83,8 +76,8 @@ impl CatTrain for Flex {
                 .zip(xa.par_chunks(ca * hw).zip(xb.par_chunks(cb * hw)))
                 .for_each(|(y, (a, b))| {
                     let (ya, yb) = y.split_at_mut(ca * hw);
-                    copy(ya, a);
-                    copy(yb, b);
+                    ya.write_copy_of_slice(a);
+                    yb.write_copy_of_slice(b);
                 })
         };
         // SAFETY: each sample's chunk of `y` is `(Ca + Cb)·H·W`, its two
@@ -107,7 +100,9 @@ impl CatTrain for Flex {
         let fill = |y: &mut [MaybeUninit<f32>]| {
             y.par_chunks_mut(len * hw)
                 .zip(xs.par_chunks(c * hw))
-                .for_each(|(y, x)| copy(y, &x[start * hw..][..len * hw]))
+                .for_each(|(y, x)| {
+                    y.write_copy_of_slice(&x[start * hw..][..len * hw]);
+                })
         };
         // SAFETY: each sample's chunk of `y` is `len·H·W`, written whole from
         // its chunk of `x` (`start + len ≤ C`, checked).

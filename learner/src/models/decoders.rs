@@ -277,8 +277,8 @@ mod tests {
     }
 
     /// Our upsampling (`resize_train` on flex) is burn's bilinear
-    /// interpolation, in value and in
-    /// gradient, on a non-square map at both factors the decoders use, and
+    /// interpolation, in value and in gradient, on a non-square map at both
+    /// factors the decoders use, and
     /// on maps one pixel high and one pixel square (the reconstruction
     /// decoder starts at side / 64: 1×1 for 64 px images).
     #[test]

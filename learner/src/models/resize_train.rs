@@ -207,9 +207,7 @@ impl ResizeTrain for Flex {
                                 row[j0] += v * (1.0 - f);
                                 row[j1] += v * f;
                             }
-                            for (d, &v) in dr.iter_mut().zip(row.iter()) {
-                                d.write(v);
-                            }
+                            dr.write_copy_of_slice(row);
                         }
                     },
                 )
