@@ -916,6 +916,26 @@ mod tests {
                 DeviceKind::Cpu
             };
             assert_eq!(cfg.representation.device, expected, "{}", p.display());
+            // The files it names load too: a typo there would otherwise
+            // surface hours into a run. (Paths are the repository root's.)
+            let root = dir.join("../..");
+            let at = |f: &Path| format!("{}: {}", p.display(), f.display());
+            if let Some(f) = &cfg.policy.distill {
+                distill::read_config(&root.join(f)).unwrap_or_else(|e| panic!("{}: {e}", at(f)));
+            }
+            if let Some(f) = &cfg.policy.config {
+                policy_run::read_config(&root.join(f)).unwrap_or_else(|e| panic!("{}: {e}", at(f)));
+            }
+            if let Some(f) = &cfg.data.collect_world {
+                hw_sim::WorldConfig::from_file(&root.join(f))
+                    .unwrap_or_else(|e| panic!("{}: {e}", at(f)));
+            }
+            for v in &cfg.variant {
+                if let Some(f) = &v.representation {
+                    train::TrainConfig::from_file(&root.join(f))
+                        .unwrap_or_else(|e| panic!("{}: {e}", at(f)));
+                }
+            }
             n += 1;
         }
         assert!(n >= 3, "{n} experiments in {}", dir.display());
