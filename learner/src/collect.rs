@@ -747,12 +747,6 @@ pub fn collect_fast(
         }
         first
     });
-    let states = done.load(Ordering::Relaxed);
-    progress.update(
-        states,
-        format!("{} episodes", episodes_done.load(Ordering::Relaxed)),
-    );
-    progress.finish();
     let mut shards = shards.into_inner().expect("not poisoned");
     shards.sort_by_key(|s| s.episode);
     // Episodes this run started past the budget's cut (before the episodes
@@ -778,9 +772,14 @@ pub fn collect_fast(
             write_manifest(&manifest_path, &shards).map_err(manifest_err)?;
         }
     }
+    // The last line counts what was kept: the surplus episodes above were
+    // run but are not in the collection.
+    let states = shards.iter().map(|s| s.states).sum();
+    progress.update(states, format!("{} episodes", shards.len()));
+    progress.finish();
     ran?;
     Ok(CollectSummary {
-        states: shards.iter().map(|s| s.states).sum(),
+        states,
         shards,
         wall_s: start.elapsed().as_secs_f64(),
     })
