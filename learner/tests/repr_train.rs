@@ -284,6 +284,39 @@ fn an_interrupted_run_resumes_to_the_same_parameters() {
     assert!(e.contains("another configuration"), "{e}");
 }
 
+/// A variant without a pairing loss writes NaN accuracies into its rows (as
+/// JSON nulls in the checkpoint); stopped after its first epoch, it resumes.
+#[test]
+fn a_run_without_pairing_resumes_after_its_first_epoch() {
+    let mut cfg = small(ModelKind::Full, 2);
+    cfg.loss.pairing = 0.0;
+    cfg.train.max_batches_per_epoch = 2;
+    cfg.train.max_test_batches = 1;
+    cfg.train.checkpoint_every = 1000;
+    let out = test_support::scratch_dir("repr-no-pairing");
+    let opts = |resume, n| TrainOptions {
+        resume,
+        stop_after_steps: n,
+        ..Default::default()
+    };
+    let s = train::train(&cfg, dataset(), &out, &opts(false, Some(3)), &|| false).unwrap();
+    assert!(!s.finished);
+    assert!(
+        s.rows.iter().any(|r| r.pairing_acc.is_nan()),
+        "{:?}",
+        s.rows
+    );
+    let s = train::train(&cfg, dataset(), &out, &opts(true, None), &|| false)
+        .expect("a checkpoint with NaN accuracies resumes");
+    assert!(s.finished);
+    assert_eq!(s.rows.len(), 4);
+    assert!(
+        s.rows
+            .iter()
+            .all(|r| r.pairing_acc.is_nan() && r.loss.pairing.is_nan())
+    );
+}
+
 #[test]
 fn the_baselines_train_on_the_same_data() {
     for kind in [ModelKind::Deterministic, ModelKind::Reconstruction] {
