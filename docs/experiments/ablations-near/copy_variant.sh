@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Copies what `learner experiment --config configs/experiments/ablations_near.toml`
+# wrote for finished variants into this folder: the experiment's results,
+# charts and stage log, and per variant its evaluation, the DAgger's table
+# and curves and the representation's metrics.
+# Usage (from the repository root): docs/experiments/ablations-near/copy_variant.sh VARIANT...
+set -euo pipefail
+run=runs/experiments/ablations_near
+here=docs/experiments/ablations-near
+[ $# -gt 0 ] || { echo "usage: $0 VARIANT..." >&2; exit 2; }
+for v in "$@"; do
+  [ -f "$run/$v/eval-square.json" ] || { echo "$run/$v: no evaluation yet" >&2; exit 1; }
+done
+cp "$run"/results.md "$run"/results.csv "$run"/stages.log "$run"/completed-*.png "$here"/
+for v in "$@"; do
+  mkdir -p "$here/$v"
+  cp "$run/$v"/eval-*.json "$here/$v"/
+  cp "$run/$v"/policy/{distill.csv,distill.png,distill-error.png} "$here/$v"/
+  if [ -f "$run/$v/repr/metrics.csv" ]; then cp "$run/$v/repr/metrics.csv" "$here/$v"/; fi
+done
