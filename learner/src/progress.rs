@@ -76,9 +76,11 @@ impl Progress {
         self.bar.suspend(f)
     }
 
-    /// Ends the bar, leaving its last state on screen (or in the log).
+    /// Ends the bar, leaving its last state on screen (or in the log): a
+    /// job stopped part-way shows where it stopped, not its total.
     pub fn finish(&self) {
-        self.bar.finish();
+        // indicatif's `finish` would set the position to the length.
+        self.bar.abandon();
         if self.plain.is_some() {
             eprintln!("{}", self.line());
         }
@@ -98,5 +100,18 @@ impl Progress {
                 / b.elapsed().as_secs_f64().max(1e-3),
             b.elapsed().as_secs_f64(),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stopped_job_ends_where_it_stopped() {
+        let p = Progress::new(3710, "batches");
+        p.update(650, "epoch 2/10");
+        p.finish();
+        assert!(p.line().starts_with("650/3710 batches"), "{}", p.line());
     }
 }
