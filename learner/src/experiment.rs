@@ -901,7 +901,8 @@ mod tests {
     /// the old `cuda = true` is refused, naming the field.
     #[test]
     fn the_shipped_experiments_load_and_name_their_device() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/experiments");
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let dir = root.join("configs/experiments");
         let mut n = 0;
         for e in std::fs::read_dir(&dir).unwrap() {
             let p = e.unwrap().path();
@@ -922,7 +923,6 @@ mod tests {
             assert_eq!(cfg.representation.device, expected, "{}", p.display());
             // The files it names load too: a typo there would otherwise
             // surface hours into a run. (Paths are the repository root's.)
-            let root = dir.join("../..");
             let at = |f: &Path| format!("{}: {}", p.display(), f.display());
             if let Some(f) = &cfg.policy.distill {
                 distill::read_config(&root.join(f)).unwrap_or_else(|e| panic!("{}: {e}", at(f)));
