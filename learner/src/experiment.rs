@@ -409,10 +409,19 @@ fn with_others(
     if opts.only.is_empty() {
         return rows.to_vec();
     }
-    let old: Vec<ResultRow> = std::fs::read(out.join("results.json"))
-        .ok()
-        .and_then(|text| serde_json::from_slice(&text).ok())
-        .unwrap_or_default();
+    let path = out.join("results.json");
+    // A missing file is a first run; an unreadable one is said aloud, since
+    // the table written next would silently lack the other variants.
+    let old: Vec<ResultRow> = match std::fs::read(&path) {
+        Err(_) => Vec::new(),
+        Ok(text) => serde_json::from_slice(&text).unwrap_or_else(|e| {
+            eprintln!(
+                "experiment: {} unreadable ({e}); the results keep only this run's variants",
+                path.display()
+            );
+            Vec::new()
+        }),
+    };
     let mut merged = Vec::new();
     for v in &cfg.variant {
         let from = if opts.only.contains(&v.name) {
