@@ -3,6 +3,9 @@
 # wrote for finished variants into this folder: the experiment's results,
 # charts and stage log, and per variant its evaluation, the DAgger's table
 # and curves and the representation's metrics.
+# The stage log here keeps every variant's lines: a run on a fresh checkout
+# (its runs/ empty but for restore_results.py's results.json) logs only its
+# own, so those are appended rather than copied over.
 # Usage (from the repository root): docs/experiments/ablations-near/copy_variant.sh VARIANT...
 set -euo pipefail
 run=runs/experiments/ablations_near
@@ -11,9 +14,13 @@ here=docs/experiments/ablations-near
 for v in "$@"; do
   [ -f "$run/$v/eval-square.json" ] || { echo "$run/$v: no evaluation yet" >&2; exit 1; }
 done
-cp "$run"/results.md "$run"/results.csv "$run"/stages.log "$run"/completed-*.png "$here"/
+cp "$run"/results.md "$run"/results.csv "$run"/completed-*.png "$here"/
 for v in "$@"; do
   mkdir -p "$here/$v"
+  # Only lines not yet here, so running it twice appends nothing.
+  awk -v p="$v: " 'index($0, p) == 1' "$run/stages.log" | while IFS= read -r line; do
+    grep -qxF -- "$line" "$here/stages.log" || printf '%s\n' "$line" >> "$here/stages.log"
+  done
   cp "$run/$v"/eval-*.json "$here/$v"/
   cp "$run/$v"/policy/{distill.csv,distill.png,distill-error.png} "$here/$v"/
   if [ -f "$run/$v/repr/metrics.csv" ]; then cp "$run/$v/repr/metrics.csv" "$here/$v"/; fi
