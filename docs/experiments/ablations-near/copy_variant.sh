@@ -18,9 +18,12 @@ cp "$run"/results.md "$run"/results.csv "$run"/completed-*.png "$here"/
 for v in "$@"; do
   mkdir -p "$here/$v"
   # Only lines not yet here, so running it twice appends nothing.
-  awk -v p="$v: " 'index($0, p) == 1' "$run/stages.log" | while IFS= read -r line; do
-    grep -qxF -- "$line" "$here/stages.log" || printf '%s\n' "$line" >> "$here/stages.log"
-  done
+  if [ -f "$run/stages.log" ]; then
+    touch "$here/stages.log"
+    awk -v p="$v: " 'index($0, p) == 1' "$run/stages.log" | while IFS= read -r line; do
+      grep -qxF -- "$line" "$here/stages.log" || printf '%s\n' "$line" >> "$here/stages.log"
+    done
+  fi
   cp "$run/$v"/eval-*.json "$here/$v"/
   cp "$run/$v"/policy/{distill.csv,distill.png,distill-error.png} "$here/$v"/
   if [ -f "$run/$v/repr/metrics.csv" ]; then cp "$run/$v/repr/metrics.csv" "$here/$v"/; fi
