@@ -7,6 +7,7 @@ Usage: loss_ratio.py NAME=metrics.csv [NAME=metrics.csv ...]
 """
 import csv
 import math
+import os
 import sys
 
 TERMS = [
@@ -31,9 +32,13 @@ def last_epoch(path):
 def main():
     cols = []
     for arg in sys.argv[1:]:
-        name, _, path = arg.partition("=")
-        if not path:
-            sys.exit(f"{arg}: expected NAME=metrics.csv")
+        # Names and paths may hold "=" themselves (d=16, runs/.../d=16/...):
+        # the split is at the first "=" whose right side is a file.
+        cuts = [i for i, c in enumerate(arg) if c == "="]
+        found = [(arg[:i], arg[i + 1 :]) for i in cuts if os.path.isfile(arg[i + 1 :])]
+        if not found:
+            sys.exit(f"{arg}: expected NAME=metrics.csv, an existing file")
+        name, path = found[0]
         cols.append((name, *last_epoch(path)))
     if not cols:
         sys.exit(__doc__)
