@@ -413,14 +413,17 @@ fn with_others(
     // A missing file is a first run; an unreadable one is said aloud, since
     // the table written next would silently lack the other variants.
     let old: Vec<ResultRow> = match std::fs::read(&path) {
-        Err(_) => Vec::new(),
-        Ok(text) => serde_json::from_slice(&text).unwrap_or_else(|e| {
-            eprintln!(
-                "experiment: {} unreadable ({e}); the results keep only this run's variants",
-                path.display()
-            );
-            Vec::new()
-        }),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        read => read
+            .map_err(anyhow::Error::from)
+            .and_then(|text| Ok(serde_json::from_slice(&text)?))
+            .unwrap_or_else(|e| {
+                eprintln!(
+                    "experiment: {} unreadable ({e}); the results keep only this run's variants",
+                    path.display()
+                );
+                Vec::new()
+            }),
     };
     let mut merged = Vec::new();
     for v in &cfg.variant {
