@@ -17,12 +17,12 @@ done
 cp "$run"/results.md "$run"/results.csv "$run"/completed-*.png "$here"/
 for v in "$@"; do
   mkdir -p "$here/$v"
-  # Only lines not yet here, so running it twice appends nothing.
+  # Only lines not yet here, so running it twice appends nothing (awk has
+  # read the log here whole before it appends to it).
   if [ -f "$run/stages.log" ]; then
     touch "$here/stages.log"
-    awk -v p="$v: " 'index($0, p) == 1' "$run/stages.log" | while IFS= read -r line; do
-      grep -qxF -- "$line" "$here/stages.log" || printf '%s\n' "$line" >> "$here/stages.log"
-    done
+    awk -v p="$v: " 'FILENAME == ARGV[1] { seen[$0] = 1; next }
+      index($0, p) == 1 && !seen[$0]++' "$here/stages.log" "$run/stages.log" >> "$here/stages.log"
   fi
   cp "$run/$v"/eval-*.json "$here/$v"/
   cp "$run/$v"/policy/{distill.csv,distill.png,distill-error.png} "$here/$v"/

@@ -25,18 +25,16 @@ def main() -> int:
     cfg = tomllib.loads(CONFIG.read_text())
     rows = []
     for v in cfg["variant"]:
-        path = HERE / v["name"] / "eval-square.json"
-        if not path.exists():
-            continue
-        stored = json.loads(path.read_text())
-        rows.append(
-            {
-                "variant": v["name"],
-                "peg": "square",
-                "report": stored["report"],
-                "paper_completed": v.get("paper_completed"),
-            }
-        )
+        # One evaluation per peg, named eval-PEG.json as the experiment names it.
+        for path in sorted((HERE / v["name"]).glob("eval-*.json")):
+            rows.append(
+                {
+                    "variant": v["name"],
+                    "peg": path.stem.removeprefix("eval-"),
+                    "report": json.loads(path.read_text())["report"],
+                    "paper_completed": v.get("paper_completed"),
+                }
+            )
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(rows, indent=1))
     print(f"{OUT}: {', '.join(r['variant'] for r in rows)}")
