@@ -211,6 +211,12 @@ pub struct NoiseConfig {
     pub depth_std_m: f64,
     /// RGB, in 8-bit levels.
     pub rgb_std: f64,
+    /// Per-episode range `[lo, hi]` of a factor on every standard deviation
+    /// above (not the bias or the filter): each reset draws it uniformly
+    /// (stream 8), so that one run sees sensors from `lo` to `hi` times as
+    /// noisy, for a policy that must hold across noise levels. `[1, 1]`:
+    /// the deviations as given, and no draw.
+    pub episode_scale: [f64; 2],
 }
 
 impl Default for NoiseConfig {
@@ -224,6 +230,7 @@ impl Default for NoiseConfig {
             ft_filter_hz: 150.0,
             depth_std_m: 0.0,
             rgb_std: 0.0,
+            episode_scale: [1.0, 1.0],
         }
     }
 }
@@ -453,6 +460,7 @@ impl NoiseConfig {
         ] {
             non_negative(f, v)?;
         }
+        ordered_pair("noise.episode_scale", self.episode_scale)?;
         all_finite("noise.ft_bias", &self.ft_bias)
     }
 }

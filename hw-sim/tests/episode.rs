@@ -115,6 +115,53 @@ fn noise_channels_do_not_shift_each_other() {
     );
 }
 
+/// `noise.episode_scale` draws one factor per episode within its range and
+/// multiplies the deviations by it: the readings' spread about the truth
+/// follows the factor, and a fixed scale of 1 leaves every draw as it was.
+#[test]
+fn the_noise_scale_is_drawn_per_episode_and_scales_the_deviations() {
+    let mut c = WorldConfig::default();
+    c.noise.q_std_rad = 1e-3;
+    c.seed = 11;
+    let plain = run(&c, 50);
+    c.noise.episode_scale = [1.0, 1.0];
+    assert_eq!(plain, run(&c, 50), "a scale of [1, 1] changed the run");
+
+    c.noise.episode_scale = [0.0, 2.0];
+    let mut world = World::new(c.clone()).unwrap();
+    let mut scales = Vec::new();
+    for seed in 0..40 {
+        world.reset(seed).unwrap();
+        let k = world.noise_scale();
+        assert!((0.0..2.0).contains(&k), "seed {seed}: scale {k}");
+        // The spread of q's readings about the truth over some steps.
+        let mut sq = 0.0;
+        let n = 30;
+        for _ in 0..n {
+            world.step(&hold_torques(&world)).unwrap();
+            let (r, q) = (world.readings().q.clone(), world.q().to_vec());
+            sq += r.iter().zip(&q).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        }
+        let rms = (sq / (n * world.q().len()) as f64).sqrt();
+        // 210 draws: the sample RMS lies within 20 % of its deviation.
+        assert!(
+            (rms - k * 1e-3).abs() <= 0.2 * k * 1e-3 + 1e-12,
+            "seed {seed}: scale {k}, RMS {rms}"
+        );
+        scales.push(k);
+    }
+    let (lo, hi) = scales
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), &k| (l.min(k), h.max(k)));
+    assert!(lo < 0.5 && hi > 1.5, "scales not spread over the range: {lo}..{hi}");
+
+    c.noise.episode_scale = [1.0, 0.5];
+    let Err(err) = World::new(c) else {
+        panic!("a range [1, 0.5] was accepted");
+    };
+    assert!(err.to_string().contains("noise.episode_scale"), "{err}");
+}
+
 #[test]
 fn seeds_place_the_box_within_its_region() {
     let mut c = WorldConfig::default();

@@ -259,6 +259,11 @@ enum PolicyCmd {
         /// RGB noise, 8-bit levels (standard deviation per channel).
         #[arg(long)]
         rgb_noise: Option<f64>,
+        /// A fixed factor on every noise deviation, for every episode (sets
+        /// hw-sim's `noise.episode_scale` to `[X, X]`): evaluates a policy
+        /// trained across noise levels at one of them.
+        #[arg(long)]
+        noise_scale: Option<f64>,
         /// A ground-truth policy told the hole's position with a
         /// per-episode error of this standard deviation per horizontal
         /// axis, mm (the observation `ground_truth_hole_error`): how
@@ -481,6 +486,7 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             torque_noise_nm,
             depth_noise_m,
             rgb_noise,
+            noise_scale,
             hole_error_mm,
             box_yaw_range_rad,
             json,
@@ -529,6 +535,13 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
                 if let Some(v) = v {
                     *field = v;
                 }
+            }
+            if let Some(k) = noise_scale {
+                anyhow::ensure!(
+                    k.is_finite() && k >= 0.0,
+                    "--noise-scale {k}: must be a factor on the noise, 0 or more"
+                );
+                world.noise.episode_scale = [k, k];
             }
             let chosen = c.chosen_policy(last);
             println!("evaluating {chosen}");

@@ -181,6 +181,11 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert_ne!(calm.normalised, pushed.normalised, "pushes");
     let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
     assert_ne!(calm.normalised, noisy.normalised, "force noise");
+    // A noise scale of 0 switches the noise off, one of 1 leaves it as set.
+    let off = eval(&["--force-noise-n", "0.5", "--noise-scale", "0"], "off.json");
+    assert_eq!(calm.normalised, off.normalised, "noise scaled to 0");
+    let full = eval(&["--force-noise-n", "0.5", "--noise-scale", "1"], "full.json");
+    assert_eq!(noisy.normalised, full.normalised, "noise scaled by 1");
     let twisted = eval(&["--torque-noise-nm", "0.05"], "twisted.json");
     assert_ne!(calm.normalised, twisted.normalised, "moment noise");
     // The box square to the peg's start instead of turned up to 0.26 rad.
@@ -202,6 +207,8 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     assert!(err.contains("force_std_n"), "{err}");
     let err = refused("--torque-noise-nm=-1");
     assert!(err.contains("torque_std_nm"), "{err}");
+    let err = refused("--noise-scale=-1");
+    assert!(err.contains("--noise-scale -1"), "{err}");
 }
 
 #[test]

@@ -99,6 +99,9 @@ pub struct World {
     occlusions: Vec<crate::config::Occlusion>,
     /// Noise streams: joint positions, velocities, force, moment.
     noise_rngs: [SimRng; 4],
+    /// This episode's factor on the noise's deviations
+    /// (`noise.episode_scale`).
+    noise_scale: f64,
     /// The F/T low-pass filter's gain per step.
     ft_alpha: f64,
     step_index: u64,
@@ -158,6 +161,7 @@ impl World {
             pushes: Vec::new(),
             occlusions: Vec::new(),
             noise_rngs: [0, 1, 2, 3].map(|k| rng::seeded(0, k)),
+            noise_scale: 1.0,
             ft_alpha: 1.0,
             step_index: 0,
             q: vec![0.0; nv],
@@ -198,7 +202,8 @@ impl World {
         self.peg = peg_info.map(|info| build::attach_peg(&mut physics, &self.bodies, info, &cfg));
 
         // Episode randomness: one stream per use. Streams 1–2 are the box
-        // and the perturbations, 3 and 5–7 the sensors, 4 the camera.
+        // and the perturbations, 3 and 5–7 the sensors, 4 the camera, 8 the
+        // noise's per-episode scale.
         let mut box_rng = rng::seeded(seed, 1);
         let mut perturb_rng = rng::seeded(seed, 2);
         self.reset_sensors(seed);
@@ -246,8 +251,17 @@ impl World {
             box_pose: self.hole_pose(),
             t_s,
             occlusions: self.occlusions_at(t_s).map(|o| o.rect).collect(),
-            noise: (self.config.noise.depth_std_m, self.config.noise.rgb_std),
+            noise: (
+                self.noise_scale * self.config.noise.depth_std_m,
+                self.noise_scale * self.config.noise.rgb_std,
+            ),
         }
+    }
+
+    /// This episode's factor on the sensors' noise deviations, drawn at
+    /// reset from `noise.episode_scale` (1 when that is `[1, 1]`).
+    pub fn noise_scale(&self) -> f64 {
+        self.noise_scale
     }
 
     /// The camera (intrinsics, pose, projection).

@@ -26,6 +26,14 @@ impl World {
     /// The noise streams and the F/T filter of an episode.
     pub(super) fn reset_sensors(&mut self, seed: u64) {
         self.noise_rngs = [3, 5, 6, 7].map(|k| rng::seeded(seed, k));
+        // No draw for a fixed scale: configurations without a range keep
+        // every episode exactly as before the range existed.
+        let [lo, hi] = self.config.noise.episode_scale;
+        self.noise_scale = if hi > lo {
+            rng::uniform(&mut rng::seeded(seed, 8), lo, hi)
+        } else {
+            lo
+        };
         let hz = self.config.noise.ft_filter_hz;
         self.ft_alpha = if hz > 0.0 {
             1.0 - (-std::f64::consts::TAU * hz * self.config.dt_s).exp()
@@ -132,6 +140,7 @@ impl World {
 
     pub(super) fn update_readings(&mut self) {
         let n = &self.config.noise;
+        let k = self.noise_scale;
         let r = &mut self.readings;
         r.t_s = self.step_index as f64 * self.config.dt_s;
         // One stream per channel, drawn only when its noise is on: noise-free
@@ -144,18 +153,18 @@ impl World {
                 0.0
             }
         };
-        for k in 0..self.q.len() {
-            r.q[k] = self.q[k] + draw(q_rng, n.q_std_rad);
-            r.v[k] = self.v[k] + draw(v_rng, n.v_std_rad_s);
-            r.tau_applied[k] = self.tau_applied[k];
+        for j in 0..self.q.len() {
+            r.q[j] = self.q[j] + draw(q_rng, k * n.q_std_rad);
+            r.v[j] = self.v[j] + draw(v_rng, k * n.v_std_rad_s);
+            r.tau_applied[j] = self.tau_applied[j];
         }
         let alpha = self.ft_alpha;
         for i in 0..6 {
             self.wrench_filtered[i] += alpha * (self.wrench_true[i] - self.wrench_filtered[i]);
             let noise = if i < 3 {
-                draw(f_rng, n.force_std_n)
+                draw(f_rng, k * n.force_std_n)
             } else {
-                draw(m_rng, n.torque_std_nm)
+                draw(m_rng, k * n.torque_std_nm)
             };
             r.wrench[i] = self.wrench_filtered[i] + n.ft_bias[i] + noise;
         }
