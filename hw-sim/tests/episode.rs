@@ -153,7 +153,10 @@ fn the_noise_scale_is_drawn_per_episode_and_scales_the_deviations() {
     let (lo, hi) = scales
         .iter()
         .fold((f64::MAX, f64::MIN), |(l, h), &k| (l.min(k), h.max(k)));
-    assert!(lo < 0.5 && hi > 1.5, "scales not spread over the range: {lo}..{hi}");
+    assert!(
+        lo < 0.5 && hi > 1.5,
+        "scales not spread over the range: {lo}..{hi}"
+    );
 
     c.noise.episode_scale = [1.0, 0.5];
     let Err(err) = World::new(c) else {

@@ -182,9 +182,15 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
     assert_ne!(calm.normalised, noisy.normalised, "force noise");
     // A noise scale of 0 switches the noise off, one of 1 leaves it as set.
-    let off = eval(&["--force-noise-n", "0.5", "--noise-scale", "0"], "off.json");
+    let off = eval(
+        &["--force-noise-n", "0.5", "--noise-scale", "0"],
+        "off.json",
+    );
     assert_eq!(calm.normalised, off.normalised, "noise scaled to 0");
-    let full = eval(&["--force-noise-n", "0.5", "--noise-scale", "1"], "full.json");
+    let full = eval(
+        &["--force-noise-n", "0.5", "--noise-scale", "1"],
+        "full.json",
+    );
     assert_eq!(noisy.normalised, full.normalised, "noise scaled by 1");
     let twisted = eval(&["--torque-noise-nm", "0.05"], "twisted.json");
     assert_ne!(calm.normalised, twisted.normalised, "moment noise");
