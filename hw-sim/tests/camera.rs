@@ -184,6 +184,31 @@ fn occlusion_blanks_the_view_and_frames_are_deterministic() {
     assert!(a[1].flow_mask.contains(&1), "the falling arm must flow");
 }
 
+/// `noise.episode_scale` reaches the camera: a fixed scale of one half on
+/// twice the deviations renders the same frame as the deviations, and a
+/// scale of 0 the noiseless one.
+#[test]
+fn the_noise_scale_scales_the_camera_noise() {
+    let frame = |depth: f64, rgb: f64, scale: f64| {
+        let mut cfg = WorldConfig::default();
+        cfg.noise.depth_std_m = depth;
+        cfg.noise.rgb_std = rgb;
+        cfg.noise.episode_scale = [scale, scale];
+        let mut world = World::new(cfg).unwrap();
+        let mut f = CameraFrame::default();
+        world.render(&mut f);
+        f
+    };
+    let noisy = frame(0.002, 2.0, 1.0);
+    assert_eq!(
+        noisy,
+        frame(0.004, 4.0, 0.5),
+        "scale 0.5 on twice the noise"
+    );
+    assert_ne!(noisy, frame(0.004, 4.0, 1.0), "twice the noise, unscaled");
+    assert_eq!(frame(0.0, 0.0, 1.0), frame(0.004, 4.0, 0.0), "scale 0");
+}
+
 /// The floor and the box are cast once per box pose and reused: a frame
 /// after the box moved must equal a fresh camera's, and repeated frames of
 /// one pose must equal the first.
