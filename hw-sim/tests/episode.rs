@@ -117,7 +117,7 @@ fn noise_channels_do_not_shift_each_other() {
 
 /// `noise.episode_scale` draws one factor per episode within its range and
 /// multiplies the deviations by it: the readings' spread about the truth
-/// follows the factor, and a fixed scale of 1 leaves every draw as it was.
+/// follows the factor, and a fixed scale adds no draw of its own.
 #[test]
 fn the_noise_scale_is_drawn_per_episode_and_scales_the_deviations() {
     let mut c = WorldConfig::default();
@@ -143,8 +143,8 @@ fn the_noise_scale_is_drawn_per_episode_and_scales_the_deviations() {
         let n = 30;
         for _ in 0..n {
             world.step(&hold_torques(&world)).unwrap();
-            let (r, q) = (world.readings().q.clone(), world.q().to_vec());
-            sq += r.iter().zip(&q).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+            let (r, q) = (&world.readings().q, world.q());
+            sq += r.iter().zip(q).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
         }
         let rms = (sq / (n * world.q().len()) as f64).sqrt();
         // 210 draws: the sample RMS lies within 20 % of its deviation.
