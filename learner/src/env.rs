@@ -41,6 +41,9 @@ pub struct FastEnv {
     episodes: u64,
     /// Wrench readings of every cycle (the policy's window).
     pub wrench: WrenchHistory,
+    /// The largest force norm the controller read since the last
+    /// [`FastEnv::step`] began, N (the supervisor's overload measure).
+    peak_force_n: f64,
     cycled: bool,
     /// The episode's roll reference: the roll of its first sensor frame.
     roll_ref_rad: f64,
@@ -67,6 +70,7 @@ impl FastEnv {
             command: TorqueCommand::empty(0),
             episodes: 0,
             wrench: WrenchHistory::default(),
+            peak_force_n: 0.0,
             cycled: false,
             roll_ref_rad: 0.0,
             frame,
@@ -113,6 +117,12 @@ impl FastEnv {
     /// The control law's workspace.
     pub fn controller_data(&self) -> &ControllerData {
         &self.control.data
+    }
+
+    /// The largest force norm read in the cycles of the last
+    /// [`FastEnv::step`], N: what the supervisor's force overload compares.
+    pub fn peak_force_n(&self) -> f64 {
+        self.peak_force_n
     }
 
     /// Starts an episode: as hw-sim's reset with a configuration (a world
@@ -176,6 +186,9 @@ impl FastEnv {
         }
         self.cycled = true;
         self.wrench.push(self.frame.wrench);
+        let w = &self.frame.wrench;
+        let f = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+        self.peak_force_n = self.peak_force_n.max(f);
         self.hardware.apply(&mut self.world, Some(&self.command))?;
         Ok(action)
     }
@@ -183,6 +196,7 @@ impl FastEnv {
     /// Runs cycles up to the one before the next action step and returns
     /// its observation; `action` (if any) is applied in the first cycle.
     pub fn step(&mut self, action: Option<&Action4>) -> Result<Observation, EnvError> {
+        self.peak_force_n = 0.0;
         self.cycle(action)?;
         while !self.world.step_index().is_multiple_of(ACTION_PERIOD_STEPS) {
             self.cycle(None)?;

@@ -29,6 +29,7 @@ pub mod policy;
 pub mod progress;
 pub mod proprio;
 pub mod rl;
+pub mod settings;
 pub mod stack;
 pub mod train;
 

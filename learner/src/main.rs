@@ -185,13 +185,18 @@ enum Cmd {
 
 #[derive(Debug, Subcommand)]
 enum PolicyCmd {
-    /// Trains with TRPO; writes checkpoint.json, curve.csv, return.png and
-    /// outcomes.png into `--out`.
+    /// Trains with TRPO or PPO (`policy.algorithm`); writes
+    /// checkpoint.json, curve.csv, return.png and outcomes.png into `--out`.
     Train {
         /// Training configuration (TOML; every field defaulted, see
         /// learner::rl::run::TrainConfig).
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Overrides one field of the configuration by its dotted path,
+        /// e.g. `--set seed=2 --set env.world.task.box_yaw_range_rad=0.26`
+        /// (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
         /// Run directory.
         #[arg(long, default_value = "runs/policy")]
         out: PathBuf,
@@ -277,6 +282,11 @@ enum PolicyCmd {
         /// no yaw), so the peg starts square to the hole.
         #[arg(long)]
         box_yaw_range_rad: Option<f64>,
+        /// Overrides one field of the checkpoint's training configuration
+        /// by its dotted path before evaluating, e.g. `--set
+        /// env.world.task.box_yaw_range_rad=0.26` (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -421,16 +431,15 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
     match cmd {
         PolicyCmd::Train {
             config,
+            sets,
             out,
             resume,
             env_steps,
             peg,
             algorithm,
         } => {
-            let mut cfg = match &config {
-                Some(p) => run::read_config(p)?,
-                None => run::TrainConfig::default(),
-            };
+            let mut cfg: run::TrainConfig =
+                learner::settings::read_with_overrides(config.as_deref(), &sets)?;
             if let Some(n) = env_steps {
                 cfg.env_steps = n;
             }
@@ -489,13 +498,14 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
             noise_scale,
             hole_error_mm,
             box_yaw_range_rad,
+            sets,
             json,
             last,
         } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             let c = run::read_checkpoint(&checkpoint)?;
             let trained_on = c.config.env.world.task.peg;
-            let mut cfg = c.config.clone();
+            let mut cfg = learner::settings::with_overrides(&c.config, &sets)?;
             if let Some(mm) = hole_error_mm {
                 use learner::rl::ObservationKind as O;
                 anyhow::ensure!(

@@ -248,3 +248,66 @@ fn the_hole_error_is_one_offset_per_episode() {
         .unwrap();
     assert!(e.to_string().contains("ground_truth_hole_error"), "{e}");
 }
+
+/// Straight down at 5 mm per step (10 cm/s) from the start onto the box:
+/// the impact overloads the 100 N supervisor where it is not raised.
+fn press_down(mut env: RlEnv) -> (bool, Vec<f64>) {
+    env.reset(5, false).unwrap();
+    let mut rewards = Vec::new();
+    loop {
+        let out = env.step(&[0.0, 0.0, -1.0, 0.0], false).unwrap();
+        rewards.push(out.reward);
+        if out.done() {
+            return (out.terminated, rewards);
+        }
+    }
+}
+
+#[test]
+fn training_aids_apply_to_training_environments_only() {
+    let mut cfg = config(PegShape::Square, 150);
+    cfg.action.max_step_m = 0.005;
+    // Default aids change nothing: a training environment is the evaluated one.
+    let plain = press_down(RlEnv::new(&cfg).unwrap());
+    assert_eq!(press_down(RlEnv::for_training(&cfg).unwrap()), plain);
+    assert!(plain.0, "the impact overloads the supervisor: {:?}", plain.1);
+
+    cfg.training.max_force_n = Some(1.0e4);
+    cfg.training.max_moment_nm = Some(1.0e3);
+    cfg.training.force_penalty_per_n = 0.1;
+    // Evaluation keeps the real fault and the paper's reward.
+    assert_eq!(press_down(RlEnv::new(&cfg).unwrap()), plain);
+    // Training runs on through the impact and pays for the force.
+    let (terminated, rewards) = press_down(RlEnv::for_training(&cfg).unwrap());
+    assert!(!terminated, "no fault in training at the raised limit");
+    assert_eq!(rewards.len(), 150);
+    assert!(
+        rewards.iter().any(|&r| r < -1.0),
+        "the pressing steps are penalised: {rewards:?}"
+    );
+
+    // The overload penalty: what the evaluated supervisor would have
+    // faulted on costs that much more per step.
+    cfg.training.overload_penalty = 50.0;
+    let (_, with_overload) = press_down(RlEnv::for_training(&cfg).unwrap());
+    let extra: Vec<f64> = rewards
+        .iter()
+        .zip(&with_overload)
+        .map(|(a, b)| a - b)
+        .collect();
+    assert!(
+        extra.iter().all(|&d| d == 0.0 || (d - 50.0).abs() < 1e-9),
+        "{extra:?}"
+    );
+    assert!(
+        extra.iter().any(|&d| (d - 50.0).abs() < 1e-9),
+        "some step is over 100 N: {extra:?}"
+    );
+
+    cfg.training.force_penalty_per_n = -1.0;
+    let err = RlEnv::for_training(&cfg).err().expect("a negative penalty is refused");
+    assert!(
+        err.to_string().contains("training.force_penalty_per_n"),
+        "{err}"
+    );
+}

@@ -113,6 +113,84 @@ impl ActionScale {
     }
 }
 
+/// What only the environments a policy learns from do (`[env.training]`,
+/// docs/rl.md "Training aids"): validation, evaluation and the live stack
+/// never see them, so the real fault stays in every reported number.
+///
+/// Why: an exploring policy that meets the rim at full speed overloads the
+/// force supervisor (100 N), and an episode that ends there loses every
+/// reward it would still have earned: from scratch, with the stiff wrist,
+/// TRPO learned to hover above the opening rather than risk it. A graded
+/// penalty keeps the lesson (press gently) without ending the episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainingAids {
+    /// The supervisor's force overload in training, N (None: the
+    /// controller's own `safety.max_force_n`).
+    pub max_force_n: Option<f64>,
+    /// The supervisor's moment overload in training, N·m (None: the
+    /// controller's own `safety.max_moment_nm`).
+    pub max_moment_nm: Option<f64>,
+    /// The force penalty starts at this peak force per step, N.
+    pub force_penalty_from_n: f64,
+    /// Reward taken per newton of a step's peak force above
+    /// `force_penalty_from_n` (0: no penalty).
+    pub force_penalty_per_n: f64,
+    /// Reward taken, besides, for a step whose peak force is above the
+    /// controller's own `safety.max_force_n`: the step that would have
+    /// faulted in evaluation (0: none).
+    pub overload_penalty: f64,
+}
+
+impl Default for TrainingAids {
+    fn default() -> Self {
+        Self {
+            max_force_n: None,
+            max_moment_nm: None,
+            force_penalty_from_n: 50.0,
+            force_penalty_per_n: 0.0,
+            overload_penalty: 0.0,
+        }
+    }
+}
+
+impl TrainingAids {
+    /// Checks every value, naming the first bad one.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        for (name, v) in [
+            ("training.max_force_n", self.max_force_n),
+            ("training.max_moment_nm", self.max_moment_nm),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v > 0.0)
+            {
+                return Err(FieldError::new(name, v, "must be positive and finite"));
+            }
+        }
+        for (name, v) in [
+            ("training.force_penalty_from_n", self.force_penalty_from_n),
+            ("training.force_penalty_per_n", self.force_penalty_per_n),
+            ("training.overload_penalty", self.overload_penalty),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(FieldError::new(name, v, "must be finite and >= 0"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The reward a step with `peak_force_n` loses where the evaluated
+    /// supervisor faults above `limit_n`.
+    pub fn force_penalty(&self, peak_force_n: f64, limit_n: f64) -> f64 {
+        let over = if peak_force_n > limit_n {
+            self.overload_penalty
+        } else {
+            0.0
+        };
+        over + self.force_penalty_per_n * (peak_force_n - self.force_penalty_from_n).max(0.0)
+    }
+}
+
 /// The RL environment's configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -127,6 +205,8 @@ pub struct RlEnvConfig {
     pub action: ActionScale,
     /// Policy steps per episode before truncation.
     pub max_steps: u32,
+    /// What only training environments do.
+    pub training: TrainingAids,
 }
 
 impl Default for RlEnvConfig {
@@ -137,6 +217,7 @@ impl Default for RlEnvConfig {
             reward: RewardConfig::default(),
             action: ActionScale::default(),
             max_steps: PAPER_EPISODE_STEPS,
+            training: TrainingAids::default(),
         }
     }
 }
@@ -146,6 +227,7 @@ impl RlEnvConfig {
     /// are checked when built).
     pub fn validate(&self) -> Result<(), FieldError> {
         self.reward.validate()?;
+        self.training.validate()?;
         for (name, v) in [
             ("action.max_step_m", self.action.max_step_m),
             ("action.max_roll_rad", self.action.max_roll_rad),
@@ -201,16 +283,36 @@ pub struct RlEnv {
     episode_reward: f64,
     running: bool,
     camera: Option<Box<shared_mem_schema::CameraFrame>>,
+    aids: Option<TrainingAids>,
+    /// The configured (evaluated) force overload, N.
+    eval_max_force_n: f64,
 }
 
 impl RlEnv {
-    /// Builds the environment; call [`RlEnv::reset`] before stepping.
+    /// Builds the environment as it is evaluated (no training aids); call
+    /// [`RlEnv::reset`] before stepping.
     pub fn new(cfg: &RlEnvConfig) -> Result<Self, RlEnvError> {
+        Self::build(cfg, None)
+    }
+
+    /// Builds an environment to learn from: `cfg.training`'s aids applied
+    /// (the supervisor's training limits, the force penalty).
+    pub fn for_training(cfg: &RlEnvConfig) -> Result<Self, RlEnvError> {
+        Self::build(cfg, Some(cfg.training.clone()))
+    }
+
+    fn build(cfg: &RlEnvConfig, aids: Option<TrainingAids>) -> Result<Self, RlEnvError> {
         cfg.validate()?;
         if !cfg.world.task.enabled {
             return Err(RlEnvError::NoTask);
         }
-        let fast = FastEnv::new(cfg.world.clone(), cfg.controller.clone())?;
+        let mut controller = cfg.controller.clone();
+        if let Some(a) = &aids {
+            let s = &mut controller.safety;
+            s.max_force_n = a.max_force_n.unwrap_or(s.max_force_n);
+            s.max_moment_nm = a.max_moment_nm.unwrap_or(s.max_moment_nm);
+        }
+        let fast = FastEnv::new(cfg.world.clone(), controller)?;
         let geom = RewardGeometry {
             hole_depth_m: cfg.world.task.hole_depth_m,
             symmetry: cfg.world.task.peg.symmetry_order(),
@@ -228,6 +330,8 @@ impl RlEnv {
             episode_reward: 0.0,
             running: false,
             camera: None,
+            aids,
+            eval_max_force_n: cfg.controller.safety.max_force_n,
         })
     }
 
@@ -267,7 +371,10 @@ impl RlEnv {
         self.obs = Some(obs);
         self.steps += 1;
         let task = *self.task();
-        let (r, stage) = reward(&self.reward, &self.geom, &task);
+        let (mut r, stage) = reward(&self.reward, &self.geom, &task);
+        if let Some(a) = &self.aids {
+            r -= a.force_penalty(self.fast.peak_force_n(), self.eval_max_force_n);
+        }
         self.episode_reward += r;
         let terminated = self.fast.sensor_frame().fault_code != 0;
         let truncated = !terminated && self.steps >= self.max_steps;

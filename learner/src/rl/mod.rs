@@ -30,7 +30,7 @@ pub mod value;
 pub mod vec;
 
 pub use deploy::TrainedPolicy;
-pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
+pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome, TrainingAids};
 pub use gaussian::{GaussianPolicy, LinearBaseline};
 pub use obs_norm::ObsNorm;
 pub use observe::{GroundTruth, ObsView, ObservationKind, Observer};

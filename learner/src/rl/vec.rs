@@ -87,7 +87,7 @@ impl VecEnv {
             return Err(hw_sim::FieldError::new("num_envs", 0, "must be at least 1").into());
         }
         let envs = (0..n)
-            .map(|_| RlEnv::new(cfg))
+            .map(|_| RlEnv::for_training(cfg))
             .collect::<Result<Vec<_>, _>>()?;
         // After the world is built, so that an invalid camera is named by
         // its field rather than reported as another camera.
