@@ -185,7 +185,8 @@ enum Cmd {
 
 #[derive(Debug, Subcommand)]
 enum PolicyCmd {
-    /// Trains with TRPO; writes checkpoint.json, curve.csv, return.png and
+    /// Trains with TRPO or PPO (the configuration's `policy.algorithm`);
+    /// writes checkpoint.json, curve.csv, return.png and
     /// outcomes.png into `--out`.
     Train {
         /// Training configuration (TOML; every field defaulted, see
@@ -782,9 +783,10 @@ enum DatasetCmd {
     Inspect {
         /// Dataset directory.
         dir: PathBuf,
-        /// Contact sheet (RGB, depth, flow, mask per row).
-        #[arg(long, default_value = "contact-sheet.png")]
-        sheet: PathBuf,
+        /// Contact sheet (RGB, depth, flow, mask per row); default:
+        /// contact-sheet.png in the dataset's directory.
+        #[arg(long)]
+        sheet: Option<PathBuf>,
         /// Rows in the sheet.
         #[arg(long, default_value_t = 8)]
         rows: usize,
@@ -878,6 +880,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
                     println!("  {f}: {why}");
                 }
             }
+            let sheet = sheet.unwrap_or_else(|| dir.join("contact-sheet.png"));
             dataset::contact_sheet(&ds, rows, &sheet)?;
             println!("contact sheet: {}", sheet.display());
             Ok(())
