@@ -31,3 +31,23 @@ echo "== cargo clippy"
 cargo clippy --workspace --all-targets --quiet -- -D warnings
 echo "== cargo test"
 cargo test --workspace
+
+# Every benchmark and example the documents name runs here once in its quick
+# mode, so that a documented command cannot rot unseen: a check that it runs
+# (and that its own assertions hold), not a measurement. Debug builds,
+# seconds each. Criterion benches run in criterion's test mode (each
+# benchmark once); hw-sim's bench has the same convention.
+echo "== benches and examples (quick mode)"
+cargo test -p hw-sim --bench sim
+cargo test -p robot-model --bench dynamics
+cargo test -p rt-controller --bench control_step
+quick_dir="$(mktemp -d)"
+trap 'rm -rf "$quick_dir"' EXIT
+cargo run --quiet -p hw-sim --example render_frames -- "$quick_dir/frames" square
+cargo run --quiet -p rt-controller --example fuzz_cycle -- 200 1
+cargo run --quiet -p robot-model -- robot-model/urdf/panda.urdf --q "0 -0.3 0 -2 0 1.6 0.8" --frame peg_tip
+# TODO (lead): the learner's benchmarks and examples named in README.md and
+# docs/performance.md (env_bench, repr_bench, conv_bench; the research probes
+# rl_probe, touch_probe, distill_fit, repr_probe, trajectory_target, which
+# are moving to lab/), and the tests crate's `jitter` binary, each with a
+# quick mode here once they have settled where they live.

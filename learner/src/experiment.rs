@@ -8,7 +8,7 @@
 //! The policy learns one of two ways: by `learner policy train` (TRPO or
 //! PPO on z, the paper's), or by `learner policy distill` (DAgger from the
 //! touch search whose belief of the opening is a linear probe of the same
-//! z, the route that completes insertions here; docs/experiments.md). Both
+//! z, the route that completes insertions here; docs/results.md). Both
 //! take the variant's representation in place of their configuration's.
 //!
 //! Every stage leaves its output in the experiment's directory and is
@@ -955,6 +955,18 @@ mod tests {
             n += 1;
         }
         assert!(n >= 3, "{n} experiments in {}", dir.display());
+        // The shipped distillations load too, those no experiment names
+        // among them (docs/results.md runs them by themselves).
+        let dir = root.join("configs/distill");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                distill::read_config(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                n += 1;
+            }
+        }
+        assert!(n >= 4, "{n} distillations in {}", dir.display());
         let e = toml::from_str::<ReprStage>("cuda = true").unwrap_err();
         assert!(e.to_string().contains("cuda"), "{e}");
         let r: ReprStage = toml::from_str("device = \"vulkan\"").unwrap();

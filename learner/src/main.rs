@@ -792,9 +792,10 @@ enum DatasetCmd {
     Inspect {
         /// Dataset directory.
         dir: PathBuf,
-        /// Contact sheet (RGB, depth, flow, mask per row).
-        #[arg(long, default_value = "contact-sheet.png")]
-        sheet: PathBuf,
+        /// Contact sheet (RGB, depth, flow, mask per row); default:
+        /// contact-sheet.png in the dataset's directory.
+        #[arg(long)]
+        sheet: Option<PathBuf>,
         /// Rows in the sheet.
         #[arg(long, default_value_t = 8)]
         rows: usize,
@@ -888,6 +889,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
                     println!("  {f}: {why}");
                 }
             }
+            let sheet = sheet.unwrap_or_else(|| dir.join("contact-sheet.png"));
             dataset::contact_sheet(&ds, rows, &sheet)?;
             println!("contact sheet: {}", sheet.display());
             Ok(())

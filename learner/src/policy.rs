@@ -1,7 +1,8 @@
 //! Observations and the scripted heuristic insertion policy.
 //!
-//! The heuristic stands in for the learned policy until it exists, and is
-//! the "contact-making" half of the paper's data-collection mix. It knows
+//! The heuristic is the node's default policy when no trained checkpoint is
+//! given (`learner run --policy` takes one), and the "contact-making" half
+//! of the paper's data-collection mix. It knows
 //! where the hole is (a calibrated cell, or the simulator's report) and
 //! moves above it, aligns the roll, descends to contact, searches on a
 //! spiral when it lands on the surface, and inserts.

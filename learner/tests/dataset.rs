@@ -466,17 +466,21 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     assert!(done.moving * 2 < done.samples, "{done:?}");
     assert!(done.contact * 2 > done.samples, "{done:?}");
 
-    // `learner dataset inspect` shows it.
-    let sheet = out.join("sheet.png");
+    // `learner dataset inspect` shows it, and writes its contact sheet into
+    // the dataset's directory when not told where (not the working one).
+    let sheet = out.join("contact-sheet.png");
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
         .args(["dataset", "inspect"])
         .arg(&*out)
-        .arg("--sheet")
-        .arg(&sheet)
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "{text}");
+    assert!(sheet.is_file(), "no {}:\n{text}", sheet.display());
+    assert!(
+        text.contains(&format!("contact sheet: {}", sheet.display())),
+        "{text}"
+    );
     let all = b.total();
     let row = format!(
         "| heuristic | completed | {} | {:.1} % | {:.1} % | {:.1} % |",
