@@ -2,7 +2,7 @@
 //! real-time settings. Every field is documented and defaulted; unknown
 //! fields are errors and bad values name their dotted field.
 
-use crate::config::ControllerConfig;
+use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{
     ConfigFileError, FieldError, at_least, ensure, non_negative, parse_toml, positive, read_toml,
@@ -65,7 +65,7 @@ pub enum WrenchSource {
     /// None: the wrench reads zero (the force supervision then sees none).
     None,
     /// An external ATI Net F/T on the wrist (`[backend.franka.net_ft]`),
-    /// in the sensor's frame (daemon::netft).
+    /// in the sensor's frame (crate::netft).
     NetFt,
 }
 

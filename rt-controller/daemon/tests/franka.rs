@@ -18,7 +18,7 @@
 //! `$FRANKY_SIM_REQUIRED=1` or `$CI` is set: then it fails (scripts/test.sh
 //! sets it).
 
-use rt_controller::daemon::netft::{CMD_START, Record, request};
+use rt_controller_daemon::netft::{CMD_START, Record, request};
 use shared_mem_schema::transport::{self, Sub};
 use shared_mem_schema::{ControllerMode, ControllerStatus, PolicyAction, SensorFrame};
 use std::net::UdpSocket;
