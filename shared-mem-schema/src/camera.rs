@@ -1,8 +1,14 @@
 //! The camera's calibration and its 20 Hz RGB-D frame.
 
-use crate::{Header, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH};
+use crate::message::{HEADER_BYTES as H, Header, Message, message};
+use crate::topics;
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// Largest camera image width carried by [`CameraFrame`], pixels.
+pub const MAX_IMAGE_WIDTH: usize = 256;
+/// Largest camera image height carried by [`CameraFrame`], pixels.
+pub const MAX_IMAGE_HEIGHT: usize = 256;
 
 /// A calibrated pinhole camera (square pixels, no distortion): the one
 /// calibration type of the stack, carried in every [`CameraFrame`], logged
@@ -93,6 +99,14 @@ pub struct CameraFrame {
     /// Depth along the optical axis, m, row-major (0: no return).
     pub depth_m: [f32; MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT],
 }
+
+message!(CameraFrame, topics::CAMERA, "CameraFrame");
+
+// Layouts (`Pod` rejects padding; these pin the sizes).
+const _: () = assert!(
+    size_of::<CameraFrame>()
+        == H + 8 + 8 + 8 + 16 + 24 + 32 + MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT * 7
+);
 
 #[cfg(test)]
 mod tests {

@@ -1,9 +1,13 @@
 //! The controller's side channel: its mode, status (counters and latency
 //! histograms) and the operator's commands.
 
-use crate::{HISTOGRAM_BINS, Header};
+use crate::message::{HEADER_BYTES as H, Header, Message, message};
+use crate::topics;
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// Bins of a [`LatencyHistogram`] (1 µs each).
+pub const HISTOGRAM_BINS: usize = 2000;
 
 /// The controller's mode as carried in messages.
 #[repr(u32)]
@@ -231,6 +235,19 @@ impl ControllerCommand {
         }
     }
 }
+
+message!(ControllerStatus, topics::STATUS, "ControllerStatus");
+message!(
+    ControllerCommand,
+    topics::CONTROLLER_COMMAND,
+    "ControllerCommand"
+);
+
+// Layouts (`Pod` rejects padding; these pin the sizes).
+const _: () = assert!(size_of::<LatencyHistogram>() == 32 + 4 * HISTOGRAM_BINS);
+const _: () =
+    assert!(size_of::<ControllerStatus>() == H + 144 + 16 + 3 * size_of::<LatencyHistogram>());
+const _: () = assert!(size_of::<ControllerCommand>() == H + 8);
 
 #[cfg(test)]
 mod tests {

@@ -20,6 +20,7 @@
 
 pub mod config;
 pub mod process;
+pub mod topics;
 pub mod transport;
 
 mod camera;
@@ -28,28 +29,13 @@ mod message;
 mod robot;
 mod sim;
 
-pub use camera::{CameraCalibration, CameraFrame};
-pub use controller::{ControllerCommand, ControllerMode, ControllerStatus, LatencyHistogram};
-pub use message::{Header, Message, write_text};
-pub use robot::{HardwareState, PolicyAction, SensorFrame, TorqueCommand};
-pub use sim::{EpisodeReport, SimCommand, Stage};
-
-/// Version of the message layout. Bump it whenever any message's layout or
-/// meaning changes; peers built from different versions refuse to talk.
-pub const SCHEMA_VERSION: u32 = 3;
-
-/// Joint arrays hold this many entries; `n_joints` says how many are used.
-pub const MAX_JOINTS: usize = 8;
-/// Largest camera image width carried by [`CameraFrame`], pixels.
-pub const MAX_IMAGE_WIDTH: usize = 256;
-/// Largest camera image height carried by [`CameraFrame`], pixels.
-pub const MAX_IMAGE_HEIGHT: usize = 256;
-/// Capacity of [`SimCommand::config_toml`], bytes.
-pub const MAX_CONFIG_BYTES: usize = 16 * 1024;
-/// Capacity of [`EpisodeReport::message`], bytes.
-pub const MAX_MESSAGE_BYTES: usize = 256;
-/// Bins of a [`LatencyHistogram`] (1 µs each).
-pub const HISTOGRAM_BINS: usize = 2000;
+pub use camera::{CameraCalibration, CameraFrame, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH};
+pub use controller::{
+    ControllerCommand, ControllerMode, ControllerStatus, HISTOGRAM_BINS, LatencyHistogram,
+};
+pub use message::{Header, Message, SCHEMA_VERSION, write_text};
+pub use robot::{HardwareState, MAX_JOINTS, PolicyAction, SensorFrame, TorqueCommand};
+pub use sim::{EpisodeReport, MAX_CONFIG_BYTES, MAX_MESSAGE_BYTES, SimCommand, Stage};
 
 /// The stack's two clocks, the one source of their periods: the hardware
 /// and the controller step at 1 kHz, the policy acts (and the camera shoots)
@@ -65,29 +51,6 @@ pub mod rates {
     pub const ACTION_PERIOD_NS: u64 = ACTION_PERIOD_STEPS * CONTROL_PERIOD_NS;
     /// Policy period, s.
     pub const ACTION_PERIOD_S: f64 = ACTION_PERIOD_NS as f64 * 1e-9;
-}
-
-/// Service topics, relative to a namespace (`<namespace>/<topic>`), so that
-/// several stacks (parallel tests) can share one machine.
-pub mod topics {
-    /// hw-sim → rt-controller, 1 kHz: [`crate::HardwareState`].
-    pub const HARDWARE_STATE: &str = "hw/state";
-    /// rt-controller → hw-sim, 1 kHz: [`crate::TorqueCommand`].
-    pub const TORQUE_COMMAND: &str = "hw/torque";
-    /// hw-sim → learner, 20 Hz: [`crate::CameraFrame`].
-    pub const CAMERA: &str = "hw/camera";
-    /// learner → hw-sim: [`crate::SimCommand`].
-    pub const SIM_COMMAND: &str = "sim/command";
-    /// hw-sim → learner, 20 Hz and after each command: [`crate::EpisodeReport`].
-    pub const EPISODE: &str = "sim/episode";
-    /// rt-controller → learner, 1 kHz: [`crate::SensorFrame`].
-    pub const SENSOR: &str = "ctrl/sensor";
-    /// rt-controller → anyone, ~10 Hz: [`crate::ControllerStatus`].
-    pub const STATUS: &str = "ctrl/status";
-    /// operator or learner → rt-controller: [`crate::ControllerCommand`].
-    pub const CONTROLLER_COMMAND: &str = "ctrl/command";
-    /// learner → rt-controller, 20 Hz: [`crate::PolicyAction`].
-    pub const ACTION: &str = "policy/action";
 }
 
 /// Namespace used when none is given.
@@ -110,4 +73,33 @@ pub fn hw_time_ns(t_s: f64) -> u64 {
 /// Seconds of a [`Header::t_hw_ns`] stamp.
 pub fn hw_time_s(ns: u64) -> f64 {
     ns as f64 * 1e-9
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bytes_round_trip() {
+        let mut a = PolicyAction::boxed_zeroed();
+        a.header = Header::new(7, 1, 2, 3);
+        a.delta_pos_m = [0.1, -0.2, 0.3];
+        a.delta_roll_rad = -0.0;
+        let b = PolicyAction::read_from(a.as_bytes()).unwrap();
+        assert_eq!(a.as_bytes(), b.as_bytes());
+        assert!(PolicyAction::read_from(&a.as_bytes()[1..]).is_none());
+        let cam = CameraFrame::boxed_zeroed();
+        assert!(cam.rgb.iter().all(|&x| x == 0));
+    }
+
+    #[test]
+    fn text_truncates_on_char_boundary() {
+        let mut buf = [0xffu8; 5];
+        let n = write_text(&mut buf, "ab€d");
+        assert_eq!(n, 5);
+        let n = write_text(&mut buf, "abcd€");
+        assert_eq!(n, 4);
+        assert_eq!(&buf, b"abcd\0");
+        assert_eq!(ControllerMode::from_u32(3), Some(ControllerMode::Fault));
+        assert_eq!(ControllerMode::from_u32(9), None);
+    }
 }

@@ -1,17 +1,18 @@
-//! What every message shares: the [`Header`], the [`Message`] trait (topic,
-//! name, bytes), fixed-buffer text, and the layouts the schema version
-//! stands for.
+//! What every message shares: the schema version, the [`Header`], the
+//! [`Message`] trait (topic, name, bytes) and fixed-buffer text. Each
+//! message's module pins its layout (the derives of `Pod` reject padding;
+//! the size checks pin what [`SCHEMA_VERSION`] stands for).
 
-use crate::{
-    CameraFrame, ControllerCommand, ControllerStatus, EpisodeReport, HardwareState,
-    LatencyHistogram, PolicyAction, SCHEMA_VERSION, SensorFrame, SimCommand, TorqueCommand, topics,
-};
-use crate::{
-    HISTOGRAM_BINS, MAX_CONFIG_BYTES, MAX_IMAGE_HEIGHT, MAX_IMAGE_WIDTH, MAX_JOINTS,
-    MAX_MESSAGE_BYTES,
-};
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// Version of the message layout. Bump it whenever any message's layout or
+/// meaning changes; peers built from different versions refuse to talk.
+pub const SCHEMA_VERSION: u32 = 3;
+
+/// Bytes of a [`Header`]: every message's layout starts with them.
+pub(crate) const HEADER_BYTES: usize = 40;
+const _: () = assert!(size_of::<Header>() == HEADER_BYTES);
 
 /// Fields every message starts with.
 #[repr(C)]
@@ -58,30 +59,10 @@ pub fn write_text(buf: &mut [u8], text: &str) -> u32 {
     n as u32
 }
 
-// The derives of `Pod` reject padding; these pin the layouts the schema
-// version stands for.
-const H: usize = 40;
-const J: usize = 8 * MAX_JOINTS;
-const _: () = assert!(size_of::<Header>() == H);
-const _: () = assert!(size_of::<HardwareState>() == H + 16 + 8 + 3 * J + 48);
-const _: () = assert!(size_of::<TorqueCommand>() == H + 16 + 8 + J);
-const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 16 + 4 * J + 8 * 19);
-const _: () = assert!(size_of::<PolicyAction>() == H + 8 + 32);
-const _: () = assert!(
-    size_of::<CameraFrame>()
-        == H + 8 + 8 + 8 + 16 + 24 + 32 + MAX_IMAGE_WIDTH * MAX_IMAGE_HEIGHT * 7
-);
-const _: () = assert!(size_of::<LatencyHistogram>() == 32 + 4 * HISTOGRAM_BINS);
-const _: () =
-    assert!(size_of::<ControllerStatus>() == H + 144 + 16 + 3 * size_of::<LatencyHistogram>());
-const _: () = assert!(size_of::<ControllerCommand>() == H + 8);
-const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
-const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
-
 /// A message type with its topic. Messages are plain old data (`bytemuck`):
 /// their bytes are what logs store and what travels.
 pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
-    /// Its topic (see [`topics`]).
+    /// Its topic (see [`crate::topics`]).
     const TOPIC: &'static str;
     /// Its type name, as written into logs next to [`SCHEMA_VERSION`].
     const NAME: &'static str;
@@ -111,6 +92,7 @@ pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
     }
 }
 
+/// Implements [`Message`] for a message type with a `header` field.
 macro_rules! message {
     ($t:ty, $topic:expr, $name:expr) => {
         impl Message for $t {
@@ -122,48 +104,4 @@ macro_rules! message {
         }
     };
 }
-
-message!(HardwareState, topics::HARDWARE_STATE, "HardwareState");
-message!(TorqueCommand, topics::TORQUE_COMMAND, "TorqueCommand");
-message!(SensorFrame, topics::SENSOR, "SensorFrame");
-message!(PolicyAction, topics::ACTION, "PolicyAction");
-message!(CameraFrame, topics::CAMERA, "CameraFrame");
-message!(ControllerStatus, topics::STATUS, "ControllerStatus");
-message!(
-    ControllerCommand,
-    topics::CONTROLLER_COMMAND,
-    "ControllerCommand"
-);
-message!(SimCommand, topics::SIM_COMMAND, "SimCommand");
-message!(EpisodeReport, topics::EPISODE, "EpisodeReport");
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::ControllerMode;
-
-    #[test]
-    fn bytes_round_trip() {
-        let mut a = PolicyAction::boxed_zeroed();
-        a.header = Header::new(7, 1, 2, 3);
-        a.delta_pos_m = [0.1, -0.2, 0.3];
-        a.delta_roll_rad = -0.0;
-        let b = PolicyAction::read_from(a.as_bytes()).unwrap();
-        assert_eq!(a.as_bytes(), b.as_bytes());
-        assert!(PolicyAction::read_from(&a.as_bytes()[1..]).is_none());
-        let cam = CameraFrame::boxed_zeroed();
-        assert!(cam.rgb.iter().all(|&x| x == 0));
-    }
-
-    #[test]
-    fn text_truncates_on_char_boundary() {
-        let mut buf = [0xffu8; 5];
-        let n = write_text(&mut buf, "ab€d");
-        assert_eq!(n, 5);
-        let n = write_text(&mut buf, "abcd€");
-        assert_eq!(n, 4);
-        assert_eq!(&buf, b"abcd\0");
-        assert_eq!(ControllerMode::from_u32(3), Some(ControllerMode::Fault));
-        assert_eq!(ControllerMode::from_u32(9), None);
-    }
-}
+pub(crate) use message;

@@ -2,9 +2,13 @@
 //! exchanged with the (simulated) robot at 1 kHz, the controller's sensor
 //! frame to the learner, and the policy's 20 Hz action.
 
-use crate::{Header, MAX_JOINTS};
+use crate::message::{HEADER_BYTES as H, Header, Message, message};
+use crate::topics;
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// Joint arrays hold this many entries; `n_joints` says how many are used.
+pub const MAX_JOINTS: usize = 8;
 
 /// Robot → controller, every hardware cycle (1 kHz).
 #[repr(C)]
@@ -98,9 +102,9 @@ pub struct SensorFrame {
     pub action_seq: u64,
     /// Used entries of the joint arrays.
     pub n_joints: u32,
-    /// Controller mode ([`ControllerMode`] as u32).
+    /// Controller mode ([`ControllerMode`](crate::ControllerMode) as u32).
     pub mode: u32,
-    /// Fault code after this cycle, as [`ControllerStatus::fault_code`] (0:
+    /// Fault code after this cycle, as [`ControllerStatus::fault_code`](crate::ControllerStatus::fault_code) (0:
     /// none).
     pub fault_code: u32,
     /// Reserved, zero.
@@ -159,3 +163,15 @@ impl PolicyAction {
         [x, y, z, self.delta_roll_rad]
     }
 }
+
+message!(HardwareState, topics::HARDWARE_STATE, "HardwareState");
+message!(TorqueCommand, topics::TORQUE_COMMAND, "TorqueCommand");
+message!(SensorFrame, topics::SENSOR, "SensorFrame");
+message!(PolicyAction, topics::ACTION, "PolicyAction");
+
+// Layouts (`Pod` rejects padding; these pin the sizes).
+const J: usize = 8 * MAX_JOINTS;
+const _: () = assert!(size_of::<HardwareState>() == H + 16 + 8 + 3 * J + 48);
+const _: () = assert!(size_of::<TorqueCommand>() == H + 16 + 8 + J);
+const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 16 + 4 * J + 8 * 19);
+const _: () = assert!(size_of::<PolicyAction>() == H + 8 + 32);

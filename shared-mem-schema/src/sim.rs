@@ -1,8 +1,14 @@
 //! The simulator's episode control: commands, reports and the task's stages.
 
-use crate::{Header, MAX_CONFIG_BYTES, MAX_MESSAGE_BYTES};
+use crate::message::{HEADER_BYTES as H, Header, Message, message};
+use crate::topics;
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
+
+/// Capacity of [`SimCommand::config_toml`], bytes.
+pub const MAX_CONFIG_BYTES: usize = 16 * 1024;
+/// Capacity of [`EpisodeReport::message`], bytes.
+pub const MAX_MESSAGE_BYTES: usize = 256;
 
 /// The episode stages of the paper's evaluation (Sec. "Evaluation
 /// metrics"), ordered: a later stage implies the earlier ones were reached.
@@ -163,3 +169,10 @@ impl EpisodeReport {
         String::from_utf8_lossy(&self.message[..n]).into_owned()
     }
 }
+
+message!(SimCommand, topics::SIM_COMMAND, "SimCommand");
+message!(EpisodeReport, topics::EPISODE, "EpisodeReport");
+
+// Layouts (`Pod` rejects padding; these pin the sizes).
+const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
+const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);

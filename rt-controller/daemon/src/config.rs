@@ -480,7 +480,10 @@ mod tests {
 
     #[test]
     fn the_shipped_configuration_loads() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../deploy/rt-controller.toml");
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../deploy/rt-controller.toml"
+        );
         let c = DaemonConfig::from_file(std::path::Path::new(path)).unwrap();
         assert_eq!(c.robot, "iiwa14");
         assert_eq!(c.timing.clock, Clock::Wall);

@@ -1,4 +1,4 @@
-//! The daemon: the control cycle ([`crate::cycle`]) between a hardware
+//! The daemon: the control cycle ([`rt_controller::cycle`]) between a hardware
 //! backend and the learner-facing services, one cycle per call.
 
 use crate::backend::{Hardware, HardwareError};

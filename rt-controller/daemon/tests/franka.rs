@@ -59,7 +59,7 @@ fn ft_sensor(stop: Arc<AtomicBool>) -> (String, std::thread::JoinHandle<()>) {
 }
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// A child process killed (SIGKILL) and reaped when dropped.
