@@ -45,7 +45,7 @@ pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareErro
         FrankaGeneration::Fr3 => FciVersion::V10,
         FrankaGeneration::Panda => FciVersion::V5,
     };
-    // Our own real-time set-up (daemon::rt) runs on the control thread;
+    // Our own real-time set-up (crate::rt) runs on the control thread;
     // the client must not change the scheduling of the caller. A control
     // log of 0: the error path then copies no states.
     let options = RobotOptions::new(RealtimeConfig::Ignore)

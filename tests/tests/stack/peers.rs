@@ -145,7 +145,7 @@ fn silent_hardware_is_a_fault_with_no_further_torques() {
     .expect("the controller never reported the hardware lost");
     assert_eq!(
         lost.fault_code,
-        rt_controller::daemon::FAULT_HARDWARE_SILENT
+        rt_controller_daemon::FAULT_HARDWARE_SILENT
     );
     // Whatever was in flight is gone; nothing new may come.
     std::thread::sleep(Duration::from_millis(20));
