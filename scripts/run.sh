@@ -35,7 +35,7 @@ fi
 # Cargo's own progress is shown: a first build takes minutes, and a silent
 # terminal for that long looks hung.
 echo "run.sh: building hw-sim, rt-controller and learner (release; the first build takes several minutes)" >&2
-cargo build --release -p hw-sim -p rt-controller -p learner --bins
+cargo build --release -p hw-sim -p rt-controller-daemon -p learner --bins
 # Where cargo put them: CARGO_TARGET_DIR when set (relative to this root).
 target_dir="${CARGO_TARGET_DIR:-target}"
 echo "run.sh: starting the stack" >&2

@@ -715,7 +715,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         })?);
     }
     let controller = match &a.controller_config {
-        Some(p) => rt_controller::daemon::config::DaemonConfig::from_file(p)?.controller,
+        Some(p) => rt_controller_daemon::config::DaemonConfig::from_file(p)?.controller,
         None => rt_controller::ControllerConfig::default(),
     };
     let workers = a
@@ -1348,7 +1348,7 @@ fn stack_franky_sim(
         .with_context(|| format!("creating {}", a.log_dir.display()))?;
     let written = a.log_dir.join("rt-controller.toml");
     stack::franky_sim_controller_config(&template, &franky.address, &a.namespace, &written)?;
-    let daemon = rt_controller::daemon::config::DaemonConfig::from_file(&written)?;
+    let daemon = rt_controller_daemon::config::DaemonConfig::from_file(&written)?;
     let p = task.hole_pose.translation.vector;
     let run_args = vec![
         "--episodes".to_string(),

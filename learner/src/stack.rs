@@ -117,7 +117,7 @@ pub enum StackError {
         path: PathBuf,
         /// Why.
         #[source]
-        source: rt_controller::daemon::config::DaemonConfigError,
+        source: rt_controller_daemon::config::DaemonConfigError,
     },
     /// The rt-controller configuration for franky-sim does not drive a
     /// Franka.
@@ -312,7 +312,7 @@ pub fn franky_sim_controller_config(
     namespace: &str,
     out: &Path,
 ) -> Result<(), StackError> {
-    use rt_controller::daemon::config::{BackendKind, DaemonConfig};
+    use rt_controller_daemon::config::{BackendKind, DaemonConfig};
     let mut c =
         DaemonConfig::from_file(template).map_err(|source| StackError::ControllerConfig {
             path: template.to_path_buf(),

@@ -39,7 +39,7 @@ impl From<Mode> for ControllerMode {
 /// Fault code carried in the status: 0 none, 1 non-finite state, 2 joint
 /// position limit, 3 joint velocity limit, 4 force overload, 5 moment
 /// overload, 6 dynamics failure, 7 non-finite torque (100, hardware silent,
-/// is the daemon's: [`crate::daemon::FAULT_HARDWARE_SILENT`]).
+/// is the daemon's: `rt_controller_daemon::FAULT_HARDWARE_SILENT`).
 pub fn fault_code(reason: Option<FaultReason>) -> u32 {
     match reason {
         None => 0,

@@ -6,14 +6,16 @@
 //! law, operational-space control (Λ = (J M⁻¹ Jᵀ)⁻¹), the QP torque-limit
 //! filter and the safety supervisor, as a pure step `(state, action) →
 //! torques`, and [`cycle::ControlCycle`], that step over the wire messages
-//! (hardware state and action in, torque command and sensor frame out). The
-//! [`daemon`] module and the `rt-controller` binary wrap the cycle with
-//! shared-memory transport, a clock, real-time set-up and a hardware backend
-//! (the simulator, or a Franka robot through `franka-rs`: `daemon::franka`,
-//! docs/franka.md; run against a simulated FR3 only, never a physical one).
+//! (hardware state and action in, torque command and sensor frame out).
+//! The daemon that runs the cycle on a robot (transport, clock, real-time
+//! set-up, the simulator and Franka backends, the `rt-controller` binary)
+//! is its own crate, `rt-controller-daemon` (rt-controller/daemon); the
+//! learner's fast path runs the same cycle in-process.
 //!
 //! It must not allocate, lock or block in the 1 kHz path, and it must not do
-//! any learning. Kinematics and dynamics come from `robot-model`.
+//! any learning. It does no I/O and must not depend on franka-rs, the
+//! shared-memory transport or the daemon: it uses only shared-mem-schema's
+//! message types. Kinematics and dynamics come from `robot-model`.
 //!
 //! ```no_run
 //! use robot_model::{LoadOptions, Model};
@@ -31,7 +33,6 @@
 
 pub mod config;
 pub mod cycle;
-pub mod daemon;
 pub mod impedance;
 pub mod linalg;
 pub mod osc;

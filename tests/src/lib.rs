@@ -38,7 +38,7 @@ pub fn stack_bins() -> &'static Path {
             "-p",
             "hw-sim",
             "-p",
-            "rt-controller",
+            "rt-controller-daemon",
             "-p",
             "learner",
             "--bins",

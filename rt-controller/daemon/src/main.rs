@@ -3,11 +3,11 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use rt_controller::daemon::config::{BackendKind, Clock, DaemonConfig};
-use rt_controller::daemon::rt::{self, Notifier};
-use rt_controller::daemon::rt_alloc::{self, RtAllocator};
-use rt_controller::daemon::{
-    Daemon, FAULT_HARDWARE_SILENT, FrankaBackend, Hardware, Shared, SimBackend, franka,
+use rt_controller_daemon::config::{BackendKind, Clock, DaemonConfig, WrenchSource};
+use rt_controller_daemon::rt::{self, Notifier};
+use rt_controller_daemon::rt_alloc::{self, RtAllocator};
+use rt_controller_daemon::{
+    Daemon, FAULT_HARDWARE_SILENT, FrankaBackend, Hardware, NetFt, Shared, SimBackend, franka,
 };
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::process::{
@@ -138,7 +138,12 @@ fn run(args: Args) -> Result<()> {
                 "rt-controller: connected, robot server version {}",
                 robot.server_version()
             );
-            let hw = FrankaBackend::new(&robot, f.clone(), &model)?;
+            // The sensor is found and streaming before the motion starts.
+            let wrench_sensor = match f.wrench {
+                WrenchSource::NetFt => Some(NetFt::connect(&f.net_ft, mono_now_ns())?),
+                WrenchSource::RobotEstimate | WrenchSource::None => None,
+            };
+            let hw = FrankaBackend::new(&robot, f.clone(), &model, wrench_sensor)?;
             drive(&cfg, model, hw, &node, |hw| {
                 info!(
                     "rt-controller: the robot's lowest control command success rate: {:.3}",

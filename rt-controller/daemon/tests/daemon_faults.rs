@@ -9,7 +9,7 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
-use rt_controller::daemon::{CycleOutcome, FAULT_HARDWARE_SILENT};
+use rt_controller_daemon::{CycleOutcome, FAULT_HARDWARE_SILENT};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{ControllerCommand, ControllerMode, ControllerStatus, PolicyAction};

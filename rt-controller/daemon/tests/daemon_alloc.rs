@@ -17,7 +17,7 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
-use rt_controller::daemon::CycleOutcome;
+use rt_controller_daemon::CycleOutcome;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
 use shared_mem_schema::{ControllerStatus, PolicyAction, SCHEMA_VERSION, SensorFrame};

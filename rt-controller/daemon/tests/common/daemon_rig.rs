@@ -3,8 +3,8 @@
 #![allow(dead_code)]
 
 use robot_model::descriptions::{IIWA14_HOME_Q, builtin};
-use rt_controller::daemon::config::{Clock, DaemonConfig};
-use rt_controller::daemon::{Daemon, SimBackend};
+use rt_controller_daemon::config::{Clock, DaemonConfig};
+use rt_controller_daemon::{Daemon, SimBackend};
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub};
 use shared_mem_schema::{HardwareState, PolicyAction, TorqueCommand};
 

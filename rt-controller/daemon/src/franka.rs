@@ -19,10 +19,10 @@
 //! the robot's own message and a fault code ([`robot_fault_code`]); the
 //! daemon publishes it as its Fault and stops.
 
-use super::backend::{Hardware, HardwareError};
-use super::config::{FrankaConfig, FrankaGeneration, WrenchSource};
-use super::netft::NetFt;
-use super::shared::{
+use crate::backend::{Hardware, HardwareError};
+use crate::config::{FrankaConfig, FrankaGeneration, WrenchSource};
+use crate::netft::NetFt;
+use crate::shared::{
     FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX,
 };
 use franka::{
@@ -45,7 +45,7 @@ pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareErro
         FrankaGeneration::Fr3 => FciVersion::V10,
         FrankaGeneration::Panda => FciVersion::V5,
     };
-    // Our own real-time set-up (daemon::rt) runs on the control thread;
+    // Our own real-time set-up (crate::rt) runs on the control thread;
     // the client must not change the scheduling of the caller. A control
     // log of 0: the error path then copies no states.
     let options = RobotOptions::new(RealtimeConfig::Ignore)
@@ -159,8 +159,16 @@ pub struct FrankaBackend<'r> {
 impl<'r> FrankaBackend<'r> {
     /// The backend on `robot` for `model` (whose gravity is taken off the
     /// commands: it must be the robot's with its end-effector load, e.g.
-    /// the built-in `fr3`).
-    pub fn new(robot: &'r Robot, cfg: FrankaConfig, model: &Model) -> Result<Self, HardwareError> {
+    /// the built-in `fr3`). `wrench_sensor` is the external sensor of
+    /// `wrench = "net_ft"`, connected and streaming ([`NetFt::connect`]:
+    /// one that does not answer is a start-up error, not a Fault in the
+    /// loop); it must be given exactly when the configuration names it.
+    pub fn new(
+        robot: &'r Robot,
+        cfg: FrankaConfig,
+        model: &Model,
+        wrench_sensor: Option<NetFt>,
+    ) -> Result<Self, HardwareError> {
         if model.nv() != JOINTS {
             return Err(HardwareError::Robot {
                 code: FAULT_ROBOT_OTHER,
@@ -173,12 +181,16 @@ impl<'r> FrankaBackend<'r> {
         }
         let mut effort = [0.0; JOINTS];
         effort.copy_from_slice(model.effort_limits().as_slice());
-        // The sensor is found and streaming before the motion starts: one
-        // that does not answer is a start-up error, not a Fault in the loop.
-        let netft = match cfg.wrench {
-            WrenchSource::NetFt => Some(NetFt::connect(&cfg.net_ft, mono_now_ns())?),
-            _ => None,
-        };
+        if (cfg.wrench == WrenchSource::NetFt) != wrench_sensor.is_some() {
+            return Err(HardwareError::Robot {
+                code: FAULT_ROBOT_OTHER,
+                reason: format!(
+                    "`backend.franka.wrench` = {:?} needs {} external sensor",
+                    cfg.wrench,
+                    if wrench_sensor.is_some() { "no" } else { "an" }
+                ),
+            });
+        }
         Ok(Self {
             robot,
             control: None,
@@ -196,7 +208,7 @@ impl<'r> FrankaBackend<'r> {
             last_command_seq: 0,
             finished: false,
             min_success_rate: 1.0,
-            netft,
+            netft: wrench_sensor,
         })
     }
 
@@ -376,8 +388,8 @@ mod tests {
     //! from the robot's error to the daemon's Fault is checked here on
     //! errors built as franka-rs builds them.
     use super::*;
-    use crate::daemon::config::{Clock, DaemonConfig};
-    use crate::daemon::{Daemon, FAULT_ROBOT_LIMIT};
+    use crate::config::{Clock, DaemonConfig};
+    use crate::{Daemon, FAULT_ROBOT_LIMIT};
     use franka::{ControlException, Errors, MoveStatus};
     use robot_model::descriptions::{FR3_READY_Q, builtin};
     use shared_mem_schema::transport;

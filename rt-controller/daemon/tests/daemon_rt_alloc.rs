@@ -8,8 +8,8 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
-use rt_controller::daemon::CycleOutcome;
-use rt_controller::daemon::rt_alloc::{self, RtAllocator};
+use rt_controller_daemon::CycleOutcome;
+use rt_controller_daemon::rt_alloc::{self, RtAllocator};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
 

@@ -1,14 +1,15 @@
-//! The daemon: the control cycle ([`crate::cycle`]) between a hardware
+//! The daemon: the control cycle ([`rt_controller::cycle`]) between a hardware
 //! backend and the learner-facing services, one cycle per call.
 
-use super::backend::{Hardware, HardwareError};
-use super::config::{Clock, DaemonConfig};
-use super::queue::{ActionQueue, for_episode};
-use super::shared::{FAULT_HARDWARE_SILENT, Shared};
-use super::stats::Stats;
-use crate::cycle::ControlCycle;
-use crate::{ActionStatus, ConfigError};
+use crate::backend::{Hardware, HardwareError};
+use crate::config::{Clock, DaemonConfig};
+use crate::queue::{ActionQueue, for_episode};
+use crate::rt::pause_briefly;
+use crate::shared::{FAULT_HARDWARE_SILENT, Shared};
+use crate::stats::Stats;
 use robot_model::Model;
+use rt_controller::cycle::ControlCycle;
+use rt_controller::{ActionStatus, ConfigError};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
 use shared_mem_schema::{
@@ -342,7 +343,7 @@ impl<H: Hardware> Daemon<H> {
             }
             spins += 1;
             if spins > 200 {
-                super::run::pause_briefly();
+                pause_briefly();
             }
         }
     }
@@ -535,7 +536,7 @@ impl<H: Hardware> Daemon<H> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::daemon::SimBackend;
+    use crate::SimBackend;
     use robot_model::descriptions::{IIWA14_HOME_Q, builtin};
     use shared_mem_schema::rates::CONTROL_PERIOD_NS;
 

@@ -1,5 +1,5 @@
-//! An external 6-axis force/torque sensor as the Franka backend's wrench
-//! source: an ATI Net F/T (the paper's real robot carried an ATI Gamma)
+//! An external 6-axis force/torque sensor, a wrench source a backend can be
+//! given (the Franka backend's `wrench = "net_ft"`): an ATI Net F/T (the paper's real robot carried an ATI Gamma)
 //! over its RDT ("raw data transfer") UDP protocol.
 //!
 //! The protocol, from ATI's Net F/T manual: the client sends an 8-byte
@@ -20,9 +20,9 @@
 //! with the reason; the values are the sensor's own, in its frame, as the
 //! robot descriptions' wrist sensor reads them (docs/franka.md).
 
-use super::backend::HardwareError;
-use super::config::NetFtConfig;
-use super::shared::FAULT_FT_SENSOR;
+use crate::backend::HardwareError;
+use crate::config::NetFtConfig;
+use crate::shared::FAULT_FT_SENSOR;
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 

@@ -18,7 +18,7 @@
 //! `$FRANKY_SIM_REQUIRED=1` or `$CI` is set: then it fails (scripts/test.sh
 //! sets it).
 
-use rt_controller::daemon::netft::{CMD_START, Record, request};
+use rt_controller_daemon::netft::{CMD_START, Record, request};
 use shared_mem_schema::transport::{self, Sub};
 use shared_mem_schema::{ControllerMode, ControllerStatus, PolicyAction, SensorFrame};
 use std::net::UdpSocket;
@@ -59,7 +59,7 @@ fn ft_sensor(stop: Arc<AtomicBool>) -> (String, std::thread::JoinHandle<()>) {
 }
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// A child process killed (SIGKILL) and reaped when dropped.

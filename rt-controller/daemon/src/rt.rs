@@ -1,6 +1,7 @@
-//! Real-time set-up of the calling thread, and systemd notifications.
+//! Real-time set-up of the calling thread, systemd notifications, and the
+//! real-time loop's short pause in a busy wait.
 
-use super::config::RealtimeConfig;
+use crate::config::RealtimeConfig;
 use std::os::unix::net::UnixDatagram;
 
 /// What the real-time set-up achieved.
@@ -140,4 +141,12 @@ impl Notifier {
             let _ = s.send_to_addr(msg.as_bytes(), addr);
         }
     }
+}
+
+/// A short sleep in a hardware-clocked wait (lockstep). Not a yield: under
+/// `SCHED_FIFO` a yield lets only other real-time threads run, so the peers
+/// this loop waits for (the simulator, the policy node) would starve on a
+/// loaded machine and the wait would end in a hardware timeout.
+pub(crate) fn pause_briefly() {
+    std::thread::sleep(std::time::Duration::from_micros(20));
 }

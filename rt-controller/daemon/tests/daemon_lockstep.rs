@@ -5,7 +5,7 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
-use rt_controller::daemon::CycleOutcome;
+use rt_controller_daemon::CycleOutcome;
 use shared_mem_schema::process::mono_now_ns;
 
 #[test]

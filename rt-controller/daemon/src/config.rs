@@ -2,7 +2,7 @@
 //! real-time settings. Every field is documented and defaulted; unknown
 //! fields are errors and bad values name their dotted field.
 
-use crate::config::ControllerConfig;
+use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{
     ConfigFileError, FieldError, at_least, ensure, non_negative, parse_toml, positive, read_toml,
@@ -65,7 +65,7 @@ pub enum WrenchSource {
     /// None: the wrench reads zero (the force supervision then sees none).
     None,
     /// An external ATI Net F/T on the wrist (`[backend.franka.net_ft]`),
-    /// in the sensor's frame (daemon::netft).
+    /// in the sensor's frame (crate::netft).
     NetFt,
 }
 
@@ -480,7 +480,10 @@ mod tests {
 
     #[test]
     fn the_shipped_configuration_loads() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../deploy/rt-controller.toml");
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../deploy/rt-controller.toml"
+        );
         let c = DaemonConfig::from_file(std::path::Path::new(path)).unwrap();
         assert_eq!(c.robot, "iiwa14");
         assert_eq!(c.timing.clock, Clock::Wall);

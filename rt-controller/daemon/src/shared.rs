@@ -3,7 +3,7 @@
 use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// Fault code of a silent hardware (the control law's codes are
-/// [`crate::cycle::fault_code`]'s).
+/// [`rt_controller::cycle::fault_code`]'s).
 pub const FAULT_HARDWARE_SILENT: u32 = 100;
 /// Fault code of a robot error: a communication constraint violation (the
 /// robot missed too many commands).
@@ -28,7 +28,7 @@ pub struct Shared {
     pub heartbeat: AtomicU64,
     /// [`shared_mem_schema::ControllerMode`] as u32.
     pub mode: AtomicU32,
-    /// Fault code (see [`crate::cycle::fault_code`]).
+    /// Fault code (see [`rt_controller::cycle::fault_code`]).
     pub fault_code: AtomicU32,
     /// Garbage actions counted so far.
     pub garbage_actions: AtomicU64,
@@ -39,7 +39,7 @@ pub struct Shared {
     /// Overruns so far.
     pub overruns: AtomicU64,
     /// Failed publications to and receives from the learner so far
-    /// ([`crate::daemon::Stats`]' `publish_errors` + `receive_errors`).
+    /// ([`crate::Stats`]' `publish_errors` + `receive_errors`).
     pub learner_io_errors: AtomicU64,
     /// Stale actions dropped so far (every reason).
     pub stale_actions: AtomicU64,

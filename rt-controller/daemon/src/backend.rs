@@ -1,5 +1,5 @@
 //! What the daemon needs of a robot, and the simulator backend (hw-sim over
-//! shared memory). The Franka backend ([`super::franka`]) implements the
+//! shared memory). The Franka backend ([`crate::franka`]) implements the
 //! same trait.
 
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
@@ -31,7 +31,7 @@ pub enum HardwareError {
     #[error("the robot or its sensor reported an error (fault code {code}): {reason}")]
     Robot {
         /// The fault code published in the status
-        /// (`crate::daemon::FAULT_ROBOT_*`).
+        /// (`crate::FAULT_ROBOT_*`).
         code: u32,
         /// The robot's reason, as its client library words it.
         reason: String,

@@ -3,7 +3,7 @@
 //! free can take the system allocator's lock as surely as an allocation).
 //! One test in its own binary: the counters are process-wide.
 
-use rt_controller::daemon::rt_alloc::{self, LARGE_BLOCK, RtAllocator};
+use rt_controller_daemon::rt_alloc::{self, LARGE_BLOCK, RtAllocator};
 use std::hint::black_box;
 
 #[global_allocator]

@@ -1,11 +1,12 @@
 //! The 1 kHz loop around [`Daemon::cycle`]: start-up, the clock (wall or
 //! hardware), overrun accounting and the shutdown hold.
 
-use super::backend::{Hardware, HardwareError};
-use super::config::Clock;
-use super::control::Daemon;
-use super::rt_alloc;
-use super::stats::RunSummary;
+use crate::backend::{Hardware, HardwareError};
+use crate::config::Clock;
+use crate::control::Daemon;
+use crate::rt::pause_briefly;
+use crate::rt_alloc;
+use crate::stats::RunSummary;
 use shared_mem_schema::process::mono_now_ns;
 use std::sync::atomic::Ordering;
 
@@ -155,12 +156,4 @@ impl<H: Hardware> Daemon<H> {
             overruns: self.stats.overruns,
         })
     }
-}
-
-/// A short sleep in a hardware-clocked wait (lockstep). Not a yield: under
-/// `SCHED_FIFO` a yield lets only other real-time threads run, so the peers
-/// this loop waits for (the simulator, the policy node) would starve on a
-/// loaded machine and the wait would end in a hardware timeout.
-pub(super) fn pause_briefly() {
-    std::thread::sleep(std::time::Duration::from_micros(20));
 }
