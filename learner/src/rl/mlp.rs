@@ -8,7 +8,7 @@
 //! outputs × inputs) then the biases. Hidden layers are tanh, the output is
 //! linear.
 
-use super::ppo::Adam;
+use super::adam::Adam;
 use hw_sim::rng::{self, SimRng};
 use rand::seq::SliceRandom;
 

@@ -11,6 +11,7 @@
 //! docs/rl.md gives every
 //! constant and setting with its source or reason.
 
+pub mod adam;
 pub mod deploy;
 pub mod distill;
 pub mod env;

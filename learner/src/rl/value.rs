@@ -12,7 +12,7 @@
 
 use super::gaussian::LinearBaseline;
 use super::mlp::{Cache, Mlp};
-use super::ppo::Adam;
+use super::adam::Adam;
 use hw_sim::FieldError;
 use hw_sim::rng::SimRng;
 use serde::{Deserialize, Serialize};
