@@ -143,10 +143,7 @@ fn silent_hardware_is_a_fault_with_no_further_torques() {
         s.mode == ControllerMode::HardwareLost as u32
     })
     .expect("the controller never reported the hardware lost");
-    assert_eq!(
-        lost.fault_code,
-        rt_controller_daemon::FAULT_HARDWARE_SILENT
-    );
+    assert_eq!(lost.fault_code, rt_controller_daemon::FAULT_HARDWARE_SILENT);
     // Whatever was in flight is gone; nothing new may come.
     std::thread::sleep(Duration::from_millis(20));
     transport::drain(&torques, |_| {}).unwrap();

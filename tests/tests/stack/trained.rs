@@ -1,6 +1,5 @@
 //! Trained policies (ground truth and representation) drive the stack live.
 
-use learner::live::task_geometry;
 use shared_mem_schema::PolicyAction;
 use std::process::Command;
 
