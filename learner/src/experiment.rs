@@ -18,9 +18,10 @@
 //! environment steps, episodes — is the configuration's: one file for this
 //! machine, one for a GPU machine at the paper's scale.
 
-use crate::collect::{self, CollectConfig, Mix};
+use crate::collect::{self, CollectConfig};
+use learner_node::mix::Mix;
 use crate::dataset::{self, BuildConfig, Dataset};
-use crate::log::LogOptions;
+use learner_node::log::LogOptions;
 use crate::plot::{Chart, Series};
 use crate::rl::distill::{self, DistillConfig};
 use crate::rl::observe::ObservationKind;

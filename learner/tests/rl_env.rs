@@ -5,7 +5,7 @@
 //! threads.
 
 use hw_sim::PegShape;
-use learner::policy::{HeuristicConfig, HeuristicPolicy};
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy};
 use learner::rl::reward::{Outcome, RewardStage, normalised_return};
 use learner::rl::{BatchEnv, GroundTruth, RlEnv, RlEnvConfig, VecEnv};
 use nalgebra::Vector3;

@@ -4,8 +4,8 @@
 
 use hw_sim::WorldConfig;
 use learner::env::FastEnv;
-use learner::live::{PolicyNode, task_geometry};
-use learner::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
+use learner_node::live::{PolicyNode, task_geometry};
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::transport::{self, Channel, TransportError};
@@ -103,10 +103,10 @@ fn episode_frame_counts(stdout: &str) -> [u64; 5] {
 /// the episode's first step.
 fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path) {
     let [logged, missing, gaps, not_published, not_recorded] = episode_frame_counts(stdout);
-    let reader = learner::log::LogReader::open(log).unwrap();
-    let all = learner::log::log_gaps(&reader).unwrap();
+    let reader = learner_node::log::LogReader::open(log).unwrap();
+    let all = learner_node::log::log_gaps(&reader).unwrap();
     let g = &all[0];
-    assert_eq!(g.topic, learner::log::topics::SENSOR, "{all:?}");
+    assert_eq!(g.topic, learner_node::log::topics::SENSOR, "{all:?}");
     let loss = g.sensor.unwrap();
     assert_eq!(
         [
@@ -123,7 +123,7 @@ fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path
     if mode == "lockstep" {
         assert_eq!(missing, 0, "{mode}: {all:?}");
         let frames = reader
-            .read_raw::<SensorFrame>(learner::log::topics::SENSOR, None)
+            .read_raw::<SensorFrame>(learner_node::log::topics::SENSOR, None)
             .unwrap();
         assert_eq!(
             frames[0].step, 0,
@@ -135,7 +135,7 @@ fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path
 fn start_sim_and_controller(
     ns: &str,
     dir: &std::path::Path,
-) -> (learner::stack::Managed, learner::stack::Managed) {
+) -> (learner_node::stack::Managed, learner_node::stack::Managed) {
     let sim = tests::start("hw-sim", &["--namespace", ns, "--no-camera"], dir);
     let ctl = tests::start("rt-controller", &["--namespace", ns, "--no-realtime"], dir);
     (sim, ctl)
@@ -614,7 +614,7 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
         })
         .unwrap();
         for f in frames {
-            roll_ref.get_or_insert_with(|| (learner::proprio::roll_reference(&f), f.step));
+            roll_ref.get_or_insert_with(|| (learner_node::proprio::roll_reference(&f), f.step));
             wrench.push(f.wrench);
             if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
                 let obs = Observation::from_frame(&f, roll_ref.expect("first frame").0);
@@ -682,7 +682,7 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
         .env("NOTIFY_SOCKET", &sock_path)
         .env("WATCHDOG_USEC", "1000000");
     let mut ctl =
-        learner::stack::Managed::spawn("rt-controller", cmd, Some(&dir.join("rt-controller.log")))
+        learner_node::stack::Managed::spawn("rt-controller", cmd, Some(&dir.join("rt-controller.log")))
             .unwrap();
     let node = transport::create_node("e2e-systemd").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
@@ -768,7 +768,7 @@ fn policy_episode(
     checkpoint: &std::path::Path,
     seed: u64,
     seconds: u32,
-) -> learner::log::LogReader {
+) -> learner_node::log::LogReader {
     let out = Command::new(tests::stack_bins().join("learner"))
         .args(["stack", "--lockstep", "--episodes", "1", "--seed"])
         .arg(seed.to_string())
@@ -791,7 +791,7 @@ fn policy_episode(
         .map(|e| e.path())
         .find(|p| p.extension().is_some_and(|x| x == "mcap"))
         .expect("the episode's log");
-    learner::log::LogReader::open(&log).unwrap()
+    learner_node::log::LogReader::open(&log).unwrap()
 }
 
 /// A policy checkpoint that centres the tip over the hole of episode
@@ -838,11 +838,11 @@ fn a_trained_policy_drives_the_stack_live() {
     let config = reader.read_config(None).unwrap();
     assert_eq!(
         config[0].1.policy,
-        learner::collect::EpisodePolicy::Learned,
+        learner_node::mix::EpisodePolicy::Learned,
         "the log names the policy"
     );
     let actions = reader
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     // 3 s at 20 Hz, the first action after one policy period.
     assert!(actions.len() >= 55, "{} actions", actions.len());
@@ -852,7 +852,7 @@ fn a_trained_policy_drives_the_stack_live() {
         assert!(a.delta_pos_m[0].abs() <= 0.005 && a.delta_pos_m[1].abs() <= 0.005);
     }
     let reports = reader
-        .read_raw::<EpisodeReport>(learner::log::topics::EPISODE, None)
+        .read_raw::<EpisodeReport>(learner_node::log::topics::EPISODE, None)
         .unwrap();
     let horizontal = |r: &EpisodeReport| r.s_m[0].hypot(r.s_m[1]);
     let (first, last) = (horizontal(&reports[0]), horizontal(reports.last().unwrap()));
@@ -895,9 +895,9 @@ fn a_trained_policy_drives_the_stack_live() {
         .map(|e| e.path())
         .find(|p| p.extension().is_some_and(|x| x == "mcap"))
         .expect("the episode's log");
-    let actions = learner::log::LogReader::open(&log)
+    let actions = learner_node::log::LogReader::open(&log)
         .unwrap()
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     assert!(actions.len() >= 15, "{} actions", actions.len());
     assert!(
@@ -993,7 +993,7 @@ fn a_representation_policy_drives_the_stack_live() {
     );
     let reader = policy_episode(dir.path(), &ckpt, 2, 2);
     let actions = reader
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     assert!(actions.len() >= 35, "{} actions", actions.len());
     let distinct = |k: usize| {

@@ -1,17 +1,18 @@
 //! What the policy sees: an [`Observer`] turns the state of a batch of
-//! environments into one observation vector each.
+//! environments (the RL environment's, or the live node's one) into one
+//! observation vector each.
 //!
 //! Two sources: [`GroundTruth`] (the tip relative to the hole, velocities
 //! and a wrench summary: privileged, the simulator's report, as the
 //! heuristic policy uses) and the frozen representation
-//! ([`super::represent::Representation`]: a trained model's z means over the
+//! ([`crate::repr::Representation`]: a trained model's z means over the
 //! camera, the wrench window and proprioception, encoded in batches), which
 //! asks for camera frames through [`Observer::needs_camera`].
 
 use crate::policy::{Observation, WrenchHistory};
-use hw_sim::TaskState;
+use hw_sim::{Stage, TaskState};
 use nalgebra::{Isometry3, Vector3};
-use serde::{Deserialize, Serialize};
+use shared_mem_schema::EpisodeReport;
 
 /// One environment's state at a policy step, as an observer reads it.
 pub struct ObsView<'a> {
@@ -58,98 +59,6 @@ pub trait Observer: Send + Sync {
     }
 }
 
-/// Refuses a world camera (`camera`, the world's `[camera]`) that is not
-/// the one `observer` was trained for.
-pub fn check_camera(
-    camera: &hw_sim::config::CameraConfig,
-    observer: &dyn Observer,
-) -> Result<(), super::env::RlEnvError> {
-    check_calibration(camera, observer.camera())
-}
-
-/// Refuses a world camera (`camera`) that is not `trained` (the camera a
-/// representation, or the dataset it learns from, was made through; `None`:
-/// any camera).
-pub fn check_calibration(
-    camera: &hw_sim::config::CameraConfig,
-    trained: Option<shared_mem_schema::CameraCalibration>,
-) -> Result<(), super::env::RlEnvError> {
-    let Some(model) = trained else {
-        return Ok(());
-    };
-    // An invalid camera is named by its field, not reported as another one.
-    camera.validate()?;
-    let world = camera.calibration();
-    if world.same_camera(&model) {
-        Ok(())
-    } else {
-        Err(super::env::RlEnvError::Camera {
-            world: Box::new(world),
-            model: Box::new(model),
-        })
-    }
-}
-
-/// Which observer a configuration asks for: `observation = "ground_truth"`
-/// or `observation = { representation = "runs/full/model" }`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ObservationKind {
-    /// [`GroundTruth`].
-    #[default]
-    GroundTruth,
-    /// The z means of the representation exported into this directory by
-    /// `learner repr train` (its `model/`).
-    Representation(std::path::PathBuf),
-    /// [`GroundTruth`] with the hole believed displaced by a per-episode
-    /// error of this standard deviation per horizontal axis, m
-    /// (`observation = { ground_truth_hole_error = 0.003 }`):
-    /// [`HoleError`].
-    GroundTruthHoleError(f64),
-}
-
-impl ObservationKind {
-    /// Whether a policy trained on `self` takes `other`'s observations as
-    /// the same inputs: equal kinds, or the ground truth with and without a
-    /// hole error (the same 18 values, one told less precisely).
-    pub fn same_inputs(&self, other: &Self) -> bool {
-        use ObservationKind::{GroundTruth as G, GroundTruthHoleError as E};
-        matches!((self, other), (G | E(_), G | E(_))) || self == other
-    }
-
-    /// The observer (loading a representation's model from its file),
-    /// encoding on every core.
-    pub fn observer(&self) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
-        self.observer_on(0)
-    }
-
-    /// The same, a representation encoding on at most `threads` cores (0:
-    /// all), as a run's `threads` setting asks.
-    pub fn observer_on(
-        &self,
-        threads: usize,
-    ) -> Result<std::sync::Arc<dyn Observer>, super::env::RlEnvError> {
-        Ok(match self {
-            ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
-            ObservationKind::GroundTruthHoleError(std_m) => {
-                if !(std_m.is_finite() && *std_m >= 0.0) {
-                    return Err(hw_sim::FieldError::new(
-                        "observation.ground_truth_hole_error",
-                        std_m,
-                        "must be a standard deviation in metres, 0 or more",
-                    )
-                    .into());
-                }
-                std::sync::Arc::new(HoleError { std_m: *std_m })
-            }
-            ObservationKind::Representation(dir) => std::sync::Arc::new(
-                super::represent::Representation::load_on(dir, threads)
-                    .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
-            ),
-        })
-    }
-}
-
 /// Ground-truth state, 18 values, each scaled to about unit size:
 /// the tip's position in the hole frame (/ 0.1 m, 3), its roll relative to
 /// the hole wrapped by the peg's symmetry (/ (π/k), 1), the tip's linear
@@ -162,8 +71,8 @@ impl ObservationKind {
 /// Why the second, fine copy: at the coarse scale the 2 mm clearance is an
 /// input change of 0.02, which a freshly initialised MLP maps to an action
 /// change of about as little (0.1 mm), so the policy cannot resolve the
-/// opening; `rl_probe` showed a policy trained without it hovering 1 mm
-/// above the opening with 3 mm lateral steps (docs/experiments.md).
+/// opening; a policy trained without it hovered 1 mm above the opening
+/// with 3 mm lateral steps.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct GroundTruth;
 
@@ -180,7 +89,8 @@ const FINE_POSITION_M: f64 = 0.005;
 const FINE_ROLL_RAD: f64 = 0.05;
 
 impl GroundTruth {
-    fn one(v: &ObsView<'_>, out: &mut [f64]) {
+    /// One view's observation into `out` ([`GROUND_TRUTH_DIM`] values).
+    pub fn one(v: &ObsView<'_>, out: &mut [f64]) {
         let s = v.task.s_m;
         let inv = v.hole_pose.rotation.inverse();
         let lin = inv * Vector3::new(v.obs.ee_twist[0], v.obs.ee_twist[1], v.obs.ee_twist[2]);
@@ -285,5 +195,61 @@ impl Observer for HoleError {
             task.s_m.y += ey;
             GroundTruth::one(&ObsView { task: &task, ..*v }, o);
         }
+    }
+}
+
+/// Why a world's camera cannot feed an observer.
+#[derive(Debug, thiserror::Error)]
+pub enum CameraMismatch {
+    /// The world's camera settings are invalid.
+    #[error(transparent)]
+    Invalid(#[from] hw_sim::FieldError),
+    /// The world's camera is not the one the observer was trained through.
+    #[error(
+        "the world's camera ({world}) is not the camera the representation was trained with \
+         ({model}); give the world (its [camera]) the training data's camera"
+    )]
+    Other {
+        /// The world's camera.
+        world: Box<shared_mem_schema::CameraCalibration>,
+        /// The trained one.
+        model: Box<shared_mem_schema::CameraCalibration>,
+    },
+}
+
+/// Refuses a world camera (`camera`, the world's `[camera]`) that is not
+/// `trained` (the camera a representation, or the dataset it learns from,
+/// was made through; `None`: any camera).
+pub fn check_calibration(
+    camera: &hw_sim::config::CameraConfig,
+    trained: Option<shared_mem_schema::CameraCalibration>,
+) -> Result<(), CameraMismatch> {
+    let Some(model) = trained else {
+        return Ok(());
+    };
+    // An invalid camera is named by its field, not reported as another one.
+    camera.validate()?;
+    let world = camera.calibration();
+    if world.same_camera(&model) {
+        Ok(())
+    } else {
+        Err(CameraMismatch::Other {
+            world: Box::new(world),
+            model: Box::new(model),
+        })
+    }
+}
+
+/// The simulator's task state as an episode report carries it (the live
+/// node's view of what the fast path reads from the world directly).
+pub fn task_state(r: &EpisodeReport) -> TaskState {
+    let stage_now = r.stage_now();
+    TaskState {
+        s_m: Vector3::from(r.s_m),
+        s_psi_rad: r.s_psi_rad,
+        in_contact: r.in_contact != 0,
+        in_hole: stage_now >= Stage::Inserted,
+        stage_now,
+        best_stage: r.best_stage(),
     }
 }

@@ -4,9 +4,9 @@
 use super::*;
 use crate::collect::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
-use crate::log::{CameraImage, Event, LogReader, topics};
-use crate::policy::WRENCH_WINDOW;
-use crate::proprio::{Proprio, roll_reference};
+use learner_node::log::{CameraImage, Event, LogReader, topics};
+use learner_node::policy::WRENCH_WINDOW;
+use learner_node::proprio::{Proprio, roll_reference};
 use hw_sim::PegShape;
 use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};

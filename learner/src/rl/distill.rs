@@ -34,7 +34,7 @@ use super::value::Baseline;
 use super::vec::{BatchEnv, VecEnv};
 use super::{RlEnvConfig, RlEnvError};
 use crate::plot::{Chart, Series};
-use crate::progress::Progress;
+use learner_node::progress::Progress;
 use hw_sim::FieldError;
 use hw_sim::rng;
 use serde::{Deserialize, Serialize};

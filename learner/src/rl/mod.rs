@@ -11,9 +11,9 @@
 //! docs/rl.md gives every
 //! constant and setting with its source or reason.
 
-pub mod deploy;
 pub mod distill;
 pub mod env;
+pub mod export;
 pub mod gaussian;
 pub mod mlp;
 pub mod obs_norm;
@@ -29,7 +29,6 @@ pub mod trpo;
 pub mod value;
 pub mod vec;
 
-pub use deploy::TrainedPolicy;
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome};
 pub use gaussian::{GaussianPolicy, LinearBaseline};
 pub use obs_norm::ObsNorm;

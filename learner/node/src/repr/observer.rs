@@ -3,42 +3,40 @@
 //! trained model's z means of the camera frame, the wrench window and the
 //! proprioception of every environment, encoded as one batch.
 
-use super::observe::{ObsView, Observer};
-use crate::models::{Encoder, ObservationRef};
+use super::inputs::{InputError, ObservationRef};
+use crate::observe::{ObsView, Observer};
 use crate::policy::WRENCH_WINDOW;
 use crate::proprio::PROPRIO;
-use std::path::Path;
+use shared_mem_schema::CameraCalibration;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// z means of an exported representation model.
+/// A trained representation that gives z means: the deployed one
+/// ([`super::DeployedEncoder`]) or the training crate's.
+pub trait ZEncoder: Send {
+    /// Latent size d.
+    fn dim(&self) -> usize;
+    /// The camera of its training images, when known.
+    fn camera(&self) -> Option<CameraCalibration>;
+    /// The z means of `obs`, `obs.len()` × d values, row after row; refuses
+    /// an observation of another size than the model's or not finite.
+    fn encode(&self, obs: &[ObservationRef<'_>]) -> Result<Vec<f32>, InputError>;
+}
+
+/// z means of a trained representation, encoded a batch at a time.
 pub struct Representation {
-    encoder: Mutex<Encoder>,
+    encoder: Mutex<Box<dyn ZEncoder>>,
     dim: usize,
-    camera: Option<shared_mem_schema::CameraCalibration>,
+    camera: Option<CameraCalibration>,
     rejected: AtomicU64,
 }
 
 impl Representation {
-    /// Loads the model `learner repr train` exported into `dir`, for the CPU.
-    pub fn load(dir: &Path) -> crate::train::Result<Self> {
-        Self::load_on(dir, 0)
-    }
-
-    /// The same, encoding batches on at most `threads` cores (0: all).
-    pub fn load_on(dir: &Path, threads: usize) -> crate::train::Result<Self> {
-        let mut encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
-        if threads > 0 {
-            encoder = encoder.with_threads(threads);
-        }
-        Ok(Self::new(encoder))
-    }
-
-    /// Around an encoder in memory.
-    pub fn new(encoder: Encoder) -> Self {
+    /// Around an encoder.
+    pub fn new(encoder: Box<dyn ZEncoder>) -> Self {
         Self {
             dim: encoder.dim(),
-            camera: encoder.camera().copied(),
+            camera: encoder.camera(),
             encoder: Mutex::new(encoder),
             rejected: AtomicU64::new(0),
         }
@@ -79,7 +77,7 @@ impl Observer for Representation {
         true
     }
 
-    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
+    fn camera(&self) -> Option<CameraCalibration> {
         self.camera
     }
 
