@@ -691,7 +691,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             };
             let workers = workers
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            let progress = learner::progress::Progress::new(files.len() as u64, "logs");
+            let progress = learner_node::progress::Progress::new(files.len() as u64, "logs");
             let (mut done, mut skipped) = (0, 0);
             let t = std::time::Instant::now();
             let meta = dataset::build(&files, &out, &cfg, workers, |path, r| {
@@ -939,7 +939,6 @@ fn run(cli: Cli) -> Result<()> {
                 a.episodes.last = false;
             }
             learner_node::cli::stack(a)
-        }
         }
     }
 }

@@ -255,7 +255,7 @@ impl FrankySim {
 /// The source tree this executable was built from (where scripts/ and
 /// configs/ are during development).
 pub fn repository_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// The rt-controller configuration for franky-sim: `template` (a daemon

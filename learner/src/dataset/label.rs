@@ -2,7 +2,7 @@
 //! labelled samples.
 
 use super::*;
-use crate::collect::EpisodePolicy;
+use learner_node::mix::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
 use learner_node::log::{CameraImage, Event, LogReader, topics};
 use learner_node::policy::WRENCH_WINDOW;

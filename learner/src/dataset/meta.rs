@@ -2,7 +2,7 @@
 //! constants, label ratios).
 
 use super::*;
-use crate::collect::EpisodePolicy;
+use learner_node::mix::EpisodePolicy;
 use hw_sim::PegShape;
 use serde::{Deserialize, Serialize};
 

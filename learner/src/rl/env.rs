@@ -14,11 +14,11 @@
 //! faults (a force overload, a joint limit): the arm is then held and the
 //! episode can no longer progress.
 
-use super::observe::ObsView;
 use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
 use crate::env::{EnvError, FastEnv};
-use learner_node::policy::{Action4, Observation, TaskGeometry};
+use learner_node::policy::{Observation, TaskGeometry};
 pub use learner_node::deploy::ActionScale;
+use learner_node::observe::ObsView;
 use hw_sim::{FieldError, TaskState, WorldConfig};
 use nalgebra::Isometry3;
 use rt_controller::ControllerConfig;

@@ -297,6 +297,7 @@ mod tests {
         assert!(p.needs_camera());
         let mut env = RlEnv::new(&Default::default()).unwrap();
         env.reset(3, false).unwrap();
+        use shared_mem_schema::Message;
         let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
         cam.calibration = hw_sim::config::CameraConfig::default().calibration();
         let (w, h) = (cam.calibration.width as usize, cam.calibration.height as usize);

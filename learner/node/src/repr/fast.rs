@@ -14,11 +14,40 @@
 
 use super::Modalities;
 use super::inputs::InputArrays;
-use super::weights::WeightsError;
 use crate::policy::WRENCH_WINDOW;
 use crate::proprio::PROPRIO;
 use faer::{Accum, MatMut, MatRef, Par};
 use std::sync::Mutex;
+
+/// Why an encoder's weights do not fit together or do not load; the
+/// file is named by [`super::weights::FileError`].
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum WeightsError {
+    /// An array of another shape than the model's layers ask for.
+    #[error("array {tensor}: shape {found:?}, expected {expected:?}")]
+    Shape {
+        /// The array.
+        tensor: String,
+        /// What the layers ask for.
+        expected: Vec<usize>,
+        /// What the file holds.
+        found: Vec<usize>,
+    },
+    /// An array the header names no layer for, or a layer without its array.
+    #[error("array {0} is missing")]
+    Missing(String),
+    /// The values end before the header's arrays do.
+    #[error("truncated: the header's arrays take {expected} bytes of values, the file holds {found}")]
+    Truncated {
+        /// Bytes the header's arrays take.
+        expected: u64,
+        /// Bytes after the header.
+        found: u64,
+    },
+    /// Not this format, or a header that does not parse.
+    #[error("{0}")]
+    Format(String),
+}
 
 fn leaky(x: f32, slope: f32) -> f32 {
     if x >= 0.0 { x } else { x * slope }

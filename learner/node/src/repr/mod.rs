@@ -15,10 +15,10 @@ pub mod inputs;
 pub mod observer;
 pub mod weights;
 
-pub use fast::{EncoderWeights, FastEncoder};
+pub use fast::{EncoderWeights, FastEncoder, WeightsError};
 pub use inputs::{InputArrays, InputError, Normaliser, ObservationRef};
 pub use observer::{Representation, ZEncoder};
-pub use weights::{EncoderFile, WeightsError};
+pub use weights::EncoderFile;
 
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::CameraCalibration;

@@ -11,7 +11,7 @@
 //! `haptics.layer0.weight` `[2·cin, cout]`, `proprio.layer0.weight`,
 //! `concat.layer0.weight` `[in, out]`, each with its `.bias`.
 
-use super::fast::{Conv, Dense, EncoderWeights, ImageEncoder, WrenchStack};
+use super::fast::{Conv, Dense, EncoderWeights, ImageEncoder, WeightsError, WrenchStack};
 use super::inputs::Normaliser;
 use super::Modalities;
 use serde::{Deserialize, Serialize};
@@ -21,36 +21,6 @@ use std::path::{Path, PathBuf};
 
 /// The file's first bytes (format version 1).
 pub const MAGIC: &[u8; 8] = b"LNENC001";
-
-/// Why an encoder's weights do not load; the file is named by
-/// [`FileError`].
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum WeightsError {
-    /// An array of another shape than the model's layers ask for.
-    #[error("array {tensor}: shape {found:?}, expected {expected:?}")]
-    Shape {
-        /// The array.
-        tensor: String,
-        /// What the layers ask for.
-        expected: Vec<usize>,
-        /// What the file holds.
-        found: Vec<usize>,
-    },
-    /// An array the header names no layer for, or a layer without its array.
-    #[error("array {0} is missing")]
-    Missing(String),
-    /// The values end before the header's arrays do.
-    #[error("truncated: the header's arrays take {expected} bytes of values, the file holds {found}")]
-    Truncated {
-        /// Bytes the header's arrays take.
-        expected: u64,
-        /// Bytes after the header.
-        found: u64,
-    },
-    /// Not this format, or a header that does not parse.
-    #[error("{0}")]
-    Format(String),
-}
 
 /// A weights file that could not be read or written.
 #[derive(Debug, thiserror::Error)]
