@@ -16,7 +16,6 @@ struct Cli {
     command: Cmd,
 }
 
-
 #[derive(Debug, Subcommand)]
 enum Cmd {
     /// The live policy node: heuristic insertion episodes against a running
@@ -476,7 +475,6 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
     Ok(())
 }
 
-
 #[derive(Debug, clap::Args)]
 struct CollectArgs {
     /// 20 Hz states to collect: in fast mode the first episodes whose
@@ -571,17 +569,19 @@ fn run_collect(a: CollectArgs) -> Result<()> {
             !a.resume,
             "--resume continues a fast-mode collection; a live collection cannot be resumed"
         );
-        return Ok(learner_node::stack::collect_live(&learner_node::stack::LiveCollect {
-            out_dir: a.out.clone(),
-            states: a.states,
-            episode_actions: a.episode_actions,
-            pegs,
-            seed: a.seed,
-            world,
-            mix,
-            log,
-            controller_config: a.controller_config.clone(),
-        })?);
+        return Ok(learner_node::stack::collect_live(
+            &learner_node::stack::LiveCollect {
+                out_dir: a.out.clone(),
+                states: a.states,
+                episode_actions: a.episode_actions,
+                pegs,
+                seed: a.seed,
+                world,
+                mix,
+                log,
+                controller_config: a.controller_config.clone(),
+            },
+        )?);
     }
     let controller = match &a.controller_config {
         Some(p) => rt_controller::daemon::config::DaemonConfig::from_file(p)?.controller,
@@ -942,4 +942,3 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
 }
-

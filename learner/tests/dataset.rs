@@ -3,11 +3,11 @@
 //! loader, and damaged inputs.
 
 use learner::collect::{CollectConfig, collect_fast};
-use learner_node::mix::Mix;
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
 use learner::env::FastEnv;
 use learner::labels::FlowLabeler;
 use learner_node::log::LogOptions;
+use learner_node::mix::Mix;
 use learner_node::policy::{HeuristicConfig, HeuristicPolicy};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use std::sync::atomic::AtomicBool;
@@ -161,8 +161,9 @@ fn a_short_collection_builds_the_expected_dataset() {
     let mut faulted = 0;
     for shard in &summary.shards {
         let log = learner_node::log::LogReader::open(&shard.file).unwrap();
-        let frames: Vec<shared_mem_schema::SensorFrame> =
-            log.read_raw(learner_node::log::topics::SENSOR, None).unwrap();
+        let frames: Vec<shared_mem_schema::SensorFrame> = log
+            .read_raw(learner_node::log::topics::SENSOR, None)
+            .unwrap();
         let mut seqs: Vec<u64> = frames
             .iter()
             .map(|f| f.action_seq)

@@ -5,9 +5,9 @@
 //! checksum.
 
 use learner::collect::{CollectConfig, collect_fast};
-use learner_node::mix::Mix;
 use learner::dataset::{self, BuildConfig, Dataset, DatasetError, Loader, LoaderConfig};
 use learner_node::log::{LogOptions, LogReader, LogWriter, topics};
+use learner_node::mix::Mix;
 use shared_mem_schema::{CameraFrame, Message, PolicyAction, SensorFrame};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;

@@ -5,9 +5,9 @@
 
 use hw_sim::WorldConfig;
 use learner::collect::run_episode;
-use learner_node::mix::Mix;
 use learner::env::FastEnv;
 use learner_node::log::{LogOptions, LogReader, topics};
+use learner_node::mix::Mix;
 use rt_controller::{ControllerConfig, FaultReason, cycle::fault_code};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{ControllerMode, SensorFrame};

@@ -7,11 +7,11 @@
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::*;
 use learner::collect::{CollectConfig, collect_fast};
-use learner_node::mix::Mix;
 use learner::dataset::{self, BuildConfig, Dataset};
-use learner_node::log::LogOptions;
 use learner::models::{Encoder, ModelKind, ObservationRef};
 use learner::train::{self, Split, TrainConfig, TrainOptions};
+use learner_node::log::LogOptions;
+use learner_node::mix::Mix;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
@@ -646,7 +646,8 @@ fn an_experiment_collects_through_the_policys_camera() {
         let i = e["episode"].as_u64().unwrap() as usize;
         assert_eq!(e["peg"], ["hexagon", "triangle"][i % 2], "{manifest}");
     }
-    let log = learner_node::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
+    let log =
+        learner_node::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
     let logged = &log.read_config(None).unwrap()[0].1;
     assert_eq!(
         logged.world.task.box_yaw_range_rad, 0.05,

@@ -12,14 +12,14 @@
 //! contact); what an episode reports is where the tip went against the
 //! heuristic's goal, the hole's bottom centre.
 
-use crate::mix::EpisodePolicy;
+use crate::live::NodeError;
 use crate::live::{ActionPacer, PolicyNode, Seen};
 use crate::log::events::{Event, Reset};
 use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
+use crate::mix::EpisodePolicy;
 use crate::policy::{
     HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, relative_to_hole,
 };
-use crate::live::NodeError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Vector3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};

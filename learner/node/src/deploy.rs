@@ -356,7 +356,11 @@ impl DeployedPolicy {
         let mut n = observer.dim();
         for (i, l) in p.layers.iter().enumerate() {
             size(format!("layers[{i}].inputs"), n, l.inputs)?;
-            size(format!("layers[{i}].weight"), l.inputs * l.outputs, l.weight.len())?;
+            size(
+                format!("layers[{i}].weight"),
+                l.inputs * l.outputs,
+                l.weight.len(),
+            )?;
             size(format!("layers[{i}].bias"), l.outputs, l.bias.len())?;
             n = l.outputs;
         }
@@ -514,22 +518,43 @@ mod tests {
         // A weight of another size than its layer's.
         let mut f = ground_truth_policy();
         f.layers[1].weight.pop();
-        let bad = write(dir.path(), "short.json", &serde_json::to_string(&f).unwrap());
+        let bad = write(
+            dir.path(),
+            "short.json",
+            &serde_json::to_string(&f).unwrap(),
+        );
         let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
         assert!(e.contains("short.json"), "{e}");
-        assert!(e.contains("layers[1].weight has 31 values, expected 32"), "{e}");
+        assert!(
+            e.contains("layers[1].weight has 31 values, expected 32"),
+            "{e}"
+        );
         // A network whose input is not the observation's.
         let mut f = ground_truth_policy();
         f.layers[0] = layer(17, 8);
-        let bad = write(dir.path(), "input.json", &serde_json::to_string(&f).unwrap());
+        let bad = write(
+            dir.path(),
+            "input.json",
+            &serde_json::to_string(&f).unwrap(),
+        );
         let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
-        assert!(e.contains("layers[0].inputs has 17 values, expected 18"), "{e}");
+        assert!(
+            e.contains("layers[0].inputs has 17 values, expected 18"),
+            "{e}"
+        );
         // Not four actions.
         let mut f = ground_truth_policy();
         f.layers[1] = layer(8, 3);
-        let bad = write(dir.path(), "actions.json", &serde_json::to_string(&f).unwrap());
+        let bad = write(
+            dir.path(),
+            "actions.json",
+            &serde_json::to_string(&f).unwrap(),
+        );
         let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
-        assert!(e.contains("layers[1].outputs has 3 values, expected 4"), "{e}");
+        assert!(
+            e.contains("layers[1].outputs has 3 values, expected 4"),
+            "{e}"
+        );
         // Cut short, another format, another version.
         let text = std::fs::read_to_string(&good).unwrap();
         let cut = write(dir.path(), "cut.json", &text[..text.len() / 2]);
@@ -540,11 +565,19 @@ mod tests {
         assert!(e.contains("not a deployed policy"), "{e}");
         assert!(!PolicyFile::is_deployed(r#"{"config": {}}"#));
         assert!(PolicyFile::is_deployed(&text));
-        let v2 = write(dir.path(), "v2.json", &text.replace("\"version\": 1", "\"version\": 2"));
+        let v2 = write(
+            dir.path(),
+            "v2.json",
+            &text.replace("\"version\": 1", "\"version\": 2"),
+        );
         let e = DeployedPolicy::load(&v2).unwrap_err().to_string();
         assert!(e.contains("version Some(2)"), "{e}");
         // A field this version does not know.
-        let extra = write(dir.path(), "extra.json", &text.replacen('{', "{\"temperature\": 1,", 1));
+        let extra = write(
+            dir.path(),
+            "extra.json",
+            &text.replacen('{', "{\"temperature\": 1,", 1),
+        );
         let e = DeployedPolicy::load(&extra).unwrap_err().to_string();
         assert!(e.contains("temperature"), "{e}");
     }

@@ -14,12 +14,12 @@ mod error;
 pub use error::CollectError;
 
 use crate::env::FastEnv;
+use hw_sim::{PegShape, WorldConfig};
 use learner_node::log::events::{Event, Outcome, Reset};
 use learner_node::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
 use learner_node::mix::{EpisodePolicy, Mix, MixedPolicy};
 use learner_node::policy::TaskGeometry;
 use learner_node::progress::Progress;
-use hw_sim::{PegShape, WorldConfig};
 use rt_controller::ControllerConfig;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{Message, Stage, hw_time_ns};

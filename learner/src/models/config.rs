@@ -3,8 +3,8 @@
 //! `configs/repr/`; every field has a default, so a file names only what
 //! differs from the paper's Full Model.
 
-use serde::{Deserialize, Serialize};
 pub use learner_node::repr::Modalities;
+use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{FieldError, ensure, non_negative, within};
 
 /// The paper's representation models (sections "Multi-Modal Representation

@@ -14,8 +14,8 @@ use burn::module::Param;
 use burn::nn::conv::{Conv1d, Conv2d};
 use burn::nn::{Linear, PaddingConfig1d};
 use burn::prelude::*;
-use learner_node::repr::fast::{Conv, Dense, EncoderWeights, ImageEncoder, WrenchStack};
 use learner_node::repr::FastEncoder;
+use learner_node::repr::fast::{Conv, Dense, EncoderWeights, ImageEncoder, WrenchStack};
 
 fn values<const D: usize>(p: &Param<Tensor<D>>) -> Vec<f32> {
     p.val().try_into_vec_as::<f32>().expect("an f32 tensor")

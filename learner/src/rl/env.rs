@@ -16,10 +16,10 @@
 
 use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
 use crate::env::{EnvError, FastEnv};
-use learner_node::policy::{Observation, TaskGeometry};
+use hw_sim::{FieldError, TaskState, WorldConfig};
 pub use learner_node::deploy::ActionScale;
 use learner_node::observe::ObsView;
-use hw_sim::{FieldError, TaskState, WorldConfig};
+use learner_node::policy::{Observation, TaskGeometry};
 use nalgebra::Isometry3;
 use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};

@@ -300,7 +300,10 @@ mod tests {
         use shared_mem_schema::Message;
         let mut cam = shared_mem_schema::CameraFrame::boxed_zeroed();
         cam.calibration = hw_sim::config::CameraConfig::default().calibration();
-        let (w, h) = (cam.calibration.width as usize, cam.calibration.height as usize);
+        let (w, h) = (
+            cam.calibration.width as usize,
+            cam.calibration.height as usize,
+        );
         assert_eq!(w, model.image_size);
         let mut moved = 0.0f64;
         let mut first: Option<[f64; 4]> = None;
@@ -310,7 +313,11 @@ mod tests {
                 *v = ((i * 7 + 31 * step) % 256) as u8;
             }
             for (i, v) in cam.depth_m[..w * h].iter_mut().enumerate() {
-                *v = if i % 11 == 0 { 0.0 } else { 0.3 + 0.001 * ((i + step) % 97) as f32 };
+                *v = if i % 11 == 0 {
+                    0.0
+                } else {
+                    0.3 + 0.001 * ((i + step) % 97) as f32
+                };
             }
             let view = env.view().unwrap();
             let view = ObsView {
@@ -323,7 +330,12 @@ mod tests {
             let want = scale.to_delta(&policy.means(&z));
             let got = p.act(&view);
             assert_eq!(p.rejected(), 0);
-            let unit = [scale.max_step_m, scale.max_step_m, scale.max_step_m, scale.max_roll_rad];
+            let unit = [
+                scale.max_step_m,
+                scale.max_step_m,
+                scale.max_step_m,
+                scale.max_roll_rad,
+            ];
             for k in 0..4 {
                 let (a, b) = (got[k] / unit[k], want[k] / unit[k]);
                 assert!((a - b).abs() <= 1e-5, "component {k}: {a} against {b}");

@@ -26,9 +26,7 @@ pub fn check_calibration(
     use learner_node::observe::CameraMismatch;
     learner_node::observe::check_calibration(camera, trained).map_err(|e| match e {
         CameraMismatch::Invalid(f) => f.into(),
-        CameraMismatch::Other { world, model } => {
-            super::env::RlEnvError::Camera { world, model }
-        }
+        CameraMismatch::Other { world, model } => super::env::RlEnvError::Camera { world, model },
     })
 }
 

@@ -9,10 +9,10 @@ use crate::models::net::tensor;
 use crate::models::{
     EeTarget, InputTensors, Modalities, ModelKind, Normaliser, ObservationRef, ReprNet,
 };
-use learner_node::policy::WRENCH_WINDOW;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use hw_sim::rng;
+use learner_node::policy::WRENCH_WINDOW;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;

@@ -12,8 +12,8 @@ use shared_mem_schema::process::{mono_now_ns, termination_requested};
 use shared_mem_schema::rates::{ACTION_PERIOD_NS, ACTION_PERIOD_STEPS};
 use shared_mem_schema::transport::{self, Pub, Sub};
 use shared_mem_schema::{
-    CameraFrame, ControllerCommand, ControllerMode, ControllerStatus, EpisodeReport, Header, Message,
-    PolicyAction, SensorFrame, SimCommand,
+    CameraFrame, ControllerCommand, ControllerMode, ControllerStatus, EpisodeReport, Header,
+    Message, PolicyAction, SensorFrame, SimCommand,
 };
 use std::collections::VecDeque;
 use std::time::Duration;

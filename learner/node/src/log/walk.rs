@@ -290,7 +290,6 @@ pub(super) fn walk_all(buf: &[u8], mut salvage: Option<&mut Salvage>) -> ScanRep
     rep
 }
 
-
 /// Checks the summary section against the footer's CRC (the mcap crate's
 /// summary reader does not): the reader takes every channel and chunk
 /// location from the summary, so a flipped bit there would otherwise drop
@@ -325,7 +324,6 @@ pub(super) fn check_summary_crc(buf: &[u8]) -> Result<(), (u64, String)> {
     }
     Ok(())
 }
-
 
 #[cfg(test)]
 mod tests {

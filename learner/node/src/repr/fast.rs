@@ -37,7 +37,9 @@ pub enum WeightsError {
     #[error("array {0} is missing")]
     Missing(String),
     /// The values end before the header's arrays do.
-    #[error("truncated: the header's arrays take {expected} bytes of values, the file holds {found}")]
+    #[error(
+        "truncated: the header's arrays take {expected} bytes of values, the file holds {found}"
+    )]
     Truncated {
         /// Bytes the header's arrays take.
         expected: u64,
@@ -290,10 +292,16 @@ impl EncoderWeights {
             }
         };
         let dense = |name: &str, l: &Dense, n_in: usize, n_out: Option<usize>| {
-            shape(format!("{name}.weight"), vec![n_in, n_out.unwrap_or(l.n_out)], vec![
-                l.n_in, l.n_out,
-            ])?;
-            shape(format!("{name}.weight"), vec![l.n_in * l.n_out], vec![l.w.len()])?;
+            shape(
+                format!("{name}.weight"),
+                vec![n_in, n_out.unwrap_or(l.n_out)],
+                vec![l.n_in, l.n_out],
+            )?;
+            shape(
+                format!("{name}.weight"),
+                vec![l.n_in * l.n_out],
+                vec![l.w.len()],
+            )?;
             shape(format!("{name}.bias"), vec![l.n_out], vec![l.b.len()])
         };
         let mlp = |name: &str, layers: &[Dense], n_in: usize, n_out: usize| {
@@ -316,11 +324,16 @@ impl EncoderWeights {
             }
             for (i, c) in e.convs.iter().enumerate() {
                 let t = format!("{name}.conv{i}");
-                shape(format!("{t}.weight"), vec![c.k * c.k * cin, c.cout], vec![
-                    c.k * c.k * c.cin,
-                    c.cout,
-                ])?;
-                shape(format!("{t}.weight"), vec![c.k * c.k * c.cin * c.cout], vec![c.w.len()])?;
+                shape(
+                    format!("{t}.weight"),
+                    vec![c.k * c.k * cin, c.cout],
+                    vec![c.k * c.k * c.cin, c.cout],
+                )?;
+                shape(
+                    format!("{t}.weight"),
+                    vec![c.k * c.k * c.cin * c.cout],
+                    vec![c.w.len()],
+                )?;
                 shape(format!("{t}.bias"), vec![c.cout], vec![c.b.len()])?;
                 side = c.out_side(side);
                 if side == 0 {

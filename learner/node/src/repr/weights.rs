@@ -11,9 +11,9 @@
 //! `haptics.layer0.weight` `[2·cin, cout]`, `proprio.layer0.weight`,
 //! `concat.layer0.weight` `[in, out]`, each with its `.bias`.
 
+use super::Modalities;
 use super::fast::{Conv, Dense, EncoderWeights, ImageEncoder, WeightsError, WrenchStack};
 use super::inputs::Normaliser;
-use super::Modalities;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::CameraCalibration;
 use std::collections::HashMap;
@@ -292,8 +292,14 @@ impl EncoderFile {
                 .chunks_exact(4)
                 .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
                 .collect();
-            if map.insert(a.name.clone(), (a.shape.clone(), data)).is_some() {
-                return Err(WeightsError::Format(format!("array {} named twice", a.name)));
+            if map
+                .insert(a.name.clone(), (a.shape.clone(), data))
+                .is_some()
+            {
+                return Err(WeightsError::Format(format!(
+                    "array {} named twice",
+                    a.name
+                )));
             }
         }
         let mut arrays = Arrays(map);
@@ -302,8 +308,16 @@ impl EncoderFile {
             image_side: h.image_side,
             leaky_slope: h.leaky_slope,
             min_variance: h.min_variance,
-            rgb: h.rgb.as_deref().map(|s| arrays.image("rgb", s)).transpose()?,
-            depth: h.depth.as_deref().map(|s| arrays.image("depth", s)).transpose()?,
+            rgb: h
+                .rgb
+                .as_deref()
+                .map(|s| arrays.image("rgb", s))
+                .transpose()?,
+            depth: h
+                .depth
+                .as_deref()
+                .map(|s| arrays.image("depth", s))
+                .transpose()?,
             haptics: arrays.layers("haptics")?.map(WrenchStack),
             proprio: arrays.layers("proprio")?,
             concat: arrays.layers("concat")?,
