@@ -3,7 +3,11 @@
 # hw-sim, rt-controller and the policy node as separate processes, a few
 # insertion episodes of the default peg, each episode's outcome and MCAP log
 # printed, everything stopped cleanly (Ctrl-C included).
-# Arguments go to `learner stack` (see `--help`), e.g. --peg hexagon --episodes 5.
+# Arguments go to `policy-node stack` (see `--help`), e.g. --peg hexagon --episodes 5.
+# Only what the stack runs is built: hw-sim, rt-controller and the node
+# (learner-node, without the training stack). --policy takes a deployed
+# policy (`learner policy export`); given a training run's checkpoint.json
+# instead, the training toolkit is built too and `learner stack` converts it.
 #
 # --robot franky-sim runs the same three-process path against franky-sim, a
 # simulated Franka FR3 (docs/franka.md, "The whole stack on franky-sim"):
@@ -13,14 +17,24 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 franky=0
 hole=0
+policy=
 prev=
 for arg in "$@"; do
     case "$prev/$arg" in
         --robot/franky-sim | */--robot=franky-sim) franky=1 ;;
         */--hole-pos | */--hole-pos=*) hole=1 ;;
+        --policy/*) policy="$arg" ;;
+        */--policy=*) policy="${arg#--policy=}" ;;
     esac
     prev="$arg"
 done
+# A deployed policy names its format; anything else is a training checkpoint.
+node_pkg=learner-node
+node_bin=policy-node
+if [ -n "$policy" ] && ! grep -q '"format": *"learner-node/policy"' "$policy" 2>/dev/null; then
+    node_pkg=learner
+    node_bin=learner
+fi
 extra=()
 if [ "$franky" = 1 ]; then
     . scripts/franky-sim-venv.sh
@@ -34,9 +48,9 @@ if [ "$franky" = 1 ]; then
 fi
 # Cargo's own progress is shown: a first build takes minutes, and a silent
 # terminal for that long looks hung.
-echo "run.sh: building hw-sim, rt-controller and learner (release; the first build takes several minutes)" >&2
-cargo build --release -p hw-sim -p rt-controller-daemon -p learner --bins
+echo "run.sh: building hw-sim, rt-controller and $node_pkg (release; the first build takes minutes)" >&2
+cargo build --release -p hw-sim -p rt-controller-daemon -p "$node_pkg" --bins
 # Where cargo put them: CARGO_TARGET_DIR when set (relative to this root).
 target_dir="${CARGO_TARGET_DIR:-target}"
 echo "run.sh: starting the stack" >&2
-exec "$target_dir/release/learner" stack "$@" "${extra[@]}"
+exec "$target_dir/release/$node_bin" stack "$@" "${extra[@]}"

@@ -36,7 +36,7 @@ fn main() {
             let encoder = Encoder::new(net, cfg, Normaliser::identity(), &dev)
                 .with_fast_path(what == "representation")
                 .with_threads(if threads == 0 { cores } else { threads });
-            Arc::new(Representation::new(encoder))
+            Arc::new(Representation::new(Box::new(encoder)))
         }
         _ => panic!("{usage}"),
     };

@@ -14,7 +14,6 @@
 //! "burn-cuda" or "burn-vulkan".
 
 use burn::optim::{AdamConfig, GradientsParams};
-use learner::models::fast::FastEncoder;
 use learner::models::losses::{LabelTensors, losses};
 use learner::models::net::tensor;
 use learner::models::{
@@ -127,8 +126,8 @@ fn main() {
             phase(2)
         );
     } else {
-        let fast =
-            (what == "infer-fast").then(|| FastEncoder::new(&net, &cfg).with_threads(threads));
+        let fast = (what == "infer-fast")
+            .then(|| learner::models::fast::fast_encoder(&net, &cfg).with_threads(threads));
         for i in 0..steps + 3 {
             let t = Instant::now();
             match &fast {

@@ -57,7 +57,7 @@ fn main() {
     let mut env = RlEnv::new(&cfg).expect("env");
     learner::rl::observe::check_camera(&cfg.world.camera, observer.as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
-    let mut heuristic = learner::policy::HeuristicPolicy::new(Default::default());
+    let mut heuristic = learner_node::policy::HeuristicPolicy::new(Default::default());
     let mut rng = hw_sim::rng::seeded(7, 0);
     let mut counts = [0u32; 4];
     let mut terminated = 0;

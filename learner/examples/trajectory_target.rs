@@ -10,9 +10,9 @@
 //! collection mix uses 0.001).
 
 use hw_sim::{PegShape, Stage, WorldConfig};
-use learner::collect::{Mix, MixedPolicy};
 use learner::env::FastEnv;
-use learner::policy::TaskGeometry;
+use learner_node::mix::{Mix, MixedPolicy};
+use learner_node::policy::TaskGeometry;
 use rt_controller::{ControllerConfig, TrajectoryTarget};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 

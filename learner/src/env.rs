@@ -9,9 +9,9 @@
 //! policy acts every [`ACTION_PERIOD_STEPS`] cycles on the observation of the
 //! cycle before the one its action is applied in.
 
-use crate::policy::{Action4, Observation, WrenchHistory};
-use crate::proprio::roll_reference;
 use hw_sim::{SimError, SimHardware, World, WorldConfig};
+use learner_node::policy::{Action4, Observation, WrenchHistory};
+use learner_node::proprio::roll_reference;
 use robot_model::Model;
 use rt_controller::{ControlCycle, ControllerConfig, ControllerData};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;

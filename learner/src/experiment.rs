@@ -18,9 +18,8 @@
 //! environment steps, episodes — is the configuration's: one file for this
 //! machine, one for a GPU machine at the paper's scale.
 
-use crate::collect::{self, CollectConfig, Mix};
+use crate::collect::{self, CollectConfig};
 use crate::dataset::{self, BuildConfig, Dataset};
-use crate::log::LogOptions;
 use crate::plot::{Chart, Series};
 use crate::rl::distill::{self, DistillConfig};
 use crate::rl::observe::ObservationKind;
@@ -29,6 +28,8 @@ use crate::rl::run::{self as policy_run, EvalReport};
 use crate::train::{self, DeviceKind, TrainOptions};
 use anyhow::{Context, Result, bail, ensure};
 use hw_sim::PegShape;
+use learner_node::log::LogOptions;
+use learner_node::mix::Mix;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;

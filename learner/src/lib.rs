@@ -1,36 +1,29 @@
 //! # learner
 //!
-//! Owns everything at the policy's rate and slower. Today: MCAP logging and
-//! reading ([`log`]), data collection ([`collect`]), the self-supervised
-//! dataset and its labels ([`dataset`], [`labels`]), the scripted and random
-//! policies ([`policy`]), the fast-path environment ([`env`]), the live
-//! 20 Hz inference node ([`live`]), the process orchestrator ([`stack`]),
-//! charts for people ([`plot`]), the RL environment with TRPO and PPO and
-//! the trained policy's deployment ([`rl`]), the multimodal representation
-//! with its baselines and ablations ([`models`]) and its training and
-//! evaluation ([`train`]), the paper's experiments end to end
-//! ([`experiment`]), and the command-line interface; see
-//! docs/architecture.md.
+//! The training toolkit, on the training machine: data collection
+//! ([`collect`]), the self-supervised dataset and its labels ([`dataset`],
+//! [`labels`]), the fast-path environment ([`env`]), charts for people
+//! ([`plot`]), the RL environment with TRPO and PPO, distillation and the
+//! conversion of a trained policy into the node's deployed format ([`rl`]),
+//! the multimodal representation with its baselines and ablations
+//! ([`models`]) and its training and evaluation ([`train`]), the paper's
+//! experiments end to end ([`experiment`]), and the `learner` command line;
+//! see docs/architecture.md.
 //!
-//! It must never sit in the 1 kHz path: the controller takes its latest
-//! action without waiting for it.
+//! What the robot PC runs (observations, the scripted and deployed
+//! policies, the representation's inference, MCAP logging, the live node,
+//! the stack's orchestrator) is the `learner-node` crate, which this one
+//! builds on; nothing there may depend on this crate.
 
-pub mod calibrated;
 pub mod collect;
 pub mod dataset;
 pub mod env;
 pub mod experiment;
 pub mod labels;
-pub mod live;
-pub mod log;
 pub mod models;
 pub mod plot;
-pub mod policy;
-pub mod progress;
-pub mod proprio;
 pub mod rl;
 pub mod settings;
-pub mod stack;
 pub mod train;
 
 /// Writes `bytes` to `path` through a sibling `<name>.tmp` and a rename, so

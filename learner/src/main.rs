@@ -1,10 +1,10 @@
-//! `learner`: the policy node and the stack's command-line interface.
+//! `learner`: the training toolkit's command line, and the node's `run` and
+//! `stack` (learner-node's, with training checkpoints converted).
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use hw_sim::{PegShape, Stage, WorldConfig};
-use learner::live::{self, LiveConfig};
-use learner::stack::{self, StackConfig};
+use hw_sim::{PegShape, WorldConfig};
+use learner_node::cli::{RunArgs, StackArgs};
 use shared_mem_schema::process::install_termination_handler;
 use std::path::PathBuf;
 
@@ -16,140 +16,18 @@ struct Cli {
     command: Cmd,
 }
 
-#[derive(Debug, clap::Args)]
-struct EpisodeArgs {
-    /// Episodes to run.
-    #[arg(long, default_value_t = 3)]
-    episodes: u32,
-    /// Peg.
-    #[arg(long, value_enum, default_value_t = PegShape::Square)]
-    peg: PegShape,
-    /// Seed of the first episode.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// World configuration (TOML) sent with every reset; `--peg` overrides
-    /// its peg.
-    #[arg(long)]
-    world: Option<PathBuf>,
-    /// Episode time limit, s.
-    #[arg(long, default_value_t = 20.0)]
-    episode_timeout_s: f64,
-    /// Where logs go.
-    #[arg(long, default_value = "logs")]
-    log_dir: PathBuf,
-    /// Service namespace.
-    #[arg(long, default_value = shared_mem_schema::DEFAULT_NAMESPACE)]
-    namespace: String,
-    /// Deterministic lockstep run.
-    #[arg(long)]
-    lockstep: bool,
-    /// A trained policy acts instead of the heuristic: a `learner policy
-    /// train` checkpoint.json (its representation model, if it observes
-    /// through one, is loaded from the path its run was configured with).
-    #[arg(long)]
-    policy: Option<PathBuf>,
-    /// With --policy: the checkpoint's last policy (a distillation's last
-    /// round, as `policy eval --last`) instead of its best validated or best
-    /// logged one.
-    #[arg(long, requires = "policy")]
-    last: bool,
-}
-
-/// A task the user calibrated instead of a simulator's report (a robot,
-/// franky-sim).
-#[derive(Debug, clap::Args)]
-struct CalibrationArgs {
-    /// The hole's top centre in the robot's base frame, m, as `X,Y,Z` (the
-    /// hole's axis is the base's z): the heuristic acts on this calibration
-    /// instead of a simulator's report. On a robot, where the box was
-    /// calibrated; on franky-sim (no box), any point the arm can reach.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        num_args = 1,
-        allow_negative_numbers = true
-    )]
-    hole_pos: Option<Vec<f64>>,
-    /// The calibrated hole's depth, m: the heuristic descends to its bottom.
-    #[arg(long, default_value_t = 0.03)]
-    hole_depth_m: f64,
-}
-
-impl CalibrationArgs {
-    /// The task, when a hole position is given (`--peg` gives its symmetry).
-    fn task(&self, peg: PegShape) -> Result<Option<learner::policy::TaskGeometry>> {
-        let Some(p) = &self.hole_pos else {
-            return Ok(None);
-        };
-        anyhow::ensure!(
-            p.len() == 3 && p.iter().all(|v| v.is_finite()),
-            "--hole-pos {p:?}: must be three finite numbers X,Y,Z (m, the robot's base frame)"
-        );
-        anyhow::ensure!(
-            self.hole_depth_m.is_finite() && self.hole_depth_m > 0.0 && self.hole_depth_m <= 0.2,
-            "--hole-depth-m {}: must be within (0, 0.2] m",
-            self.hole_depth_m
-        );
-        Ok(Some(learner::policy::TaskGeometry {
-            hole_pose: nalgebra::Isometry3::translation(p[0], p[1], p[2]),
-            symmetry: peg.symmetry_order(),
-            depth_m: self.hole_depth_m,
-        }))
-    }
-}
-
-/// What `learner stack` runs the controller against.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-enum RobotArg {
-    /// hw-sim: the simulated arm, peg, box and camera.
-    Sim,
-    /// franky-sim: a simulated Franka FR3 over the robot's own protocol,
-    /// without peg, box or camera (needs --hole-pos).
-    FrankySim,
-}
-
 #[derive(Debug, Subcommand)]
 enum Cmd {
     /// The live policy node: heuristic insertion episodes against a running
     /// hw-sim and rt-controller, logged to MCAP. With --hole-pos, against a
     /// running rt-controller alone (a robot, franky-sim): the task from the
-    /// calibration, no resets.
-    Run {
-        #[command(flatten)]
-        episodes: EpisodeArgs,
-        #[command(flatten)]
-        collect: RunCollectArgs,
-        #[command(flatten)]
-        calibration: CalibrationArgs,
-        /// With --hole-pos: the daemon's robot description, recorded in the
-        /// logs.
-        #[arg(long, default_value = "fr3")]
-        robot_description: String,
-        /// With --hole-pos: how long to wait for the controller's first
-        /// frame, s (a robot's daemon connects within its start-up timeout).
-        #[arg(long, default_value_t = 180)]
-        controller_wait_s: u64,
-    },
+    /// calibration, no resets. --policy takes a deployed policy or a
+    /// training checkpoint (converted).
+    Run(RunArgs),
     /// The whole stack: starts hw-sim (or franky-sim), rt-controller and
     /// `learner run` as separate processes, runs the episodes, stops
     /// everything.
-    Stack {
-        #[command(flatten)]
-        episodes: EpisodeArgs,
-        /// rt-controller configuration (TOML); with --robot franky-sim, the
-        /// default is the repository's configs/rt-controller/franky-sim.toml.
-        #[arg(long)]
-        controller_config: Option<PathBuf>,
-        /// What the controller drives.
-        #[arg(long, value_enum, default_value_t = RobotArg::Sim)]
-        robot: RobotArg,
-        #[command(flatten)]
-        calibration: CalibrationArgs,
-        /// With --robot franky-sim: the loopback address franky-sim serves
-        /// on (default: one of this process's own in 127.20.0.0/16).
-        #[arg(long)]
-        franky_sim_address: Option<String>,
-    },
+    Stack(StackArgs),
     /// Collects episodes for the self-supervised dataset (random and
     /// heuristic policies), one MCAP shard per episode.
     Collect(CollectArgs),
@@ -185,6 +63,22 @@ enum Cmd {
 
 #[derive(Debug, Subcommand)]
 enum PolicyCmd {
+    /// Writes a checkpoint's policy in the node's deployed format: DIR/policy.json
+    /// and, for a representation policy, DIR/encoder.bin (the robot PC's
+    /// `policy-node run --policy DIR/policy.json` reads them without the
+    /// training stack).
+    Export {
+        /// The training run's checkpoint.json.
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// The checkpoint's last policy instead of its best validated or
+        /// best logged one.
+        #[arg(long)]
+        last: bool,
+    },
     /// Trains with TRPO or PPO (`policy.algorithm`); writes
     /// checkpoint.json, curve.csv, return.png and outcomes.png into `--out`.
     Train {
@@ -484,6 +378,15 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
                 run::checkpoint_path(&out).display()
             );
         }
+        PolicyCmd::Export {
+            checkpoint,
+            out,
+            last,
+        } => {
+            let d = learner::rl::export::from_checkpoint(&checkpoint, last)?;
+            let path = d.write(&out)?;
+            println!("{} written ({})", path.display(), d.policy.source);
+        }
         PolicyCmd::Eval {
             checkpoint,
             episodes,
@@ -582,33 +485,6 @@ fn run_policy(cmd: PolicyCmd) -> Result<()> {
     Ok(())
 }
 
-/// `learner run` as a collector (what `learner collect --live` passes).
-#[derive(Debug, clap::Args)]
-struct RunCollectArgs {
-    /// Pegs taken in turn per episode, comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',')]
-    pegs: Vec<PegShape>,
-    /// Collect with the random/heuristic mix, this share heuristic.
-    #[arg(long)]
-    mix_heuristic_fraction: Option<f64>,
-    /// End each episode after this many actions.
-    #[arg(long)]
-    episode_actions: Option<u32>,
-    /// Stop after this many states (actions), with a progress bar.
-    #[arg(long)]
-    states: Option<u64>,
-    /// Collection: run completed episodes to their length instead of
-    /// ending them shortly after completion.
-    #[arg(long)]
-    full_episodes: bool,
-    /// Leave out the Foxglove view channels.
-    #[arg(long)]
-    no_foxglove: bool,
-    /// Rate of the 1 kHz view channels, Hz.
-    #[arg(long, default_value_t = 1000.0)]
-    view_rate_hz: f64,
-}
-
 #[derive(Debug, clap::Args)]
 struct CollectArgs {
     /// 20 Hz states to collect: in fast mode the first episodes whose
@@ -673,7 +549,8 @@ fn load_world(path: Option<&PathBuf>) -> Result<WorldConfig> {
 }
 
 fn run_collect(a: CollectArgs) -> Result<()> {
-    use learner::collect::{self, CollectConfig, Mix};
+    use learner::collect::{self, CollectConfig};
+    use learner_node::mix::Mix;
     anyhow::ensure!(
         (0.0..=1.0).contains(&a.heuristic_fraction),
         "--heuristic-fraction {} must be within 0..1",
@@ -685,7 +562,7 @@ fn run_collect(a: CollectArgs) -> Result<()> {
         a.pegs.clone()
     };
     let world = load_world(a.world.as_ref())?;
-    let log = learner::log::LogOptions {
+    let log = learner_node::log::LogOptions {
         foxglove: !a.no_foxglove,
         view_rate_hz: a.view_rate_hz,
         ..Default::default()
@@ -702,17 +579,19 @@ fn run_collect(a: CollectArgs) -> Result<()> {
             !a.resume,
             "--resume continues a fast-mode collection; a live collection cannot be resumed"
         );
-        return Ok(live::collect_live(&live::LiveCollect {
-            out_dir: a.out.clone(),
-            states: a.states,
-            episode_actions: a.episode_actions,
-            pegs,
-            seed: a.seed,
-            world,
-            mix,
-            log,
-            controller_config: a.controller_config.clone(),
-        })?);
+        return Ok(learner_node::stack::collect_live(
+            &learner_node::stack::LiveCollect {
+                out_dir: a.out.clone(),
+                states: a.states,
+                episode_actions: a.episode_actions,
+                pegs,
+                seed: a.seed,
+                world,
+                mix,
+                log,
+                controller_config: a.controller_config.clone(),
+            },
+        )?);
     }
     let controller = match &a.controller_config {
         Some(p) => rt_controller_daemon::config::DaemonConfig::from_file(p)?.controller,
@@ -823,7 +702,7 @@ fn run_dataset(cmd: DatasetCmd) -> Result<()> {
             };
             let workers = workers
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-            let progress = learner::progress::Progress::new(files.len() as u64, "logs");
+            let progress = learner_node::progress::Progress::new(files.len() as u64, "logs");
             let (mut done, mut skipped) = (0, 0);
             let t = std::time::Instant::now();
             let meta = dataset::build(&files, &out, &cfg, workers, |path, r| {
@@ -922,13 +801,6 @@ enum LogCmd {
     },
 }
 
-fn world_config(a: &EpisodeArgs) -> Result<WorldConfig> {
-    let mut w = load_world(a.world.as_ref())?;
-    w.task.enabled = true;
-    w.task.peg = a.peg;
-    Ok(w)
-}
-
 fn main() {
     tracing_subscriber::fmt().with_target(false).init();
     install_termination_handler();
@@ -940,7 +812,7 @@ fn main() {
 }
 
 fn run_log(cmd: LogCmd) -> Result<()> {
-    use learner::log;
+    use learner_node::log;
     match cmd {
         LogCmd::Info { file } => {
             let r = log::LogReader::open(&file)?;
@@ -1015,12 +887,12 @@ fn run_log(cmd: LogCmd) -> Result<()> {
 
 /// Prints the gaps of every 1 kHz channel of a log (lost messages are
 /// reported, not an error: the file itself is intact).
-fn print_gaps(r: &learner::log::LogReader) -> Result<()> {
-    let gaps = learner::log::log_gaps(r)?;
+fn print_gaps(r: &learner_node::log::LogReader) -> Result<()> {
+    let gaps = learner_node::log::log_gaps(r)?;
     if gaps.is_empty() {
         println!("1 kHz channels: none");
     }
-    for line in learner::log::gaps::describe(&gaps) {
+    for line in learner_node::log::gaps::describe(&gaps) {
         println!("1 kHz {line}");
     }
     Ok(())
@@ -1058,341 +930,27 @@ fn run(cli: Cli) -> Result<()> {
             println!("{} results in {}", rows.len(), out.display());
             Ok(())
         }
-        Cmd::Run {
-            episodes: a,
-            collect: c,
-            calibration,
-            robot_description,
-            controller_wait_s,
-        } => {
-            if let Some(task) = calibration.task(a.peg)? {
-                return run_calibrated(&a, &c, task, robot_description, controller_wait_s);
-            }
-            let mut cfg = LiveConfig::new(&a.namespace, world_config(&a)?, a.log_dir.clone());
-            cfg.episodes = a.episodes;
-            cfg.seed = a.seed;
-            cfg.episode_timeout_s = a.episode_timeout_s;
-            cfg.lockstep = a.lockstep;
-            cfg.pegs = c.pegs.clone();
-            cfg.mix = c.mix_heuristic_fraction.map(|f| {
-                let mut m = learner::collect::Mix {
-                    heuristic_fraction: f,
-                    ..Default::default()
-                };
-                if c.full_episodes {
-                    m.end_after_completion = None;
-                }
-                m
-            });
-            cfg.max_actions = c.episode_actions;
-            cfg.target_states = c.states;
-            cfg.log.foxglove = !c.no_foxglove;
-            cfg.log.view_rate_hz = c.view_rate_hz;
-            if let Some(path) = &a.policy {
-                anyhow::ensure!(
-                    cfg.mix.is_none(),
-                    "--policy and --mix-heuristic-fraction exclude each other"
-                );
-                let (p, which) = learner::rl::TrainedPolicy::load(path, a.last)?;
-                p.check_world(&cfg.world)?;
-                eprintln!("learner: acting with {which} of {}", path.display());
-                if p.trained_peg() != a.peg {
-                    eprintln!(
-                        "learner: the policy was trained on the {} peg; running it on the {} peg",
-                        p.trained_peg().name(),
-                        a.peg.name()
-                    );
-                }
-                cfg.policy = Some(std::sync::Arc::new(p));
-            }
-            let outcomes = live::run(&cfg, |o| {
-                println!(
-                    "episode {} (seed {}): {}{} after {:.2} s, {} actions; {}",
-                    o.episode,
-                    o.seed,
-                    o.stage,
-                    if o.interrupted { " (interrupted)" } else { "" },
-                    o.duration_s,
-                    o.actions,
-                    frames_and_log(&o.sensor_gaps, &o.log)
-                );
-            })?;
-            let done = outcomes
-                .iter()
-                .filter(|o| o.stage == Stage::Completed)
-                .count();
-            println!(
-                "{done} of {} episodes completed the insertion",
-                outcomes.len()
-            );
-            Ok(())
+        Cmd::Run(a) => {
+            let policy = match &a.episodes.policy {
+                Some(p) => Some(learner::rl::export::load_for_node(p, a.episodes.last)?),
+                None => None,
+            };
+            learner_node::cli::run(a, policy)
         }
-        Cmd::Stack {
-            episodes: a,
-            controller_config,
-            robot,
-            calibration,
-            franky_sim_address,
-        } => {
-            if robot == RobotArg::FrankySim {
-                return stack_franky_sim(&a, controller_config, &calibration, franky_sim_address);
-            }
-            anyhow::ensure!(
-                calibration.hole_pos.is_none() && franky_sim_address.is_none(),
-                "--hole-pos and --franky-sim-address are for --robot franky-sim (hw-sim reports \
-                 the hole itself)"
-            );
-            let world = world_config(&a)?; // fail early on a bad peg or file
-            let mut run_args = vec![
-                "--episodes".to_string(),
-                a.episodes.to_string(),
-                "--peg".into(),
-                a.peg.name().into(),
-                "--seed".into(),
-                a.seed.to_string(),
-                "--episode-timeout-s".into(),
-                a.episode_timeout_s.to_string(),
-            ];
-            if let Some(w) = &a.world {
-                run_args.push("--world".into());
-                run_args.push(w.display().to_string());
-            }
-            if let Some(p) = &a.policy {
-                // Fail here, before any process starts, on a bad file or a
-                // representation model that does not load.
-                learner::rl::TrainedPolicy::load(p, a.last)?
-                    .0
-                    .check_world(&world)?;
-                run_args.push("--policy".into());
-                run_args.push(p.display().to_string());
-                if a.last {
-                    run_args.push("--last".into());
+        Cmd::Stack(mut a) => {
+            // The node the stack starts reads deployed policies only: a
+            // training checkpoint is converted into the run's log directory
+            // first (a record of what ran).
+            if let Some(p) = a.episodes.policy.take() {
+                let dir = a.episodes.log_dir.join("policy");
+                let file = learner::rl::export::file_for_node(&p, a.episodes.last, &dir)?;
+                if file != p {
+                    eprintln!("learner: {} converted into {}", p.display(), file.display());
                 }
+                a.episodes.policy = Some(file);
+                a.episodes.last = false;
             }
-            let exit = stack::run(&StackConfig {
-                hardware: stack::Hardware::Sim,
-                namespace: a.namespace.clone(),
-                lockstep: a.lockstep,
-                run_args,
-                log_dir: a.log_dir.clone(),
-                controller_config,
-            })?;
-            println!("stack stopped; process logs in {}", a.log_dir.display());
-            if !exit.policy.success() {
-                anyhow::bail!("the policy node failed ({})", exit.policy);
-            }
-            Ok(())
+            learner_node::cli::stack(a)
         }
     }
-}
-
-/// An episode line's tail: its sensor frames logged and missing, and its log.
-fn frames_and_log(g: &learner::log::ChannelGaps, log: &std::path::Path) -> String {
-    let loss = g.sensor.unwrap_or_default();
-    format!(
-        "sensor frames: {} logged, {} missing in {} gaps ({} hardware steps without a controller \
-         frame, {} published but not recorded); log {}",
-        g.messages,
-        g.missing,
-        g.gaps,
-        loss.not_published,
-        loss.not_recorded,
-        log.display()
-    )
-}
-
-/// Refuses the episode options that need hw-sim, for `mode` (a run without
-/// the simulator: a robot, franky-sim).
-fn without_simulator(a: &EpisodeArgs, mode: &str) -> Result<()> {
-    for (given, flag) in [
-        (
-            a.lockstep,
-            "--lockstep (the robot clocks the loop and never waits for the learner)",
-        ),
-        (
-            a.policy.is_some(),
-            "--policy (a trained policy reads the simulator's task state)",
-        ),
-        (
-            a.world.is_some(),
-            "--world (there is no simulator to configure)",
-        ),
-    ] {
-        anyhow::ensure!(!given, "{mode} excludes {flag}");
-    }
-    Ok(())
-}
-
-/// `learner run --hole-pos`: the heuristic on a calibrated task against a
-/// running controller alone (a robot, franky-sim).
-fn run_calibrated(
-    a: &EpisodeArgs,
-    c: &RunCollectArgs,
-    task: learner::policy::TaskGeometry,
-    robot: String,
-    controller_wait_s: u64,
-) -> Result<()> {
-    use learner::calibrated::{self, CalibratedConfig};
-    without_simulator(a, "--hole-pos")?;
-    for (given, flag) in [
-        (
-            c.mix_heuristic_fraction.is_some(),
-            "--mix-heuristic-fraction",
-        ),
-        (!c.pegs.is_empty(), "--pegs"),
-        (c.states.is_some(), "--states"),
-        (c.episode_actions.is_some(), "--episode-actions"),
-    ] {
-        anyhow::ensure!(!given, "--hole-pos excludes {flag}");
-    }
-    anyhow::ensure!(
-        a.episode_timeout_s.is_finite() && a.episode_timeout_s > 0.0,
-        "--episode-timeout-s {} must be positive",
-        a.episode_timeout_s
-    );
-    let cfg = CalibratedConfig {
-        namespace: a.namespace.clone(),
-        episodes: a.episodes,
-        task,
-        peg: a.peg,
-        robot,
-        episode_timeout_s: a.episode_timeout_s,
-        settle_s: 0.5,
-        controller_wait_s,
-        log_dir: a.log_dir.clone(),
-        log: learner::log::LogOptions {
-            foxglove: !c.no_foxglove,
-            view_rate_hz: c.view_rate_hz,
-            ..Default::default()
-        },
-    };
-    std::fs::create_dir_all(&cfg.log_dir)
-        .with_context(|| format!("creating {}", cfg.log_dir.display()))?;
-    let mm = |v: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", v[0] * 1e3, v[1] * 1e3, v[2] * 1e3);
-    let run = calibrated::run(&cfg, |o| {
-        let e = o.end_error_m();
-        println!(
-            "episode {}: {} after {:.2} s, {} actions; tip from {} to {} mm, goal (the hole's \
-             bottom centre) {} mm: moved {:.1} mm towards it, ended {:.1} mm from it ({:.1} mm \
-             sideways, {:+.1} mm in z); {}",
-            o.episode,
-            if o.reached {
-                "reached the hole's bottom level"
-            } else if o.interrupted {
-                "interrupted"
-            } else {
-                "did not reach the hole's bottom level"
-            },
-            o.duration_s,
-            o.actions,
-            mm(o.start_m),
-            mm(o.end_m),
-            mm(o.goal_m),
-            o.approached_m() * 1e3,
-            e.norm() * 1e3,
-            e.xy().norm() * 1e3,
-            e.z * 1e3,
-            frames_and_log(&o.sensor_gaps, &o.log)
-        );
-    })?;
-    let reached = run.episodes.iter().filter(|o| o.reached).count();
-    println!(
-        "{reached} of {} episodes reached the calibrated hole's bottom level, in free space: \
-         there is no peg or box, so no contact and no insertion outcome",
-        run.episodes.len()
-    );
-    match &run.status {
-        Some(s) => println!(
-            "controller: {} cycles, {} hardware states skipped, compute p50 {} µs, p99 {} µs, \
-             max {:.0} µs (the robot's period: 1000 µs), fault code {}",
-            s.cycles,
-            s.hardware_states_skipped,
-            s.compute.quantile_us(0.5),
-            s.compute.quantile_us(0.99),
-            s.compute.max_ns as f64 / 1e3,
-            s.fault_code
-        ),
-        None => println!("controller: no status received"),
-    }
-    Ok(())
-}
-
-/// `learner stack --robot franky-sim`: franky-sim, rt-controller with the
-/// Franka backend, and the heuristic on the calibrated task.
-fn stack_franky_sim(
-    a: &EpisodeArgs,
-    controller_config: Option<PathBuf>,
-    calibration: &CalibrationArgs,
-    address: Option<String>,
-) -> Result<()> {
-    let Some(task) = calibration.task(a.peg)? else {
-        anyhow::bail!(
-            "--robot franky-sim needs --hole-pos X,Y,Z: where the hole is in the robot's base \
-             frame, m (franky-sim has no box; on a robot this is the box's calibration), e.g. \
-             --hole-pos 0.60,0.0,0.42, 5 cm in front of and 10 cm below the FR3's start pose"
-        );
-    };
-    without_simulator(a, "--robot franky-sim")?;
-    let mut franky = stack::FrankySim::from_repository();
-    if let Some(addr) = address {
-        anyhow::ensure!(
-            addr.parse::<std::net::Ipv4Addr>()
-                .is_ok_and(|ip| ip.is_loopback()),
-            "--franky-sim-address {addr:?}: must be an IPv4 loopback address (127.x.y.z)"
-        );
-        franky.address = addr;
-    }
-    let template = controller_config
-        .unwrap_or_else(|| stack::repository_root().join("configs/rt-controller/franky-sim.toml"));
-    std::fs::create_dir_all(&a.log_dir)
-        .with_context(|| format!("creating {}", a.log_dir.display()))?;
-    let written = a.log_dir.join("rt-controller.toml");
-    stack::franky_sim_controller_config(&template, &franky.address, &a.namespace, &written)?;
-    let daemon = rt_controller_daemon::config::DaemonConfig::from_file(&written)?;
-    let p = task.hole_pose.translation.vector;
-    let run_args = vec![
-        "--episodes".to_string(),
-        a.episodes.to_string(),
-        "--peg".into(),
-        a.peg.name().into(),
-        "--episode-timeout-s".into(),
-        a.episode_timeout_s.to_string(),
-        "--hole-pos".into(),
-        format!("{},{},{}", p.x, p.y, p.z),
-        "--hole-depth-m".into(),
-        task.depth_m.to_string(),
-        "--robot-description".into(),
-        daemon.robot.clone(),
-        // The daemon retries connecting for its start-up timeout.
-        "--controller-wait-s".into(),
-        (daemon.timing.startup_timeout_s.ceil() as u64 + 60).to_string(),
-    ];
-    let exit = stack::run(&StackConfig {
-        hardware: stack::Hardware::FrankySim(franky),
-        namespace: a.namespace.clone(),
-        lockstep: false,
-        run_args,
-        log_dir: a.log_dir.clone(),
-        controller_config: Some(written),
-    })?;
-    let show = |s: Option<std::process::ExitStatus>| {
-        s.map_or("still running after SIGKILL".to_string(), |s| s.to_string())
-    };
-    println!(
-        "stack stopped: rt-controller {} after SIGTERM, franky-sim {}; process logs in {}",
-        show(exit.controller),
-        show(exit.hardware),
-        a.log_dir.display()
-    );
-    if !exit.policy.success() {
-        anyhow::bail!("the policy node failed ({})", exit.policy);
-    }
-    if !exit.controller.is_some_and(|s| s.success()) {
-        anyhow::bail!(
-            "rt-controller did not stop cleanly ({}); see {}",
-            show(exit.controller),
-            a.log_dir.join("rt-controller.log").display()
-        );
-    }
-    Ok(())
 }

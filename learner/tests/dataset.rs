@@ -2,12 +2,13 @@
 //! built from its logs, labels against the simulator's ground truth, the
 //! loader, and damaged inputs.
 
-use learner::collect::{CollectConfig, Mix, collect_fast};
+use learner::collect::{CollectConfig, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
 use learner::env::FastEnv;
 use learner::labels::FlowLabeler;
-use learner::log::LogOptions;
-use learner::policy::{HeuristicConfig, HeuristicPolicy};
+use learner_node::log::LogOptions;
+use learner_node::mix::Mix;
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use std::sync::atomic::AtomicBool;
 
@@ -159,9 +160,10 @@ fn a_short_collection_builds_the_expected_dataset() {
     let mut applied = 0;
     let mut faulted = 0;
     for shard in &summary.shards {
-        let log = learner::log::LogReader::open(&shard.file).unwrap();
-        let frames: Vec<shared_mem_schema::SensorFrame> =
-            log.read_raw(learner::log::topics::SENSOR, None).unwrap();
+        let log = learner_node::log::LogReader::open(&shard.file).unwrap();
+        let frames: Vec<shared_mem_schema::SensorFrame> = log
+            .read_raw(learner_node::log::topics::SENSOR, None)
+            .unwrap();
         let mut seqs: Vec<u64> = frames
             .iter()
             .map(|f| f.action_seq)
@@ -389,7 +391,7 @@ fn logs_of_two_cameras_do_not_make_one_dataset() {
 /// from each log's stage events at the sample's frame, contact from the
 /// sample, motion from its position label.
 fn recount(ds: &Dataset) -> dataset::Balance {
-    use learner::log::{Event, LogReader, topics};
+    use learner_node::log::{Event, LogReader, topics};
     let mut b = dataset::Balance::default();
     let mut samples = Vec::new();
     for (shard, blocks) in ds.meta.shards.iter().enumerate() {
@@ -450,7 +452,7 @@ fn inspect_reports_the_balance_and_collection_ends_episodes_after_completion() {
     let b = &ds.stats.balance;
     assert_eq!(b.total().samples, ds.meta.samples);
     assert_eq!(
-        b.policy_total(learner::collect::EpisodePolicy::Random)
+        b.policy_total(learner_node::mix::EpisodePolicy::Random)
             .samples,
         0
     );
@@ -762,7 +764,7 @@ fn a_failed_episode_stops_the_other_workers() {
 /// A copy of the log at `from`, written to `to` message by message, with the
 /// focal length of the camera frames from the third on scaled by `focal`.
 fn copy_log(from: &std::path::Path, to: &std::path::Path, focal: f64) {
-    use learner::log::{LogReader, LogWriter, topics};
+    use learner_node::log::{LogReader, LogWriter, topics};
     use shared_mem_schema::{CameraFrame, Message, PolicyAction, SensorFrame};
     let r = LogReader::open(from).unwrap();
     let opts = LogOptions {

@@ -4,9 +4,10 @@
 //! meta.json is refused with the field named; a damaged block fails its
 //! checksum.
 
-use learner::collect::{CollectConfig, Mix, collect_fast};
+use learner::collect::{CollectConfig, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, DatasetError, Loader, LoaderConfig};
-use learner::log::{LogOptions, LogReader, LogWriter, topics};
+use learner_node::log::{LogOptions, LogReader, LogWriter, topics};
+use learner_node::mix::Mix;
 use shared_mem_schema::{CameraFrame, Message, PolicyAction, SensorFrame};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;

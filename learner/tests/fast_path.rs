@@ -4,9 +4,10 @@
 //! the controller stopped following actions.
 
 use hw_sim::WorldConfig;
-use learner::collect::{Mix, run_episode};
+use learner::collect::run_episode;
 use learner::env::FastEnv;
-use learner::log::{LogOptions, LogReader, topics};
+use learner_node::log::{LogOptions, LogReader, topics};
+use learner_node::mix::Mix;
 use rt_controller::{ControllerConfig, FaultReason, cycle::fault_code};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{ControllerMode, SensorFrame};

@@ -4,7 +4,7 @@
 
 use hw_sim::{PegShape, Stage, WorldConfig};
 use learner::env::FastEnv;
-use learner::policy::{HeuristicConfig, HeuristicPolicy, TaskGeometry};
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy, TaskGeometry};
 use rt_controller::ControllerConfig;
 
 fn episode(peg: PegShape, seed: u64) -> (Stage, f64) {
@@ -79,7 +79,8 @@ fn heuristic_completes_all_four_pegs() {
 
 #[test]
 fn collection_mix_heuristic_runs_whole_episodes_without_a_fault() {
-    use learner::collect::{EpisodePolicy, Mix, MixedPolicy, task_of};
+    use learner::collect::task_of;
+    use learner_node::mix::{EpisodePolicy, Mix, MixedPolicy};
     // The collection's heuristic: 1 mm of noise on every position step.
     // It used to end most 5 s episodes in a force overload: impacts on the
     // box's top and the bottom, and noise winding the target into the

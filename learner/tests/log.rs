@@ -3,9 +3,11 @@
 //! anywhere): an error naming the offset, never a panic, and a recovered copy
 //! that holds every intact message.
 
-use learner::collect::EpisodePolicy;
-use learner::log::events::{Event, Outcome, Reset};
-use learner::log::{self, LogOptions, LogReader, LogWriter, ReadError, RunConfig, RunMode, topics};
+use learner_node::log::events::{Event, Outcome, Reset};
+use learner_node::log::{
+    self, LogOptions, LogReader, LogWriter, ReadError, RunConfig, RunMode, topics,
+};
+use learner_node::mix::EpisodePolicy;
 use shared_mem_schema::{CameraFrame, Header, Message, PolicyAction, SensorFrame};
 use std::path::Path;
 

@@ -2,7 +2,7 @@
 //! `learner log check`, with where the sensor frames went: never published
 //! by the controller, or published and not recorded.
 
-use learner::log::{self, LogOptions, LogReader, LogWriter, topics};
+use learner_node::log::{self, LogOptions, LogReader, LogWriter, topics};
 use shared_mem_schema::rates::CONTROL_PERIOD_NS;
 use shared_mem_schema::{Header, Message, SensorFrame};
 use std::path::Path;

@@ -217,7 +217,8 @@ fn the_end_effector_target_is_the_normalised_displacement_or_next_pose() {
         ..Default::default()
     };
     s.proprio[..4].copy_from_slice(&[0.505, 0.1, 0.29, 0.2]);
-    let d = norm.labels(
+    let d = learner::models::inputs::labels(
+        &norm,
         std::slice::from_ref(&s),
         &[1],
         1,
@@ -230,7 +231,14 @@ fn the_end_effector_target_is_the_normalised_displacement_or_next_pose() {
         &[(0.005 - 0.001) / 0.002, (-0.004 + 0.002) / 0.004, -1.0],
         1e-4,
     );
-    let p = norm.labels(std::slice::from_ref(&s), &[1], 1, EeTarget::Pose, false);
+    let p = learner::models::inputs::labels(
+        &norm,
+        std::slice::from_ref(&s),
+        &[1],
+        1,
+        EeTarget::Pose,
+        false,
+    );
     // (next − proprioception's mean) / its sd, position and roll.
     close(&p.ee, &[0.1, -0.02, -0.4, 1.0], 1e-4);
 }
@@ -438,8 +446,8 @@ fn the_fast_cpu_path_computes_what_encode_computes() {
         let x = InputTensors::new(&a, &dev);
         let net = random_biases(new_net(cfg, &dev), 3);
         // Split unevenly over three threads (2, 2, 1), and on one.
-        let fast = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(3);
-        let single = learner::models::fast::FastEncoder::new(&net, cfg).with_threads(1);
+        let fast = learner::models::fast::fast_encoder(&net, cfg).with_threads(3);
+        let single = learner::models::fast::fast_encoder(&net, cfg).with_threads(1);
         let masks = [
             Modalities::ALL,
             no_rgb,

@@ -6,11 +6,12 @@
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::*;
-use learner::collect::{CollectConfig, Mix, collect_fast};
+use learner::collect::{CollectConfig, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset};
-use learner::log::LogOptions;
 use learner::models::{Encoder, ModelKind, ObservationRef};
 use learner::train::{self, Split, TrainConfig, TrainOptions};
+use learner_node::log::LogOptions;
+use learner_node::mix::Mix;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
@@ -436,7 +437,7 @@ fn the_frozen_representation_observes_the_rl_environment() {
     assert!(e.contains("nowhere"), "{e}");
     // The export keeps the dataset's camera; a world with another camera
     // (another size, or the same moved by 5 cm) is refused before any step.
-    let rep = std::sync::Arc::new(learner::rl::Representation::load(&s.model_dir).unwrap());
+    let rep = std::sync::Arc::new(learner::rl::represent::load(&s.model_dir).unwrap());
     let trained = rep.camera().expect("the export keeps the camera");
     assert!(trained.same_camera(&env.world.camera.calibration()));
     let mut wide = env.clone();
@@ -645,7 +646,8 @@ fn an_experiment_collects_through_the_policys_camera() {
         let i = e["episode"].as_u64().unwrap() as usize;
         assert_eq!(e["peg"], ["hexagon", "triangle"][i % 2], "{manifest}");
     }
-    let log = learner::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
+    let log =
+        learner_node::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
     let logged = &log.read_config(None).unwrap()[0].1;
     assert_eq!(
         logged.world.task.box_yaw_range_rad, 0.05,

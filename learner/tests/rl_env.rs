@@ -5,9 +5,9 @@
 //! threads.
 
 use hw_sim::PegShape;
-use learner::policy::{HeuristicConfig, HeuristicPolicy};
 use learner::rl::reward::{Outcome, RewardStage, normalised_return};
 use learner::rl::{BatchEnv, GroundTruth, RlEnv, RlEnvConfig, VecEnv};
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy};
 use nalgebra::Vector3;
 use std::sync::Arc;
 

@@ -8,7 +8,7 @@
 //! It must not hold product code: anything a deployed process runs belongs to
 //! another crate.
 
-use learner::stack::Managed;
+use learner_node::stack::Managed;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, MutexGuard, OnceLock};
@@ -28,7 +28,7 @@ pub fn workspace_root() -> PathBuf {
 pub fn stack_bins() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let dir = learner::stack::bin_dir().expect("locating the target directory");
+        let dir = learner_node::stack::bin_dir().expect("locating the target directory");
         let release = dir.ends_with("release");
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
@@ -41,6 +41,8 @@ pub fn stack_bins() -> &'static Path {
             "rt-controller-daemon",
             "-p",
             "learner",
+            "-p",
+            "learner-node",
             "--bins",
         ]);
         if release {

@@ -3,7 +3,7 @@
 //! recover` turns each into a valid file, and the dataset builder skips the
 //! damaged ones, naming them, while building the rest.
 
-use learner::log::{LogReader, ReadError, topics};
+use learner_node::log::{LogReader, ReadError, topics};
 use std::process::Command;
 use std::time::{Duration, Instant};
 use test_support::scratch_dir;

@@ -76,10 +76,10 @@ fn the_heuristic_drives_franky_sim_through_the_stack() {
     }
     for n in [1, 2] {
         let log = dir.join(format!("episode-000{n}.mcap"));
-        let reader = learner::log::LogReader::open(&log).unwrap();
-        let gaps = learner::log::log_gaps(&reader).unwrap();
+        let reader = learner_node::log::LogReader::open(&log).unwrap();
+        let gaps = learner_node::log::log_gaps(&reader).unwrap();
         assert!(
-            gaps[0].topic == learner::log::topics::SENSOR && gaps[0].messages > 1000,
+            gaps[0].topic == learner_node::log::topics::SENSOR && gaps[0].messages > 1000,
             "{}: {gaps:?}",
             log.display()
         );

@@ -4,7 +4,7 @@
 //! weights the data towards a peg resting at the bottom; this makes it
 //! visible.
 
-use crate::collect::EpisodePolicy;
+use learner_node::mix::EpisodePolicy;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::Stage;
 

@@ -2,7 +2,7 @@
 //! table, written from logs labelled in parallel.
 
 use super::*;
-use crate::policy::WRENCH_WINDOW;
+use learner_node::policy::WRENCH_WINDOW;
 use robot_model::descriptions::RobotCatalog;
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -1,7 +1,7 @@
 //! What can fail when building, opening or reading a dataset.
 
 use crate::labels::LabelError;
-use crate::log::ReadError;
+use learner_node::log::ReadError;
 use std::path::PathBuf;
 
 /// A dataset failure; names the file (log, shard, table) and the value at

@@ -2,12 +2,12 @@
 //! labelled samples.
 
 use super::*;
-use crate::collect::EpisodePolicy;
 use crate::labels::{FlowLabeler, in_contact};
-use crate::log::{CameraImage, Event, LogReader, topics};
-use crate::policy::WRENCH_WINDOW;
-use crate::proprio::{Proprio, roll_reference};
 use hw_sim::PegShape;
+use learner_node::log::{CameraImage, Event, LogReader, topics};
+use learner_node::mix::EpisodePolicy;
+use learner_node::policy::WRENCH_WINDOW;
+use learner_node::proprio::{Proprio, roll_reference};
 use robot_model::descriptions::RobotCatalog;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::{CameraCalibration, PolicyAction, SensorFrame, Stage};

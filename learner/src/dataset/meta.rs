@@ -2,8 +2,8 @@
 //! constants, label ratios).
 
 use super::*;
-use crate::collect::EpisodePolicy;
 use hw_sim::PegShape;
+use learner_node::mix::EpisodePolicy;
 use serde::{Deserialize, Serialize};
 
 /// Where a block is in its shard.

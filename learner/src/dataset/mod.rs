@@ -41,12 +41,12 @@ use sample::sample_bytes;
 /// Shard file magic (start and end).
 pub const SHARD_MAGIC: &[u8; 8] = b"VTDSHRD5";
 /// Dataset format version (meta.json). 2: blocks carry a CRC-32. 3:
-/// proprioception is the paper's 8 values ([`crate::proprio`]) instead of 13
+/// proprioception is the paper's 8 values ([`learner_node::proprio`]) instead of 13
 /// with a quaternion; the flow mask is the robot in motion. 4: each sample
 /// carries the stage its episode had reached (a byte of the head's padding).
 /// 5: the end-effector label carries the next roll beside the next position
 /// (the authors' code predicts both).
 pub const FORMAT_VERSION: u32 = 5;
 /// Proprioception values per sample: position (3), roll (1), linear
-/// velocity (3), roll rate (1) ([`crate::proprio::Proprio`]).
-pub use crate::proprio::PROPRIO;
+/// velocity (3), roll rate (1) ([`learner_node::proprio::Proprio`]).
+pub use learner_node::proprio::PROPRIO;

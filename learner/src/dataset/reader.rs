@@ -1,7 +1,7 @@
 //! An opened dataset: its tables and block reads.
 
 use super::*;
-use crate::policy::WRENCH_WINDOW;
+use learner_node::policy::WRENCH_WINDOW;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 

@@ -1,7 +1,7 @@
 //! One sample and its byte encoding inside a block.
 
 use super::*;
-use crate::policy::WRENCH_WINDOW;
+use learner_node::policy::WRENCH_WINDOW;
 
 /// One sample.
 #[derive(Debug, Clone, PartialEq, Default)]

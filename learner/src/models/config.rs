@@ -3,6 +3,7 @@
 //! `configs/repr/`; every field has a default, so a file names only what
 //! differs from the paper's Full Model.
 
+pub use learner_node::repr::Modalities;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{FieldError, ensure, non_negative, within};
 
@@ -48,73 +49,6 @@ impl EeTarget {
         match self {
             Self::Displacement => 3,
             Self::Pose => 4,
-        }
-    }
-}
-
-/// Which sensors a model sees. A modality left out contributes no expert to
-/// the product (no input to the concatenation of the deterministic model);
-/// the same switch masks a sensor of a trained model at run time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Modalities {
-    /// RGB camera image.
-    pub rgb: bool,
-    /// Depth image.
-    pub depth: bool,
-    /// The wrist F/T sensor's window (the paper's haptics).
-    pub haptics: bool,
-    /// End-effector pose and velocity.
-    pub proprio: bool,
-}
-
-impl Default for Modalities {
-    fn default() -> Self {
-        Self::ALL
-    }
-}
-
-impl Modalities {
-    /// Every sensor.
-    pub const ALL: Self = Self {
-        rgb: true,
-        depth: true,
-        haptics: true,
-        proprio: true,
-    };
-
-    /// Those of `self` that `other` also has.
-    pub fn and(self, other: Self) -> Self {
-        Self {
-            rgb: self.rgb && other.rgb,
-            depth: self.depth && other.depth,
-            haptics: self.haptics && other.haptics,
-            proprio: self.proprio && other.proprio,
-        }
-    }
-
-    /// Whether none is on.
-    pub fn none(self) -> bool {
-        !(self.rgb || self.depth || self.haptics || self.proprio)
-    }
-
-    /// Names of those on, for messages.
-    pub fn names(self) -> String {
-        let mut v = Vec::new();
-        for (on, name) in [
-            (self.rgb, "rgb"),
-            (self.depth, "depth"),
-            (self.haptics, "haptics"),
-            (self.proprio, "proprio"),
-        ] {
-            if on {
-                v.push(name);
-            }
-        }
-        if v.is_empty() {
-            "none".into()
-        } else {
-            v.join("+")
         }
     }
 }

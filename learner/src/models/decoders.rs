@@ -223,7 +223,7 @@ impl ReconDecoders {
             rgb_fc: LinearConfig::new(d, RECON_START * cells).init(device),
             rgb_convs,
             wrench: Mlp::new(&[d, 128, 64, 32, 6], device),
-            proprio: Mlp::new(&[d, 128, 64, 32, crate::proprio::PROPRIO], device),
+            proprio: Mlp::new(&[d, 128, 64, 32, learner_node::proprio::PROPRIO], device),
         }
     }
 

@@ -4,10 +4,10 @@
 //! "Multimodal Input Experiments": the mean is the policy's input).
 
 use super::config::{Modalities, ModelConfig};
-use super::fast::FastEncoder;
 use super::inputs::{InputError, Normaliser, ObservationRef};
 use super::net::{InputTensors, ReprNet};
 use burn::prelude::*;
+use learner_node::repr::{EncoderFile, FastEncoder};
 use shared_mem_schema::CameraCalibration;
 use std::path::Path;
 
@@ -42,7 +42,7 @@ impl Encoder {
     /// From parts in memory.
     pub fn new(net: ReprNet, config: ModelConfig, normaliser: Normaliser, device: &Device) -> Self {
         Self {
-            fast: (*device == Device::flex()).then(|| FastEncoder::new(&net, &config)),
+            fast: (*device == Device::flex()).then(|| super::fast::fast_encoder(&net, &config)),
             active: config.modalities,
             net,
             config,
@@ -71,7 +71,7 @@ impl Encoder {
         if !on {
             self.fast = None;
         } else if self.fast.is_none() && self.device == Device::flex() {
-            self.fast = Some(FastEncoder::new(&self.net, &self.config));
+            self.fast = Some(super::fast::fast_encoder(&self.net, &self.config));
         }
         self
     }
@@ -81,6 +81,17 @@ impl Encoder {
     pub fn with_threads(mut self, n: usize) -> Self {
         self.fast = self.fast.map(|f| f.with_threads(n));
         self
+    }
+
+    /// What the node's weights file holds for it: its layers as plain
+    /// arrays, the sensors it encodes with, its normaliser and camera.
+    pub fn to_file(&self) -> EncoderFile {
+        EncoderFile {
+            weights: super::fast::encoder_weights(&self.net, &self.config),
+            modalities: self.active,
+            normaliser: self.normaliser.clone(),
+            camera: self.camera,
+        }
     }
 
     /// Latent size d.

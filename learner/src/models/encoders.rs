@@ -205,7 +205,10 @@ impl ProprioEncoder {
     /// For latent size `d`.
     pub fn new(d: usize, device: &Device) -> Self {
         Self {
-            mlp: Mlp::new(&[crate::proprio::PROPRIO, 32, 64, 128, 2 * d], device),
+            mlp: Mlp::new(
+                &[learner_node::proprio::PROPRIO, 32, 64, 128, 2 * d],
+                device,
+            ),
         }
     }
 

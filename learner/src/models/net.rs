@@ -11,10 +11,10 @@ use super::decoders::{
 use super::encoders::{DepthEncoder, Mlp, ProprioEncoder, RgbEncoder, WrenchEncoder};
 use super::fusion::{self, Gaussian};
 use super::inputs::InputArrays;
-use crate::policy::WRENCH_WINDOW;
-use crate::proprio::PROPRIO;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
+use learner_node::policy::WRENCH_WINDOW;
+use learner_node::proprio::PROPRIO;
 
 /// A batch of inputs as tensors.
 #[derive(Debug, Clone)]

@@ -14,11 +14,12 @@
 //! faults (a force overload, a joint limit): the arm is then held and the
 //! episode can no longer progress.
 
-use super::observe::ObsView;
 use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
 use crate::env::{EnvError, FastEnv};
-use crate::policy::{Action4, Observation, TaskGeometry};
 use hw_sim::{FieldError, TaskState, WorldConfig};
+pub use learner_node::deploy::ActionScale;
+use learner_node::observe::ObsView;
+use learner_node::policy::{Observation, TaskGeometry};
 use nalgebra::Isometry3;
 use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};
@@ -67,50 +68,6 @@ pub enum RlEnvError {
     /// Stepped before its reset, or after its episode ended.
     #[error("environment {0} has no running episode (reset it first)")]
     NotRunning(usize),
-}
-
-/// The scale of a policy action (docs/rl.md, "Actions").
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ActionScale {
-    /// Position step of an action component of 1 (and the most), m.
-    pub max_step_m: f64,
-    /// Roll step of an action component of 1 (and the most), rad.
-    pub max_roll_rad: f64,
-}
-
-impl Default for ActionScale {
-    fn default() -> Self {
-        Self {
-            max_step_m: 0.0015,
-            max_roll_rad: 0.05,
-        }
-    }
-}
-
-impl ActionScale {
-    /// The controller's action for a policy output: each component clipped
-    /// to [−1, 1] (a NaN to 0) and scaled.
-    pub fn to_delta(&self, a: &[f64]) -> Action4 {
-        let c = |x: f64| if x.is_nan() { 0.0 } else { x.clamp(-1.0, 1.0) };
-        [
-            c(a[0]) * self.max_step_m,
-            c(a[1]) * self.max_step_m,
-            c(a[2]) * self.max_step_m,
-            c(a[3]) * self.max_roll_rad,
-        ]
-    }
-
-    /// The policy output that asks for `delta` (clipped): the inverse of
-    /// [`ActionScale::to_delta`], for scripted policies run through the env.
-    pub fn from_delta(&self, delta: &Action4) -> [f64; 4] {
-        [
-            (delta[0] / self.max_step_m).clamp(-1.0, 1.0),
-            (delta[1] / self.max_step_m).clamp(-1.0, 1.0),
-            (delta[2] / self.max_step_m).clamp(-1.0, 1.0),
-            (delta[3] / self.max_roll_rad).clamp(-1.0, 1.0),
-        ]
-    }
 }
 
 /// What only the environments a policy learns from do (`[env.training]`,

@@ -12,9 +12,9 @@
 //! constant and setting with its source or reason.
 
 pub mod adam;
-pub mod deploy;
 pub mod distill;
 pub mod env;
+pub mod export;
 pub mod gaussian;
 pub mod mlp;
 pub mod obs_norm;
@@ -30,7 +30,6 @@ pub mod trpo;
 pub mod value;
 pub mod vec;
 
-pub use deploy::TrainedPolicy;
 pub use env::{ActionScale, RlEnv, RlEnvConfig, RlEnvError, StepOutcome, TrainingAids};
 pub use gaussian::{GaussianPolicy, LinearBaseline};
 pub use obs_norm::ObsNorm;

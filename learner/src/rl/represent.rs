@@ -1,137 +1,37 @@
-//! The frozen representation as the policy's observation (paper, "Policy
-//! Learning": the policy takes the mean of the learned representation): a
-//! trained model's z means of the camera frame, the wrench window and the
-//! proprioception of every environment, encoded as one batch.
+//! The frozen representation of a `learner repr train` export as an RL
+//! observation: the node's [`Representation`] observer around the training
+//! crate's [`Encoder`] (burn's model, encoding on the CPU's fast path).
 
-use super::observe::{ObsView, Observer};
 use crate::models::{Encoder, ObservationRef};
-use crate::policy::WRENCH_WINDOW;
-use crate::proprio::PROPRIO;
+pub use learner_node::repr::Representation;
+use learner_node::repr::{InputError, ZEncoder};
+use shared_mem_schema::CameraCalibration;
 use std::path::Path;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
 
-/// z means of an exported representation model.
-pub struct Representation {
-    encoder: Mutex<Encoder>,
-    dim: usize,
-    camera: Option<shared_mem_schema::CameraCalibration>,
-    rejected: AtomicU64,
-}
-
-impl Representation {
-    /// Loads the model `learner repr train` exported into `dir`, for the CPU.
-    pub fn load(dir: &Path) -> crate::train::Result<Self> {
-        Self::load_on(dir, 0)
-    }
-
-    /// The same, encoding batches on at most `threads` cores (0: all).
-    pub fn load_on(dir: &Path, threads: usize) -> crate::train::Result<Self> {
-        let mut encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
-        if threads > 0 {
-            encoder = encoder.with_threads(threads);
-        }
-        Ok(Self::new(encoder))
-    }
-
-    /// Around an encoder in memory.
-    pub fn new(encoder: Encoder) -> Self {
-        Self {
-            dim: encoder.dim(),
-            camera: encoder.camera().copied(),
-            encoder: Mutex::new(encoder),
-            rejected: AtomicU64::new(0),
-        }
-    }
-
-    /// Batches it refused (a camera frame of another size or another
-    /// camera than the model's, a value that is not finite): their
-    /// observations were written as zeros.
-    pub fn rejected(&self) -> u64 {
-        self.rejected.load(Ordering::Relaxed)
-    }
-}
-
-/// The 32×6 wrench window of a view, oldest first; a history shorter than
-/// the window repeats its oldest reading, as the dataset's first samples
-/// of an episode do.
-fn window(v: &ObsView<'_>) -> Vec<f32> {
-    let readings: Vec<&[f64; 6]> = v.wrench.ordered().collect();
-    let mut out = Vec::with_capacity(WRENCH_WINDOW * 6);
-    let missing = WRENCH_WINDOW.saturating_sub(readings.len());
-    let first = readings.first().copied().unwrap_or(&[0.0; 6]);
-    for r in std::iter::repeat_n(first, missing).chain(readings.iter().copied()) {
-        out.extend(r.iter().map(|&x| x as f32));
-    }
-    out
-}
-
-impl Observer for Representation {
+impl ZEncoder for Encoder {
     fn dim(&self) -> usize {
-        self.dim
+        Encoder::dim(self)
     }
 
-    fn rejected(&self) -> u64 {
-        Representation::rejected(self)
+    fn camera(&self) -> Option<CameraCalibration> {
+        Encoder::camera(self).copied()
     }
 
-    fn needs_camera(&self) -> bool {
-        true
+    fn encode(&self, obs: &[ObservationRef<'_>]) -> Result<Vec<f32>, InputError> {
+        Encoder::encode(self, obs)
     }
+}
 
-    fn camera(&self) -> Option<shared_mem_schema::CameraCalibration> {
-        self.camera
-    }
+/// Loads the model `learner repr train` exported into `dir`, for the CPU.
+pub fn load(dir: &Path) -> crate::train::Result<Representation> {
+    load_on(dir, 0)
+}
 
-    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
-        let windows: Vec<Vec<f32>> = views.iter().map(window).collect();
-        let proprios: Vec<[f32; PROPRIO]> =
-            views.iter().map(|v| v.obs.proprio.to_array()).collect();
-        let mut obs = Vec::with_capacity(views.len());
-        for (i, v) in views.iter().enumerate() {
-            let Some(cam) = v.camera else {
-                break;
-            };
-            // Another camera's frame is refused like a frame of another
-            // size (the environment and the live node check the world's
-            // camera before the first step; this catches a frame that
-            // still differs).
-            if self
-                .camera
-                .is_some_and(|c| !c.same_camera(&cam.calibration))
-            {
-                break;
-            }
-            let (w, h) = (
-                cam.calibration.width as usize,
-                cam.calibration.height as usize,
-            );
-            obs.push(ObservationRef {
-                rgb: &cam.rgb[..(3 * w * h).min(cam.rgb.len())],
-                depth: &cam.depth_m[..(w * h).min(cam.depth_m.len())],
-                wrench: &windows[i],
-                proprio: &proprios[i],
-            });
-        }
-        let z = if obs.len() == views.len() {
-            let enc = self.encoder.lock().unwrap_or_else(|e| e.into_inner());
-            enc.encode(&obs).ok()
-        } else {
-            None
-        };
-        match z {
-            Some(z) if z.len() == out.len() => {
-                for (o, x) in out.iter_mut().zip(z) {
-                    *o = x as f64;
-                }
-            }
-            _ => {
-                // `encode` checks sizes (a frame of another size than the
-                // model's) and finiteness; the policy gets zeros and the
-                // count says so.
-                self.rejected.fetch_add(1, Ordering::Relaxed);
-                out.fill(0.0);
-            }
-        }
+/// The same, encoding batches on at most `threads` cores (0: all).
+pub fn load_on(dir: &Path, threads: usize) -> crate::train::Result<Representation> {
+    let mut encoder = Encoder::load(dir, &burn::prelude::Device::flex())?;
+    if threads > 0 {
+        encoder = encoder.with_threads(threads);
     }
+    Ok(Representation::new(Box::new(encoder)))
 }

@@ -11,7 +11,7 @@ use super::train::{IterationStats, Trainer, TrainerState};
 use super::value::Baseline;
 use super::vec::{BatchEnv, VecEnv, all_cores, par_map};
 use crate::plot::{Chart, Series};
-use crate::progress::Progress;
+use learner_node::progress::Progress;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};

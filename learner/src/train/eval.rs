@@ -128,7 +128,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
             .meta
             .episodes
             .iter()
-            .filter(|e| e.policy == crate::collect::EpisodePolicy::Heuristic)
+            .filter(|e| e.policy == learner_node::mix::EpisodePolicy::Heuristic)
             .map(|e| e.episode)
             .collect();
         pca_picture(

@@ -9,10 +9,10 @@ use crate::models::net::tensor;
 use crate::models::{
     EeTarget, InputTensors, Modalities, ModelKind, Normaliser, ObservationRef, ReprNet,
 };
-use crate::policy::WRENCH_WINDOW;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use hw_sim::rng;
+use learner_node::policy::WRENCH_WINDOW;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -143,7 +143,7 @@ pub(crate) fn prepare(
 ) -> Result<Prepared> {
     let obs: Vec<ObservationRef<'_>> = b.samples.iter().map(ObservationRef::from).collect();
     let inputs = norm.inputs(&obs, side)?;
-    let labels = norm.labels(&b.samples, &b.paired, side, ee, with_rgb01);
+    let labels = crate::models::inputs::labels(norm, &b.samples, &b.paired, side, ee, with_rgb01);
     let n = side * side;
     let zero_flow_epe = labels
         .flow
@@ -238,7 +238,7 @@ pub fn train(
     std::fs::create_dir_all(out).map_err(io_err(out))?;
     let device = opts.device.device(true).map_err(TrainError::Mismatch)?;
     let t = &cfg.train;
-    let norm = Normaliser::from_stats(&ds.stats);
+    let norm = crate::models::inputs::normaliser_from_stats(&ds.stats);
     norm.validate()
         .map_err(|what| TrainError::Mismatch(format!("{}: {what}", data.display())))?;
     let (mut net, mut optim, mut state) = start(cfg, out, opts.resume, &device)?;
@@ -269,7 +269,7 @@ pub fn train(
     let total = per_epoch * t.epochs as u64;
     let bar = opts
         .progress
-        .then(|| crate::progress::Progress::new(total, "batches"));
+        .then(|| learner_node::progress::Progress::new(total, "batches"));
     let variational = cfg.model.kind != ModelKind::Deterministic;
     let recon = cfg.model.kind == ModelKind::Reconstruction;
     let side = cfg.model.image_size;

@@ -89,10 +89,10 @@ fn episode_frame_counts(stdout: &str) -> [u64; 5] {
 /// the episode's first step.
 fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path) {
     let [logged, missing, gaps, not_published, not_recorded] = episode_frame_counts(stdout);
-    let reader = learner::log::LogReader::open(log).unwrap();
-    let all = learner::log::log_gaps(&reader).unwrap();
+    let reader = learner_node::log::LogReader::open(log).unwrap();
+    let all = learner_node::log::log_gaps(&reader).unwrap();
     let g = &all[0];
-    assert_eq!(g.topic, learner::log::topics::SENSOR, "{all:?}");
+    assert_eq!(g.topic, learner_node::log::topics::SENSOR, "{all:?}");
     let loss = g.sensor.unwrap();
     assert_eq!(
         [
@@ -109,7 +109,7 @@ fn check_sensor_frames_accounted(mode: &str, stdout: &str, log: &std::path::Path
     if mode == "lockstep" {
         assert_eq!(missing, 0, "{mode}: {all:?}");
         let frames = reader
-            .read_raw::<SensorFrame>(learner::log::topics::SENSOR, None)
+            .read_raw::<SensorFrame>(learner_node::log::topics::SENSOR, None)
             .unwrap();
         assert_eq!(
             frames[0].step, 0,

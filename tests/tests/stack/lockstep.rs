@@ -2,8 +2,8 @@
 
 use hw_sim::WorldConfig;
 use learner::env::FastEnv;
-use learner::live::{PolicyNode, task_geometry};
-use learner::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
+use learner_node::live::{PolicyNode, task_geometry};
+use learner_node::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::transport;
 use std::time::{Duration, Instant};
@@ -68,7 +68,7 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
         })
         .unwrap();
         for f in frames {
-            roll_ref.get_or_insert_with(|| (learner::proprio::roll_reference(&f), f.step));
+            roll_ref.get_or_insert_with(|| (learner_node::proprio::roll_reference(&f), f.step));
             wrench.push(f.wrench);
             if (f.step + 1).is_multiple_of(ACTION_PERIOD_STEPS) {
                 let obs = Observation::from_frame(&f, roll_ref.expect("first frame").0);

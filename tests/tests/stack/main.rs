@@ -18,7 +18,7 @@ use tests::wait_for;
 pub(crate) fn start_sim_and_controller(
     ns: &str,
     dir: &std::path::Path,
-) -> (learner::stack::Managed, learner::stack::Managed) {
+) -> (learner_node::stack::Managed, learner_node::stack::Managed) {
     let sim = tests::start("hw-sim", &["--namespace", ns, "--no-camera"], dir);
     let ctl = tests::start("rt-controller", &["--namespace", ns, "--no-realtime"], dir);
     (sim, ctl)

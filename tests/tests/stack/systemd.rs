@@ -22,7 +22,7 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
         .env("NOTIFY_SOCKET", &sock_path)
         .env("WATCHDOG_USEC", "1000000");
     let mut ctl =
-        learner::stack::Managed::spawn("rt-controller", cmd, Some(&dir.join("rt-controller.log")))
+        learner_node::stack::Managed::spawn("rt-controller", cmd, Some(&dir.join("rt-controller.log")))
             .unwrap();
     let node = transport::create_node("e2e-systemd").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();

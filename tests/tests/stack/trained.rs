@@ -48,7 +48,7 @@ fn policy_episode(
     checkpoint: &std::path::Path,
     seed: u64,
     seconds: u32,
-) -> learner::log::LogReader {
+) -> learner_node::log::LogReader {
     let out = Command::new(tests::stack_bins().join("learner"))
         .args(["stack", "--lockstep", "--episodes", "1", "--seed"])
         .arg(seed.to_string())
@@ -71,7 +71,7 @@ fn policy_episode(
         .map(|e| e.path())
         .find(|p| p.extension().is_some_and(|x| x == "mcap"))
         .expect("the episode's log");
-    learner::log::LogReader::open(&log).unwrap()
+    learner_node::log::LogReader::open(&log).unwrap()
 }
 
 /// A policy checkpoint that centres the tip over the hole of episode
@@ -118,11 +118,11 @@ fn a_trained_policy_drives_the_stack_live() {
     let config = reader.read_config(None).unwrap();
     assert_eq!(
         config[0].1.policy,
-        learner::collect::EpisodePolicy::Learned,
+        learner_node::mix::EpisodePolicy::Learned,
         "the log names the policy"
     );
     let actions = reader
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     // 3 s at 20 Hz, the first action after one policy period.
     assert!(actions.len() >= 55, "{} actions", actions.len());
@@ -132,7 +132,7 @@ fn a_trained_policy_drives_the_stack_live() {
         assert!(a.delta_pos_m[0].abs() <= 0.005 && a.delta_pos_m[1].abs() <= 0.005);
     }
     let reports = reader
-        .read_raw::<EpisodeReport>(learner::log::topics::EPISODE, None)
+        .read_raw::<EpisodeReport>(learner_node::log::topics::EPISODE, None)
         .unwrap();
     let horizontal = |r: &EpisodeReport| r.s_m[0].hypot(r.s_m[1]);
     let (first, last) = (horizontal(&reports[0]), horizontal(reports.last().unwrap()));
@@ -175,9 +175,9 @@ fn a_trained_policy_drives_the_stack_live() {
         .map(|e| e.path())
         .find(|p| p.extension().is_some_and(|x| x == "mcap"))
         .expect("the episode's log");
-    let actions = learner::log::LogReader::open(&log)
+    let actions = learner_node::log::LogReader::open(&log)
         .unwrap()
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     assert!(actions.len() >= 15, "{} actions", actions.len());
     assert!(
@@ -273,7 +273,7 @@ fn a_representation_policy_drives_the_stack_live() {
     );
     let reader = policy_episode(dir.path(), &ckpt, 2, 2);
     let actions = reader
-        .read_raw::<PolicyAction>(learner::log::topics::ACTION, None)
+        .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
     assert!(actions.len() >= 35, "{} actions", actions.len());
     let distinct = |k: usize| {

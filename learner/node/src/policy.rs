@@ -1,13 +1,14 @@
-//! Observations and the scripted heuristic insertion policy.
+//! Observations and the scripted policies: the heuristic insertion and the
+//! bounded random walk.
 //!
-//! The heuristic is the node's default policy when no trained checkpoint is
-//! given (`learner run --policy` takes one), and the "contact-making" half
-//! of the paper's data-collection mix. It knows
+//! The heuristic is the "contact-making" half of the paper's
+//! data-collection mix and the node's default policy. It knows
 //! where the hole is (a calibrated cell, or the simulator's report) and
 //! moves above it, aligns the roll, descends to contact, searches on a
 //! spiral when it lands on the surface, and inserts.
 
 use crate::proprio::Proprio;
+use hw_sim::convert::unit_quaternion;
 use hw_sim::rng;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use shared_mem_schema::SensorFrame;
@@ -111,8 +112,6 @@ impl Observation {
         }
     }
 }
-
-pub use hw_sim::convert::unit_quaternion;
 
 /// Where the task is (calibration; the simulator reports it).
 #[derive(Debug, Clone, PartialEq)]

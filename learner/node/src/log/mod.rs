@@ -21,14 +21,15 @@ pub mod events;
 pub mod foxglove;
 pub mod gaps;
 mod read;
+mod walk;
 
 pub use config::{RunConfig, RunMode};
 pub use events::Event;
 pub use gaps::{ChannelGaps, SensorLoss, log_gaps};
 pub use read::{
-    CameraImage, LogMessage, LogReader, ReadError, RecoverReport, ScanReport, TopicInfo, recover,
-    scan,
+    CameraImage, LogMessage, LogReader, ReadError, RecoverReport, TopicInfo, recover, scan,
 };
+pub use walk::ScanReport;
 
 use mcap::records::MessageHeader;
 use shared_mem_schema::{

@@ -2,7 +2,7 @@
 //! ran with, one typed value written by the live node and by fast-mode
 //! collection, read back by the dataset labeler (JSON through serde).
 
-use crate::collect::EpisodePolicy;
+use crate::mix::EpisodePolicy;
 use hw_sim::WorldConfig;
 use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};

@@ -1,7 +1,7 @@
 //! The episode events of a log's `/events` channel, one typed value each,
 //! written and read with serde (JSON tagged by `"event"`).
 
-use crate::collect::EpisodePolicy;
+use crate::mix::EpisodePolicy;
 use hw_sim::{PegShape, Stage, WorldConfig};
 use serde::{Deserialize, Serialize};
 

@@ -1,17 +1,19 @@
 //! Starting and stopping the whole stack as separate processes: hw-sim (or
 //! franky-sim, a simulated Franka FR3), rt-controller and the live policy
-//! node (`learner run`), found next to the running executable (all three
+//! node (the `run` command of the executable that starts the stack:
+//! `policy-node` or `learner`), found next to the running executable (all
 //! are built into one target directory).
 
-use crate::log::LogError;
+use crate::log::LogOptions;
+use crate::mix::Mix;
+use hw_sim::{PegShape, WorldConfig};
 use shared_mem_schema::process::termination_requested;
-use shared_mem_schema::transport::TransportError;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-/// Why the stack, or the live policy node in it, failed; names the process,
-/// file or episode at fault.
+/// Why the stack failed to start or stop its processes; names the process
+/// or file at fault (the node's own failures are its exit status).
 #[derive(Debug, thiserror::Error)]
 pub enum StackError {
     /// The running executable could not be located.
@@ -23,7 +25,7 @@ pub enum StackError {
     /// A stack executable is missing.
     #[error(
         "{} not found: build the stack first (cargo build --release -p hw-sim -p rt-controller \
-         -p learner)",
+         -p learner-node)",
         .0.display()
     )]
     NotBuilt(PathBuf),
@@ -57,52 +59,12 @@ pub enum StackError {
         /// Its output.
         log: PathBuf,
     },
-    /// The policy node (`learner run`) failed.
+    /// The policy node (`run`) failed.
     #[error("the policy node failed ({0})")]
     PolicyNodeFailed(ExitStatus),
     /// The world configuration could not be printed as TOML.
     #[error("printing the world configuration: {0}")]
     WorldToml(#[from] toml::ser::Error),
-    /// The world configuration does not fit in a reset command.
-    #[error("the world configuration is {bytes} bytes, a command carries at most {max}")]
-    WorldTooLarge {
-        /// Its size.
-        bytes: usize,
-        /// [`shared_mem_schema::MAX_CONFIG_BYTES`].
-        max: usize,
-    },
-    /// The simulator refused a reset.
-    #[error("the simulator refused the reset: {0}")]
-    ResetRefused(String),
-    /// No answer to a reset within 15 s.
-    #[error("no answer from the simulator to a reset within 15 s (is hw-sim running?)")]
-    NoResetAnswer,
-    /// A termination request came while waiting for the simulator.
-    #[error("interrupted while waiting for the simulator")]
-    Interrupted,
-    /// The controller kept its fault through 10 s of reset commands.
-    #[error("the controller did not clear its fault on reset ({0})")]
-    ControllerReset(&'static str),
-    /// No sensor frames arrived for 10 s at the start of an episode.
-    #[error("no sensor frames from rt-controller for 10 s (is it running?)")]
-    NoSensorFrames,
-    /// No sensor frames arrived while waiting for the controller to start.
-    #[error("no sensor frames from rt-controller within {0} s of waiting (is it running?)")]
-    ControllerNotStarted(u64),
-    /// The sensor frames stopped for 2 s during an episode.
-    #[error("sensor frames stopped for 2 s in episode {0}")]
-    FramesStopped(u64),
-    /// The controller faulted during a run with a calibrated task (no
-    /// simulator resets the arm, so the run stops there).
-    #[error(
-        "the controller faulted in episode {episode} (fault code {code}); see rt-controller.log"
-    )]
-    ControllerFault {
-        /// The episode.
-        episode: u64,
-        /// The controller's fault code.
-        code: u32,
-    },
     /// franky-sim cannot be run with the given interpreter.
     #[error(
         "franky-sim is not installed: `{} -c 'import franky_sim'` fails; run \
@@ -131,12 +93,6 @@ pub enum StackError {
         /// Its backend kind, as the file spells it.
         kind: String,
     },
-    /// A shared-memory service failed.
-    #[error(transparent)]
-    Transport(#[from] TransportError),
-    /// An episode's log could not be written.
-    #[error(transparent)]
-    Log(#[from] LogError),
 }
 
 /// Where the stack's executables are: next to the current one.
@@ -299,7 +255,7 @@ impl FrankySim {
 /// The source tree this executable was built from (where scripts/ and
 /// configs/ are during development).
 pub fn repository_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
 /// The rt-controller configuration for franky-sim: `template` (a daemon
@@ -347,7 +303,10 @@ pub struct StackConfig {
     pub namespace: String,
     /// Lockstep instead of real time.
     pub lockstep: bool,
-    /// Extra arguments for `learner run`.
+    /// The node's executable, run as `<node> run` (the running one:
+    /// [`std::env::current_exe`]).
+    pub node: PathBuf,
+    /// Extra arguments for the node's `run`.
     pub run_args: Vec<String>,
     /// Directory of logs (process logs and MCAP).
     pub log_dir: PathBuf,
@@ -369,13 +328,12 @@ pub struct StackExit {
 }
 
 /// Starts the simulator (hw-sim or franky-sim) and rt-controller, runs
-/// `learner run` to completion in the foreground (its output is ours), and
+/// the node (`<node> run`) to completion in the foreground (its output is ours), and
 /// stops everything: the controller first (SIGTERM: it holds the pose, then
 /// exits), then the simulator.
 pub fn run(cfg: &StackConfig) -> Result<StackExit, StackError> {
     let dir = bin_dir()?;
     let ctl_bin = executable(&dir, "rt-controller")?;
-    let learner_bin = executable(&dir, "learner")?;
     std::fs::create_dir_all(&cfg.log_dir).map_err(|source| StackError::Io {
         path: cfg.log_dir.clone(),
         source,
@@ -422,7 +380,7 @@ pub fn run(cfg: &StackConfig) -> Result<StackExit, StackError> {
         ctl_cmd,
         Some(&cfg.log_dir.join("rt-controller.log")),
     )?;
-    let mut run_cmd = Command::new(&learner_bin);
+    let mut run_cmd = Command::new(&cfg.node);
     run_cmd
         .arg("run")
         .args(["--namespace", &cfg.namespace])
@@ -432,7 +390,7 @@ pub fn run(cfg: &StackConfig) -> Result<StackExit, StackError> {
     if cfg.lockstep {
         run_cmd.arg("--lockstep");
     }
-    let mut policy = Managed::spawn("learner run", run_cmd, None)?;
+    let mut policy = Managed::spawn("policy node", run_cmd, None)?;
     let status = loop {
         if let Some(s) = policy.try_wait() {
             break s;
@@ -465,4 +423,79 @@ pub fn run(cfg: &StackConfig) -> Result<StackExit, StackError> {
         controller,
         hardware,
     })
+}
+
+/// Live collection: `learner collect --live`.
+#[derive(Debug, Clone)]
+pub struct LiveCollect {
+    /// Where the shards go (and the processes' logs).
+    pub out_dir: PathBuf,
+    /// States to collect.
+    pub states: u64,
+    /// Actions per episode.
+    pub episode_actions: u32,
+    /// Pegs taken in turn.
+    pub pegs: Vec<PegShape>,
+    /// Seed of the first episode.
+    pub seed: u64,
+    /// World configuration.
+    pub world: WorldConfig,
+    /// The policy mix.
+    pub mix: Mix,
+    /// Log options.
+    pub log: LogOptions,
+    /// rt-controller configuration file.
+    pub controller_config: Option<PathBuf>,
+}
+
+/// Collects through the real-time stack: starts hw-sim and rt-controller
+/// and runs the node (this executable's `run`) with the collection mix.
+pub fn collect_live(c: &LiveCollect) -> Result<(), StackError> {
+    std::fs::create_dir_all(&c.out_dir).map_err(|source| StackError::Io {
+        path: c.out_dir.clone(),
+        source,
+    })?;
+    let world_path = c.out_dir.join("world.toml");
+    std::fs::write(&world_path, toml::to_string(&c.world)?).map_err(|source| StackError::Io {
+        path: world_path.clone(),
+        source,
+    })?;
+    let pegs: Vec<&str> = c.pegs.iter().map(|p| p.name()).collect();
+    let mut run_args = vec![
+        "--episodes".to_string(),
+        u32::MAX.to_string(),
+        "--seed".into(),
+        c.seed.to_string(),
+        "--world".into(),
+        world_path.display().to_string(),
+        "--pegs".into(),
+        pegs.join(","),
+        "--mix-heuristic-fraction".into(),
+        c.mix.heuristic_fraction.to_string(),
+        "--episode-actions".into(),
+        c.episode_actions.to_string(),
+        "--states".into(),
+        c.states.to_string(),
+        "--view-rate-hz".into(),
+        c.log.view_rate_hz.to_string(),
+    ];
+    if !c.log.foxglove {
+        run_args.push("--no-foxglove".into());
+    }
+    if c.mix.end_after_completion.is_none() {
+        run_args.push("--full-episodes".into());
+    }
+    let exit = run(&StackConfig {
+        hardware: Hardware::Sim,
+        node: std::env::current_exe().map_err(StackError::CurrentExe)?,
+        namespace: shared_mem_schema::DEFAULT_NAMESPACE.into(),
+        lockstep: false,
+        run_args,
+        log_dir: c.out_dir.clone(),
+        controller_config: c.controller_config.clone(),
+    })?;
+    if !exit.policy.success() {
+        return Err(StackError::PolicyNodeFailed(exit.policy));
+    }
+    Ok(())
 }

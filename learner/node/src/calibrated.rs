@@ -12,14 +12,14 @@
 //! contact); what an episode reports is where the tip went against the
 //! heuristic's goal, the hole's bottom centre.
 
-use crate::collect::EpisodePolicy;
+use crate::live::NodeError;
 use crate::live::{ActionPacer, PolicyNode, Seen};
 use crate::log::events::{Event, Reset};
 use crate::log::{ChannelGaps, LogOptions, LogWriter, RunConfig, RunMode};
+use crate::mix::EpisodePolicy;
 use crate::policy::{
     HeuristicConfig, HeuristicPolicy, Observation, TaskGeometry, relative_to_hole,
 };
-use crate::stack::StackError;
 use hw_sim::{PegShape, WorldConfig};
 use nalgebra::{Isometry3, Vector3};
 use shared_mem_schema::process::{mono_now_ns, termination_requested};
@@ -107,7 +107,7 @@ pub struct CalibratedRun {
 pub fn run(
     cfg: &CalibratedConfig,
     mut on_episode: impl FnMut(&CalibratedOutcome),
-) -> Result<CalibratedRun, StackError> {
+) -> Result<CalibratedRun, NodeError> {
     transport::quiet_logs();
     let mut node = PolicyNode::open(&cfg.namespace)?;
     node.wait_for_controller_within(cfg.controller_wait_s)?;
@@ -137,7 +137,7 @@ fn episode(
     cfg: &CalibratedConfig,
     n: u64,
     status: &mut Option<ControllerStatus>,
-) -> Result<(CalibratedOutcome, SensorFrame), StackError> {
+) -> Result<(CalibratedOutcome, SensorFrame), NodeError> {
     let first = newest_frame(node)?;
     // The controller's episode: a robot's daemon has one per process.
     let stream = first.header.episode;
@@ -190,7 +190,7 @@ fn episode(
             continue;
         };
         if frame.mode == ControllerMode::Fault as u32 {
-            return Err(StackError::ControllerFault {
+            return Err(NodeError::ControllerFault {
                 episode: n,
                 code: frame.fault_code,
             });
@@ -198,7 +198,7 @@ fn episode(
         let t = frame.header.t_hw_ns;
         let (s, _) = relative_to_hole(
             &Vector3::from(frame.ee_pos_m),
-            &crate::policy::unit_quaternion(frame.ee_quat_xyzw),
+            &hw_sim::convert::unit_quaternion(frame.ee_quat_xyzw),
             &cfg.task,
         );
         if reached_at.is_none() && s.z < -(cfg.task.depth_m - bottom_tol) {
@@ -212,7 +212,7 @@ fn episode(
             break frame;
         }
         if mono_now_ns() - seen.last_frame_wall_ns > 2_000_000_000 {
-            return Err(StackError::FramesStopped(n));
+            return Err(NodeError::FramesStopped(n));
         }
         // Once at the bottom's level the node stops acting: the heuristic
         // would press on for a contact force free space never gives, and
@@ -246,7 +246,7 @@ fn episode(
 }
 
 /// The newest sensor frame, waiting at most 10 s for one.
-fn newest_frame(node: &mut PolicyNode) -> Result<SensorFrame, StackError> {
+fn newest_frame(node: &mut PolicyNode) -> Result<SensorFrame, NodeError> {
     let start = mono_now_ns();
     loop {
         let mut newest = None;
@@ -255,10 +255,10 @@ fn newest_frame(node: &mut PolicyNode) -> Result<SensorFrame, StackError> {
             return Ok(f);
         }
         if termination_requested() {
-            return Err(StackError::Interrupted);
+            return Err(NodeError::Interrupted);
         }
         if mono_now_ns() - start > 10_000_000_000 {
-            return Err(StackError::NoSensorFrames);
+            return Err(NodeError::NoSensorFrames);
         }
         std::thread::sleep(Duration::from_micros(500));
     }
@@ -273,12 +273,12 @@ fn return_to(
     home: &SensorFrame,
     next: u64,
     status: &mut Option<ControllerStatus>,
-) -> Result<(), StackError> {
+) -> Result<(), NodeError> {
     // The home pose as a "hole" of symmetry 1, z up like a hole frame: the
     // home position, turned about the base's z by the tool's roll there.
     // (The tool's own frame, z down, would measure the roll with the
     // opposite sign, and the correction below would add to the error.)
-    let home_x = crate::policy::unit_quaternion(home.ee_quat_xyzw) * Vector3::x();
+    let home_x = hw_sim::convert::unit_quaternion(home.ee_quat_xyzw) * Vector3::x();
     let home_pose = Isometry3::from_parts(
         Vector3::from(home.ee_pos_m).into(),
         nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), home_x.y.atan2(home_x.x)),
@@ -294,21 +294,21 @@ fn return_to(
         let frame = newest_frame(node)?;
         transport::drain(&node.status, |s| *status = Some(*s))?;
         if frame.mode == ControllerMode::Fault as u32 {
-            return Err(StackError::ControllerFault {
+            return Err(NodeError::ControllerFault {
                 episode: next,
                 code: frame.fault_code,
             });
         }
         let (s, psi) = relative_to_hole(
             &Vector3::from(frame.ee_pos_m),
-            &crate::policy::unit_quaternion(frame.ee_quat_xyzw),
+            &hw_sim::convert::unit_quaternion(frame.ee_quat_xyzw),
             &task,
         );
         if s.norm() < 0.002 && psi.abs() < 0.02 {
             return Ok(());
         }
         if termination_requested() {
-            return Err(StackError::Interrupted);
+            return Err(NodeError::Interrupted);
         }
         if mono_now_ns() - start > 20_000_000_000 {
             eprintln!(

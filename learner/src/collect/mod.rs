@@ -9,14 +9,17 @@
 //! is `learner run` with the same mix through the real-time stack. Both
 //! write the same log format, so the dataset builder reads either.
 
-use crate::env::{EnvError, FastEnv};
-use crate::log::events::{Event, Outcome, Reset};
-use crate::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
-use crate::policy::{
-    Action4, HeuristicConfig, HeuristicPolicy, Phase, RandomConfig, RandomPolicy, TaskGeometry,
-};
-use crate::progress::Progress;
-use hw_sim::{PegShape, WorldConfig, rng};
+mod error;
+
+pub use error::CollectError;
+
+use crate::env::FastEnv;
+use hw_sim::{PegShape, WorldConfig};
+use learner_node::log::events::{Event, Outcome, Reset};
+use learner_node::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
+use learner_node::mix::{EpisodePolicy, Mix, MixedPolicy};
+use learner_node::policy::TaskGeometry;
+use learner_node::progress::Progress;
 use rt_controller::ControllerConfig;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;
 use shared_mem_schema::{Message, Stage, hw_time_ns};
@@ -25,122 +28,6 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
-
-/// The policy mix.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Mix {
-    /// Share of episodes run by the heuristic (the rest: random).
-    pub heuristic_fraction: f64,
-    /// Gaussian noise added to the heuristic's position steps, m (σ).
-    pub heuristic_noise_m: f64,
-    /// The random policy's tuning.
-    pub random: RandomConfig,
-    /// An episode that completed the insertion ends this many actions
-    /// later (none: it runs its full length). A peg resting at the bottom
-    /// changes nothing from one state to the next; the states it would take
-    /// go to new episodes instead (new box poses, approaches and contacts).
-    pub end_after_completion: Option<u32>,
-}
-
-impl Default for Mix {
-    fn default() -> Self {
-        Self {
-            heuristic_fraction: 0.5,
-            heuristic_noise_m: 0.001,
-            random: RandomConfig::default(),
-            end_after_completion: Some(10),
-        }
-    }
-}
-
-/// Which policy an episode runs (serde: its [`EpisodePolicy::name`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EpisodePolicy {
-    /// The scripted insertion.
-    Heuristic,
-    /// The bounded random walk.
-    Random,
-    /// A trained policy (`learner run --policy`).
-    Learned,
-}
-
-impl EpisodePolicy {
-    /// Name used in logs.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Heuristic => "heuristic",
-            Self::Random => "random",
-            Self::Learned => "learned",
-        }
-    }
-}
-
-/// The mixed policy of one episode.
-pub struct MixedPolicy {
-    kind: EpisodePolicy,
-    heuristic: HeuristicPolicy,
-    random: RandomPolicy,
-    noise_m: f64,
-    rng: rng::SimRng,
-}
-
-impl MixedPolicy {
-    /// Draws the episode's policy from `seed`.
-    pub fn new(mix: &Mix, seed: u64) -> Self {
-        let mut rng = rng::seeded(seed, 23);
-        let kind = if rng::unit(&mut rng) < mix.heuristic_fraction {
-            EpisodePolicy::Heuristic
-        } else {
-            EpisodePolicy::Random
-        };
-        Self {
-            kind,
-            heuristic: HeuristicPolicy::new(HeuristicConfig::default()),
-            random: RandomPolicy::new(mix.random.clone(), seed),
-            noise_m: mix.heuristic_noise_m,
-            rng,
-        }
-    }
-
-    /// The policy drawn.
-    pub fn kind(&self) -> EpisodePolicy {
-        self.kind
-    }
-
-    /// The next action.
-    pub fn act(
-        &mut self,
-        obs: &crate::policy::Observation,
-        wrench: &crate::policy::WrenchHistory,
-        task: &TaskGeometry,
-    ) -> Action4 {
-        match self.kind {
-            EpisodePolicy::Heuristic => {
-                let mut a = self.heuristic.act(obs, wrench, task);
-                // In the hole (and resting on its bottom) the walls hold
-                // the tip: noise would only wind the target into them
-                // until the force faults the controller (10 of 59
-                // episodes in the hole, 2 at the bottom, measured).
-                if self.heuristic.phase() == Phase::Insert {
-                    return a;
-                }
-                let down = a[2].min(0.0);
-                for x in &mut a[..3] {
-                    *x += self.noise_m * rng::normal(&mut self.rng);
-                }
-                // Noise may slow a descent or move it sideways, never
-                // speed it up downwards: the heuristic's own speed near a
-                // surface is what keeps the first contact below the
-                // overload (1 mm of noise per action is 2 cm/s).
-                a[2] = a[2].max(down);
-                a
-            }
-            // A mix draws only the two above.
-            EpisodePolicy::Random | EpisodePolicy::Learned => self.random.act(obs, task),
-        }
-    }
-}
 
 /// What `learner collect` does in fast mode.
 #[derive(Debug, Clone)]
@@ -839,84 +726,6 @@ pub fn read_manifest(path: &Path) -> Result<Vec<EpisodeShard>, CollectError> {
         }
     }
     Ok(out)
-}
-
-/// Why a collection (or one of its episodes) failed; names the file or
-/// episode at fault.
-#[derive(Debug, thiserror::Error)]
-pub enum CollectError {
-    /// No pegs were given.
-    #[error("no pegs to collect with")]
-    NoPegs,
-    /// Episodes of zero actions were asked for.
-    #[error("episodes need at least one action")]
-    NoActions,
-    /// The world has no task (its hole pose is unknown).
-    #[error("the world has no task")]
-    NoTask,
-    /// The output directory already holds a collection and resuming was
-    /// not asked for.
-    #[error(
-        "{}: already holds a collection ({episodes} episodes in manifest.jsonl); resume it or \
-         collect into another directory",
-        dir.display()
-    )]
-    NotEmpty {
-        /// The directory.
-        dir: PathBuf,
-        /// Episodes its manifest lists.
-        episodes: usize,
-    },
-    /// An episode on file was collected with another seed or peg than this
-    /// collection would give it.
-    #[error("{}: episode {episode}: {detail}; resume with the same settings or collect into another directory", dir.display())]
-    Mismatch {
-        /// The directory.
-        dir: PathBuf,
-        /// The episode.
-        episode: u64,
-        /// What differs.
-        detail: String,
-    },
-    /// A line of the manifest is not an episode record.
-    #[error("{}: line {line}: {detail}", path.display())]
-    Manifest {
-        /// The manifest.
-        path: PathBuf,
-        /// Its line, from 1.
-        line: usize,
-        /// Why.
-        detail: String,
-    },
-    /// The world has no box.
-    #[error("the world has no box")]
-    NoBox,
-    /// A file or directory of the collection could not be written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file or directory.
-        path: PathBuf,
-        /// Why.
-        #[source]
-        source: std::io::Error,
-    },
-    /// The environment failed.
-    #[error(transparent)]
-    Env(#[from] EnvError),
-    /// The episode's log could not be written.
-    #[error(transparent)]
-    Log(#[from] LogError),
-    /// One episode failed.
-    #[error("episode {episode} ({}): {source}", path.display())]
-    Episode {
-        /// Episode number.
-        episode: u64,
-        /// Its log.
-        path: PathBuf,
-        /// Why.
-        #[source]
-        source: Box<CollectError>,
-    },
 }
 
 #[cfg(test)]

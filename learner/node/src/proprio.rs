@@ -70,7 +70,7 @@ pub fn tool_roll_rate_rad_s(rot: &UnitQuaternion<f64>, omega: &Vector3<f64>) -> 
 
 /// The orientation a sensor frame carries.
 fn frame_rotation(f: &SensorFrame) -> UnitQuaternion<f64> {
-    crate::policy::unit_quaternion(f.ee_quat_xyzw)
+    hw_sim::convert::unit_quaternion(f.ee_quat_xyzw)
 }
 
 /// The roll reference of an episode: the absolute roll of its first sensor
