@@ -483,7 +483,7 @@ fn stack_franky_sim(
         .with_context(|| format!("creating {}", a.log_dir.display()))?;
     let written = a.log_dir.join("rt-controller.toml");
     stack::franky_sim_controller_config(&template, &franky.address, &a.namespace, &written)?;
-    let daemon = rt_controller::daemon::config::DaemonConfig::from_file(&written)?;
+    let daemon = rt_controller_daemon::config::DaemonConfig::from_file(&written)?;
     let p = task.hole_pose.translation.vector;
     let run_args = vec![
         "--episodes".to_string(),
