@@ -13,7 +13,13 @@ fn a_training_checkpoint_is_refused_before_the_stack_starts() {
     let ckpt = dir.path().join("checkpoint.json");
     std::fs::write(&ckpt, r#"{"config": {}, "state": {}}"#).unwrap();
     let out = node()
-        .args(["stack", "--episodes", "1", "--namespace", "node-cli-refused"])
+        .args([
+            "stack",
+            "--episodes",
+            "1",
+            "--namespace",
+            "node-cli-refused",
+        ])
         .arg("--log-dir")
         .arg(dir.path().join("logs"))
         .arg("--policy")
@@ -43,5 +49,8 @@ fn last_is_refused_with_a_deployed_policy() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(err.contains("--last picks among a training checkpoint's policies"), "{err}");
+    assert!(
+        err.contains("--last picks among a training checkpoint's policies"),
+        "{err}"
+    );
 }
