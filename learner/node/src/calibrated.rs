@@ -312,7 +312,7 @@ fn return_to(
         }
         if mono_now_ns() - start > 20_000_000_000 {
             eprintln!(
-                "learner: the tip did not get back within 2 mm of the first episode's start in \
+                "node: the tip did not get back within 2 mm of the first episode's start in \
                  20 s ({:.1} mm off); the next episode starts where it is",
                 s.norm() * 1e3
             );

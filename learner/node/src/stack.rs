@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 #[derive(Debug, thiserror::Error)]
 pub enum StackError {
     /// The running executable could not be located.
-    #[error("locating the learner executable: {0}")]
+    #[error("locating the running executable: {0}")]
     CurrentExe(#[source] std::io::Error),
     /// The running executable's path has no directory.
     #[error("the executable {} has no directory", .0.display())]

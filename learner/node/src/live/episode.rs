@@ -55,7 +55,7 @@ impl LiveEpisode {
         let episode = first.header.episode;
         if let Some(code) = node.clear_controller_fault(episode)? {
             eprintln!(
-                "learner: the controller had fault code {code} latched; reset for episode \
+                "node: the controller had fault code {code} latched; reset for episode \
                  {episode}"
             );
         }

@@ -123,7 +123,7 @@ pub struct LiveConfig {
 }
 
 impl LiveConfig {
-    /// The settings of `learner run` for `episodes` heuristic episodes.
+    /// The settings of `run` for `episodes` heuristic episodes.
     pub fn new(namespace: &str, world: WorldConfig, log_dir: PathBuf) -> Self {
         Self {
             namespace: namespace.to_string(),
@@ -208,7 +208,7 @@ pub fn run(
             let rejected = p.rejected();
             if rejected > rejected_before {
                 eprintln!(
-                    "learner: episode {}: {} observations could not be encoded (no camera \
+                    "node: episode {}: {} observations could not be encoded (no camera \
                      frame yet, or one of another size); the policy saw zeros for them",
                     outcome.episode,
                     rejected - rejected_before
