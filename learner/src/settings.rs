@@ -68,7 +68,10 @@ pub fn apply_overrides(doc: &mut toml::Table, sets: &[String]) -> Result<(), Set
                 .entry(part.to_string())
                 .or_insert_with(|| toml::Value::Table(toml::Table::new()));
             table = entry.as_table_mut().ok_or_else(|| {
-                bad(&format!("`{}` is a value, not a table", path[..=i].join(".")))
+                bad(&format!(
+                    "`{}` is a value, not a table",
+                    path[..=i].join(".")
+                ))
             })?;
         }
         table.insert(last.to_string(), value);
@@ -106,15 +109,17 @@ pub fn read_with_overrides<T: DeserializeOwned>(
         None => toml::Table::new(),
     };
     apply_overrides(&mut doc, sets)?;
-    toml::Value::Table(doc).try_into().map_err(|e| SettingsError::Parse {
-        path: path.map_or("defaults".into(), |p| p.display().to_string()),
-        with: if sets.is_empty() {
-            String::new()
-        } else {
-            format!(" with --set {}", sets.join(" --set "))
-        },
-        detail: e.to_string(),
-    })
+    toml::Value::Table(doc)
+        .try_into()
+        .map_err(|e| SettingsError::Parse {
+            path: path.map_or("defaults".into(), |p| p.display().to_string()),
+            with: if sets.is_empty() {
+                String::new()
+            } else {
+                format!(" with --set {}", sets.join(" --set "))
+            },
+            detail: e.to_string(),
+        })
 }
 
 /// `value` with `sets` applied: a configuration already read (a
@@ -161,7 +166,13 @@ mod tests {
 
     #[test]
     fn overrides_set_nested_fields_of_every_type() {
-        let o = read(&["seed=7", "inner.x = 0.5", "inner.name=ppo", "inner.list=[1, 2]"]).unwrap();
+        let o = read(&[
+            "seed=7",
+            "inner.x = 0.5",
+            "inner.name=ppo",
+            "inner.list=[1, 2]",
+        ])
+        .unwrap();
         assert_eq!(
             o,
             Outer {

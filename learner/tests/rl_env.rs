@@ -270,7 +270,11 @@ fn training_aids_apply_to_training_environments_only() {
     // Default aids change nothing: a training environment is the evaluated one.
     let plain = press_down(RlEnv::new(&cfg).unwrap());
     assert_eq!(press_down(RlEnv::for_training(&cfg).unwrap()), plain);
-    assert!(plain.0, "the impact overloads the supervisor: {:?}", plain.1);
+    assert!(
+        plain.0,
+        "the impact overloads the supervisor: {:?}",
+        plain.1
+    );
 
     cfg.training.max_force_n = Some(1.0e4);
     cfg.training.max_moment_nm = Some(1.0e3);
@@ -305,7 +309,9 @@ fn training_aids_apply_to_training_environments_only() {
     );
 
     cfg.training.force_penalty_per_n = -1.0;
-    let err = RlEnv::for_training(&cfg).err().expect("a negative penalty is refused");
+    let err = RlEnv::for_training(&cfg)
+        .err()
+        .expect("a negative penalty is refused");
     assert!(
         err.to_string().contains("training.force_penalty_per_n"),
         "{err}"

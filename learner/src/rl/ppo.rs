@@ -9,11 +9,11 @@
 //! `(a−μ)/σ²` for the mean (back-propagated through [`super::mlp::Mlp`])
 //! and `(a−μ)²/σ² − 1` for log σ.
 
-use super::gaussian::{Batch, GaussianPolicy, UpdateStats, kl_gaussian, log_prob, normalise};
-use super::mlp::Cache;
 /// The optimiser PPO steps with (its own module: the value network and
 /// the MLP regression use it too).
 pub use super::adam::Adam;
+use super::gaussian::{Batch, GaussianPolicy, UpdateStats, kl_gaussian, log_prob, normalise};
+use super::mlp::Cache;
 use hw_sim::FieldError;
 use hw_sim::rng::SimRng;
 use rand::seq::SliceRandom;

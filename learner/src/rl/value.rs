@@ -10,9 +10,9 @@
 //! layers across inputs and is fitted with an L2 penalty, as pytorch-trpo
 //! fits its value MLP.
 
+use super::adam::Adam;
 use super::gaussian::LinearBaseline;
 use super::mlp::{Cache, Mlp};
-use super::adam::Adam;
 use hw_sim::FieldError;
 use hw_sim::rng::SimRng;
 use serde::{Deserialize, Serialize};

@@ -21,9 +21,12 @@ fn systemd_notifications_and_sigterm_hold_then_clean_exit() {
     cmd.args(["--namespace", &ns, "--no-realtime"])
         .env("NOTIFY_SOCKET", &sock_path)
         .env("WATCHDOG_USEC", "1000000");
-    let mut ctl =
-        learner_node::stack::Managed::spawn("rt-controller", cmd, Some(&dir.join("rt-controller.log")))
-            .unwrap();
+    let mut ctl = learner_node::stack::Managed::spawn(
+        "rt-controller",
+        cmd,
+        Some(&dir.join("rt-controller.log")),
+    )
+    .unwrap();
     let node = transport::create_node("e2e-systemd").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
     let mut got = Vec::new();
