@@ -38,14 +38,18 @@ cargo test --workspace
 # seconds each. Criterion benches run in criterion's test mode (each
 # benchmark once); hw-sim's bench has the same convention.
 echo "== benches and examples (quick mode)"
-cargo test -p hw-sim --bench sim
-cargo test -p robot-model --bench dynamics
-cargo test -p rt-controller --bench control_step
+# With --workspace, and from the binaries `cargo test --workspace` already
+# built, so that the workspace's one feature set is reused: a per-package
+# `cargo test -p hw-sim --bench sim` resolves its own features and compiles
+# the simulator's dependencies a second time.
+cargo test --workspace --benches
+target_dir="${CARGO_TARGET_DIR:-target}"
+cargo build --workspace --examples --bins --quiet
 quick_dir="$(mktemp -d)"
 trap 'rm -rf "$quick_dir"' EXIT
-cargo run --quiet -p hw-sim --example render_frames -- "$quick_dir/frames" square
-cargo run --quiet -p rt-controller --example fuzz_cycle -- 200 1
-cargo run --quiet -p robot-model -- robot-model/urdf/panda.urdf --q "0 -0.3 0 -2 0 1.6 0.8" --frame peg_tip
+"$target_dir/debug/examples/render_frames" "$quick_dir/frames" square
+"$target_dir/debug/examples/fuzz_cycle" 200 1
+"$target_dir/debug/robot-model" robot-model/urdf/panda.urdf --q "0 -0.3 0 -2 0 1.6 0.8" --frame peg_tip
 # TODO (lead): the learner's benchmarks and examples named in README.md and
 # docs/performance.md (env_bench, repr_bench, conv_bench; the research probes
 # rl_probe, touch_probe, distill_fit, repr_probe, trajectory_target, which
