@@ -15,6 +15,7 @@
 //! the stack's orchestrator) is the `learner-node` crate, which this one
 //! builds on; nothing there may depend on this crate.
 
+pub mod cli;
 pub mod collect;
 pub mod dataset;
 pub mod env;

@@ -42,6 +42,12 @@ fn eval_report(ck: &Path, extra: &[&str], json: &Path) -> (learner::rl::run::Eva
 }
 
 /// `learner policy train [extra…] --config cfg --out out` to its end.
+/// `--set`'s value for a ground-truth observation told the hole with a
+/// per-episode error of `std_m` per axis.
+fn hole_error(std_m: f64) -> String {
+    format!("observation={{ground_truth_hole_error={std_m}}}")
+}
+
 fn train(extra: &[&str], cfg: &Path, out: &Path) -> Output {
     learner()
         .args(["policy", "train"])
@@ -68,7 +74,7 @@ fn train_resume_and_evaluate() {
     assert_eq!(csv.lines().count(), 1 + 2, "{csv}");
     assert!(csv.starts_with("iteration,env_steps,episodes,mean_return"));
     // Resume for 40 more steps: one more update, history kept.
-    let resumed = train(&["--resume", "--env-steps", "120"], &cfg, &out);
+    let resumed = train(&["--resume", "--set", "env_steps=120"], &cfg, &out);
     assert!(resumed.status.success());
     let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
     assert_eq!(c.state.iteration, 3);
@@ -121,12 +127,15 @@ fn train_resume_and_evaluate() {
     };
     let read = |json: &str| std::fs::read_to_string(dir.path().join(json)).unwrap();
     assert!(eval(&[], "exact.json").0);
-    assert!(eval(&["--hole-error-mm", "0"], "zero.json").0);
-    assert!(eval(&["--hole-error-mm", "20"], "off.json").0);
+    assert!(eval(&["--set", &hole_error(0.0)], "zero.json").0);
+    assert!(eval(&["--set", &hole_error(0.02)], "off.json").0);
     assert_eq!(read("exact.json"), read("zero.json"));
     assert_ne!(read("exact.json"), read("off.json"));
-    let (ok, err) = eval(&["--hole-error-mm=-1"], "bad.json");
-    assert!(!ok && err.contains("--hole-error-mm -1"), "{err}");
+    let (ok, err) = eval(&["--set", &hole_error(-0.001)], "bad.json");
+    assert!(
+        !ok && err.contains("observation.ground_truth_hole_error"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -158,7 +167,11 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     )
     .unwrap();
     let out = dir.path().join("run");
-    assert!(train(&["--algorithm", "ppo"], &cfg, &out).status.success());
+    assert!(
+        train(&["--set", "policy.algorithm=ppo"], &cfg, &out)
+            .status
+            .success()
+    );
     let c = learner::rl::run::read_checkpoint(&out.join("checkpoint.json")).unwrap();
     assert_eq!(c.config.policy.algorithm, learner::rl::Algorithm::Ppo);
     // No episode of 400 steps ended in 60: no training result, no best
@@ -167,7 +180,11 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     // 60 steps in one batch: 2 epochs of 4 minibatches of ≤ 16.
     assert_eq!(c.state.adam.t, 8);
     let eval = |extra: &[&str], json: &str| {
-        let args = [&["--episodes", "1", "--peg", "triangle"][..], extra].concat();
+        let args = [
+            &["--episodes", "1", "--set", "env.world.task.peg=triangle"][..],
+            extra,
+        ]
+        .concat();
         let (r, text) = eval_report(&out.join("checkpoint.json"), &args, &dir.path().join(json));
         assert!(text.contains("triangle peg, trained on square"), "{text}");
         assert_eq!(r.episodes, 1);
@@ -177,44 +194,66 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     let again = eval(&[], "again.json");
     assert_eq!(calm, again, "an evaluation is repeatable");
     // The same seed and policy: only the perturbation differs.
-    let pushed = eval(&["--pushes", "3"], "pushed.json");
+    let pushed = eval(
+        &["--set", "env.world.perturbations.random_pushes=3"],
+        "pushed.json",
+    );
     assert_ne!(calm.normalised, pushed.normalised, "pushes");
-    let noisy = eval(&["--force-noise-n", "0.5"], "noisy.json");
+    let noisy = eval(&["--set", "env.world.noise.force_std_n=0.5"], "noisy.json");
     assert_ne!(calm.normalised, noisy.normalised, "force noise");
     // A noise scale of 0 switches the noise off, one of 1 leaves it as set.
     let off = eval(
-        &["--force-noise-n", "0.5", "--noise-scale", "0"],
+        &[
+            "--set",
+            "env.world.noise.force_std_n=0.5",
+            "--set",
+            "env.world.noise.episode_scale=[0, 0]",
+        ],
         "off.json",
     );
     assert_eq!(calm.normalised, off.normalised, "noise scaled to 0");
     let full = eval(
-        &["--force-noise-n", "0.5", "--noise-scale", "1"],
+        &[
+            "--set",
+            "env.world.noise.force_std_n=0.5",
+            "--set",
+            "env.world.noise.episode_scale=[1, 1]",
+        ],
         "full.json",
     );
     assert_eq!(noisy.normalised, full.normalised, "noise scaled by 1");
-    let twisted = eval(&["--torque-noise-nm", "0.05"], "twisted.json");
+    let twisted = eval(
+        &["--set", "env.world.noise.torque_std_nm=0.05"],
+        "twisted.json",
+    );
     assert_ne!(calm.normalised, twisted.normalised, "moment noise");
     // The box square to the peg's start instead of turned up to 0.26 rad.
-    let square = eval(&["--box-yaw-range-rad", "0"], "square.json");
+    let square = eval(
+        &["--set", "env.world.task.box_yaw_range_rad=0"],
+        "square.json",
+    );
     assert_ne!(calm.normalised, square.normalised, "box yaw");
     // A bad value is refused, naming what is wrong.
     let refused = |arg: &str| {
         let o = learner()
-            .args(["policy", "eval", arg, "--checkpoint"])
+            .args(["policy", "eval", "--set", arg, "--checkpoint"])
             .arg(out.join("checkpoint.json"))
             .output()
             .unwrap();
         assert!(!o.status.success(), "{arg}");
         String::from_utf8_lossy(&o.stderr).to_string()
     };
-    let err = refused("--box-yaw-range-rad=-0.1");
-    assert!(err.contains("--box-yaw-range-rad -0.1"), "{err}");
-    let err = refused("--force-noise-n=-1");
+    let err = refused("env.world.task.box_yaw_range_rad=-0.1");
+    assert!(err.contains("task.box_yaw_range_rad"), "{err}");
+    let err = refused("env.world.noise.force_std_n=-1");
     assert!(err.contains("force_std_n"), "{err}");
-    let err = refused("--torque-noise-nm=-1");
+    let err = refused("env.world.noise.torque_std_nm=-1");
     assert!(err.contains("torque_std_nm"), "{err}");
-    let err = refused("--noise-scale=-1");
-    assert!(err.contains("--noise-scale -1"), "{err}");
+    let err = refused("env.world.noise.episode_scale=[-1, -1]");
+    assert!(err.contains("noise.episode_scale"), "{err}");
+    // A policy cannot be evaluated on inputs it was not trained on.
+    let err = refused("observation={representation=\"nowhere\"}");
+    assert!(err.contains("does not take"), "{err}");
 }
 
 #[test]
@@ -393,9 +432,15 @@ fn the_camera_perturbations_reach_a_representation_policy() {
     let calm = eval(&[], "calm.json");
     assert_eq!(calm, eval(&[], "again.json"), "an evaluation is repeatable");
     for (args, what) in [
-        (&["--occlusions", "3"][..], "occlusions"),
-        (&["--rgb-noise", "8"][..], "RGB noise"),
-        (&["--depth-noise-m", "0.005"][..], "depth noise"),
+        (
+            &["--set", "env.world.perturbations.random_occlusions=3"][..],
+            "occlusions",
+        ),
+        (&["--set", "env.world.noise.rgb_std=8"][..], "RGB noise"),
+        (
+            &["--set", "env.world.noise.depth_std_m=0.005"][..],
+            "depth noise",
+        ),
     ] {
         assert_ne!(calm, eval(args, &format!("{what}.json")), "{what}");
     }
