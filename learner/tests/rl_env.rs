@@ -249,6 +249,54 @@ fn the_hole_error_is_one_offset_per_episode() {
     assert!(e.to_string().contains("ground_truth_hole_error"), "{e}");
 }
 
+/// The hole error's curriculum: at share 0 the ramped observer is the
+/// exact ground truth, at share 1 the full error, in between the same
+/// per-episode offset scaled; a ramp without a hole error is refused.
+#[test]
+fn the_ramped_hole_error_grows_from_the_truth_to_the_full_error() {
+    use learner::rl::ObservationKind;
+    use learner::rl::observe::{GROUND_TRUTH_DIM as D, RampedHoleError};
+    let cfg = config(PegShape::Square, 30);
+    let n = 2;
+    let seeds: Vec<(usize, u64)> = (0..n).map(|i| (i, 70 + i as u64)).collect();
+    let first = |observer: Arc<dyn learner::rl::Observer>| {
+        let mut v = VecEnv::new(&cfg, n, observer, 1).unwrap();
+        v.reset(&seeds).unwrap();
+        v.observations().to_vec()
+    };
+    let exact = first(ObservationKind::GroundTruth.observer().unwrap());
+    let full = first(
+        ObservationKind::GroundTruthHoleError(0.004)
+            .observer()
+            .unwrap(),
+    );
+    let ramp = Arc::new(RampedHoleError::new(0.004));
+    assert_eq!(first(ramp.clone()), exact, "starts at no error");
+    ramp.set_share(1.0);
+    assert_eq!(first(ramp.clone()), full, "ends at the full error");
+    ramp.set_share(0.25);
+    let quarter = first(ramp.clone());
+    for i in 0..n {
+        // Coarse x, y are s / 0.1 m: a quarter of the full offset.
+        for k in 0..2 {
+            let (q, f, e) = (quarter[i * D + k], full[i * D + k], exact[i * D + k]);
+            assert!(f != e);
+            assert!(((q - e) - 0.25 * (f - e)).abs() < 1e-12, "{q} {f} {e}");
+        }
+    }
+    ramp.set_share(7.0);
+    assert_eq!(ramp.current_std_m(), 0.004, "clamped to the full error");
+    // The training aid needs a hole error to ramp.
+    let dir = test_support::scratch_dir("rl-env-ramp");
+    let text = "num_envs = 1\nenv_steps = 10\n[policy]\nbatch_steps = 10\n\
+                [env.training]\nhole_error_ramp_steps = 100\n";
+    let run: learner::rl::run::TrainConfig = toml::from_str(text).unwrap();
+    let Err(err) = learner::rl::run::train(run, &dir.path().join("run"), false, &|| false) else {
+        panic!("a ramp without a hole error was not refused");
+    };
+    assert!(err.to_string().contains("hole_error_ramp_steps"), "{err}");
+}
+
 /// Straight down at 5 mm per step (10 cm/s) from the start onto the box:
 /// the impact overloads the 100 N supervisor where it is not raised.
 fn press_down(mut env: RlEnv) -> (bool, Vec<f64>) {

@@ -97,6 +97,11 @@ pub struct TrainingAids {
     /// controller's own `safety.max_force_n`: the step that would have
     /// faulted in evaluation (0: none).
     pub overload_penalty: f64,
+    /// With a hole error (`observation = { ground_truth_hole_error = σ }`),
+    /// the training environments' error grows linearly from 0 to σ over
+    /// this many environment steps ([`super::observe::RampedHoleError`]);
+    /// 0: σ from the start.
+    pub hole_error_ramp_steps: u64,
 }
 
 impl Default for TrainingAids {
@@ -107,6 +112,7 @@ impl Default for TrainingAids {
             force_penalty_from_n: 50.0,
             force_penalty_per_n: 0.0,
             overload_penalty: 0.0,
+            hole_error_ramp_steps: 0,
         }
     }
 }

@@ -6,6 +6,7 @@
 
 pub use learner_node::observe::{GROUND_TRUTH_DIM, GroundTruth, HoleError, ObsView, Observer};
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Refuses a world camera (`camera`, the world's `[camera]`) that is not
 /// the one `observer` was trained for.
@@ -87,5 +88,57 @@ impl ObservationKind {
                     .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
             ),
         })
+    }
+}
+
+/// [`HoleError`] whose standard deviation grows over training (the
+/// training aid `training.hole_error_ramp_steps`, docs/rl.md): the
+/// training loop sets the share of the ramp done before each update, so a
+/// policy first learns to reach the opening told exactly and then, as the
+/// error grows, to find it by touch. Validation and evaluation observe
+/// through a plain [`HoleError`] at the full deviation.
+#[derive(Debug)]
+pub struct RampedHoleError {
+    /// The full standard deviation per horizontal axis, m.
+    pub std_m: f64,
+    /// The share of `std_m` in use, an `f64`'s bits.
+    share: AtomicU64,
+}
+
+impl RampedHoleError {
+    /// Starts at no error.
+    pub fn new(std_m: f64) -> Self {
+        Self {
+            std_m,
+            share: AtomicU64::new(0f64.to_bits()),
+        }
+    }
+
+    /// Uses `share` (clamped to 0..1) of the full deviation from now on.
+    pub fn set_share(&self, share: f64) {
+        let s = if share.is_finite() {
+            share.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        self.share.store(s.to_bits(), Ordering::Relaxed);
+    }
+
+    /// The deviation in use, m.
+    pub fn current_std_m(&self) -> f64 {
+        self.std_m * f64::from_bits(self.share.load(Ordering::Relaxed))
+    }
+}
+
+impl Observer for RampedHoleError {
+    fn dim(&self) -> usize {
+        GROUND_TRUTH_DIM
+    }
+
+    fn observe(&self, views: &[ObsView<'_>], out: &mut [f64]) {
+        HoleError {
+            std_m: self.current_std_m(),
+        }
+        .observe(views, out)
     }
 }

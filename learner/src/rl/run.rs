@@ -295,6 +295,35 @@ impl CurvePoint {
     }
 }
 
+/// The training environments' observer: the configuration's, or with a
+/// hole error and `training.hole_error_ramp_steps` its ramped version,
+/// returned beside it for the loop to advance.
+type TrainingObserver = (
+    std::sync::Arc<dyn super::observe::Observer>,
+    Option<std::sync::Arc<super::observe::RampedHoleError>>,
+);
+
+/// See [`TrainingObserver`].
+fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, RlEnvError> {
+    if let ObservationKind::GroundTruthHoleError(std_m) = cfg.observation
+        && cfg.env.training.hole_error_ramp_steps > 0
+    {
+        // The plain observer checks the deviation.
+        cfg.observation.observer_on(cfg.threads)?;
+        let r = std::sync::Arc::new(super::observe::RampedHoleError::new(std_m));
+        let observer: std::sync::Arc<dyn super::observe::Observer> = r.clone();
+        return Ok((observer, Some(r)));
+    }
+    if cfg.env.training.hole_error_ramp_steps > 0 {
+        return Err(RlEnvError::Config(hw_sim::FieldError::new(
+            "env.training.hole_error_ramp_steps",
+            cfg.env.training.hole_error_ramp_steps,
+            "ramps a hole error: needs observation = { ground_truth_hole_error = σ }",
+        )));
+    }
+    Ok((cfg.observation.observer_on(cfg.threads)?, None))
+}
+
 /// Why a run failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -439,12 +468,8 @@ pub fn train(
         ))
         .into());
     }
-    let env = VecEnv::new(
-        &cfg.env,
-        cfg.num_envs,
-        cfg.observation.observer_on(cfg.threads)?,
-        cfg.threads,
-    )?;
+    let (observer, ramp) = training_observer(&cfg)?;
+    let env = VecEnv::new(&cfg.env, cfg.num_envs, observer, cfg.threads)?;
     let state = match (state, &cfg.init_from) {
         (Some(s), _) => Some(s),
         (None, Some(from)) => {
@@ -561,6 +586,10 @@ pub fn train(
                 trainer.state.env_steps
             );
             break;
+        }
+        if let Some(r) = &ramp {
+            let steps = cfg.env.training.hole_error_ramp_steps as f64;
+            r.set_share(trainer.state.env_steps as f64 / steps);
         }
         let s = trainer.iterate()?;
         episodes += s.episodes.len();
