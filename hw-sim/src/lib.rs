@@ -24,9 +24,7 @@ pub mod camera;
 pub mod config;
 pub mod convert;
 pub mod hardware;
-pub mod png;
 pub mod reset;
-pub mod rng;
 pub mod shapes;
 pub mod world;
 
@@ -36,4 +34,6 @@ pub use hardware::SimHardware;
 pub use shapes::PegShape;
 pub use shared_mem_schema::Stage;
 pub use shared_mem_schema::config::{ConfigFileError, FieldError};
+/// The stack's shared utilities, here for the simulator's own modules.
+pub use stack_common::{png, rng};
 pub use world::{SensorReadings, SimError, TaskState, World};

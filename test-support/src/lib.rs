@@ -16,7 +16,7 @@ use rand::SeedableRng;
 use std::path::Path;
 
 /// The tests' generator: the same PCG-64 as the simulator's
-/// (`hw_sim::rng::SimRng`), seeded from a `u64`.
+/// (`stack_common::rng::SimRng`), seeded from a `u64`.
 pub type Rng = rand_pcg::Pcg64;
 
 /// A generator for `seed`: the same numbers on every run and platform.

@@ -1,4 +1,4 @@
-//! The one seeded random generator of the simulator and the learner: rand's
+//! The one seeded random generator of the simulator, the learner and the node: rand's
 //! PCG-64, whose output for a seed is fixed by its specification, so the same
 //! seed gives the same episodes on every platform and rand release.
 
