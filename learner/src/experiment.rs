@@ -289,12 +289,6 @@ pub fn run(
                  told the hole by the truth rather than by its own z",
                 p.display()
             );
-            ensure!(
-                !d.dagger.plant_probes || cfg.variant.iter().all(|v| v.representation.is_some()),
-                "policy.distill {}: dagger.plant_probes needs each teacher's probe of z, which \
-                 the ground-truth variant has not",
-                p.display()
-            );
             Route::Distill(Box::new(d))
         }
         None => Route::Train(Box::new(match &cfg.policy.config {

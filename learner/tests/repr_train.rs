@@ -955,23 +955,16 @@ fn an_experiment_distils_from_each_variants_own_probe() {
         serde_json::from_slice(&std::fs::read(out.join("reused/eval-square.json")).unwrap())
             .unwrap();
     assert_eq!(e["policy_iteration"], 2);
-    // A distillation without a probe, and one that plants the probes while
-    // a variant observes the ground truth, are refused before anything runs.
+    // A distillation without a probe is refused before anything runs.
     let text = std::fs::read_to_string(&distill).unwrap();
     let unprobed = "[search_teacher]\n\n".to_string() + &text[text.find("[student]").unwrap()..];
-    let planting = text.replacen("[dagger]\n", "[dagger]\nplant_probes = true\n", 1);
-    for (edited, why) in [
-        (unprobed, "no [search_teacher.probe]"),
-        (planting, "plant_probes"),
-    ] {
-        let bad = dir.join("bad-distill.toml");
-        std::fs::write(&bad, edited).unwrap();
-        let mut c = cfg.clone();
-        c.policy.distill = Some(bad);
-        let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
-        assert!(e.to_string().contains(why), "{e}");
-        assert!(!dir.join("refused/Full").exists(), "nothing ran");
-    }
+    let bad = dir.join("bad-distill.toml");
+    std::fs::write(&bad, unprobed).unwrap();
+    let mut c = cfg.clone();
+    c.policy.distill = Some(bad);
+    let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
+    assert!(e.to_string().contains("no [search_teacher.probe]"), "{e}");
+    assert!(!dir.join("refused/Full").exists(), "nothing ran");
     // A model trained otherwise than the variant's own would be is refused:
     // more epochs, or another architecture.
     let mut longer = cfg.clone();

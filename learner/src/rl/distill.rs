@@ -98,18 +98,6 @@ pub struct DaggerConfig {
     /// Seed of the first collected episode (the run's episode seeds go up
     /// from it; apart from evaluation's, from 1 000 000, and validation's).
     pub episode_seed: u64,
-    /// Plant the search teacher's probes (near, then approach) in the
-    /// student's first hidden layer before every refit and hold them there
-    /// ([`GaussianPolicy::plant_probes`]): the student is still a network
-    /// of the z means alone, whose first units read what its teacher reads.
-    /// Needs a search teacher told by a probe of the representation the
-    /// student observes (the same directory, as written) and a first hidden
-    /// layer of a unit per reading (3, or 5 with the approach probe), both
-    /// checked before the probes are fitted. Fitted offline, a student given
-    /// those readings fits unseen episodes about twice as well as one that
-    /// must find them (docs/experiments.md, "A student started from its
-    /// teacher's probes"); in DAgger it completed no more (same section).
-    pub plant_probes: bool,
 }
 
 impl Default for DaggerConfig {
@@ -122,7 +110,6 @@ impl Default for DaggerConfig {
             minibatch: 256,
             learning_rate: 1e-3,
             episode_seed: 5_000_000,
-            plant_probes: false,
         }
     }
 }
@@ -463,36 +450,6 @@ pub fn distill(
         ));
     }
     let probe_cfg = cfg.search_teacher.as_ref().and_then(|s| s.probe.as_ref());
-    if cfg.dagger.plant_probes {
-        let observes = |dir: &Path| {
-            student_cfg.observation == super::ObservationKind::Representation(dir.to_path_buf())
-        };
-        let Some(p) = probe_cfg.filter(|p| observes(&p.representation)) else {
-            return Err(field(
-                "dagger.plant_probes",
-                &true,
-                "needs a [search_teacher.probe] of the representation the student observes \
-                 (student.observation = { representation = … }, the same directory as written)",
-            ));
-        };
-        let readings = 3 + if p.approach { 2 } else { 0 };
-        if student_cfg
-            .policy
-            .hidden
-            .first()
-            .is_none_or(|&h| h < readings)
-        {
-            return Err(field(
-                "dagger.plant_probes",
-                &true,
-                &format!(
-                    "needs a first hidden layer of at least {readings} units (one per probe \
-                     reading); student.policy.hidden is {:?}",
-                    student_cfg.policy.hidden
-                ),
-            ));
-        }
-    }
     if let Some(camera) = &cfg.camera {
         if probe_cfg.is_some() {
             return Err(field(
@@ -543,15 +500,8 @@ pub fn distill(
         }
     }
     write_json(&cfg_path, &recorded)?;
-    // The probes the student's first units read, near then approach.
-    let mut planted: Vec<LinearProbe> = Vec::new();
     if let (Some(search), Some(p)) = (&cfg.search_teacher, probe_cfg) {
-        let (view, probes) = probed_view(search, p, &student_cfg, out, fresh)?;
-        t_obs = view;
-        if cfg.dagger.plant_probes {
-            planted.push(probes.near);
-            planted.extend(probes.approach);
-        }
+        t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
     }
     let s_obs = student_cfg.observation.observer_on(student_cfg.threads)?;
     // Each against the world they share, named: the teacher keeps its
@@ -679,17 +629,6 @@ pub fn distill(
         let mut norm = ObsNorm::new(sd, student_cfg.policy.observation_clip);
         norm.update(&obs);
         state.policy.obs_norm = Some(norm);
-        // Planted again under this round's normalisation, then held.
-        let held = if planted.is_empty() {
-            Vec::new()
-        } else {
-            let refs: Vec<&LinearProbe> = planted.iter().collect();
-            state
-                .policy
-                .plant_probes(&refs, &obs)
-                .map_err(|e| field("dagger.plant_probes", &true, &e))?
-                .to_vec()
-        };
         let inputs = state.policy.inputs(&obs);
         let fit = MseFit {
             epochs: d.epochs,
@@ -699,14 +638,13 @@ pub fn distill(
         };
         let mut frng = rng::seeded(student_cfg.seed, (4 << 32) + r);
         let mlp = state.policy.mlp();
-        fit.run_holding(
+        fit.run(
             &mlp,
             &mut state.policy.net,
             &mut state.adam,
             &inputs,
             &targets,
             &mut frng,
-            &held,
         );
         let error_after_parts = input_error(&state.policy, &inputs, &targets);
         let (error_before, error_after) = (
@@ -822,7 +760,7 @@ pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>),
         .as_ref()
         .ok_or_else(|| refuse("not a distillation from the touch search".into(), &cfg_path))?;
     let view: Arc<dyn Observer> = match &search.probe {
-        Some(p) => probed_view(search, p, &cfg.student, out, false)?.0,
+        Some(p) => probed_view(search, p, &cfg.student, out, false)?,
         None => Arc::new(SearchView {
             std_m: search.hole_error_m,
         }),
@@ -834,7 +772,7 @@ pub fn search_teacher_of(out: &Path) -> Result<(TouchSearch, Arc<dyn Observer>),
     Ok((teacher, view))
 }
 
-/// The representation-told search teacher's view, with its probes: fitted
+/// The representation-told search teacher's view through its probes: fitted
 /// in the student's environment (a fresh run) or read back (a resumed one).
 fn probed_view(
     search: &TouchSearchConfig,
@@ -842,7 +780,7 @@ fn probed_view(
     student_cfg: &TrainConfig,
     out: &Path,
     fresh: bool,
-) -> Result<(Arc<dyn Observer>, BeliefProbes), RunError> {
+) -> Result<Arc<dyn Observer>, RunError> {
     let path = probe_path(out);
     let approach_path = approach_probe_path(out);
     // A resumed run's rounds were labelled through its probes: refit ones
@@ -924,12 +862,11 @@ fn probed_view(
             ));
         }
     }
-    let view = Arc::new(ProbedSearchView {
+    Ok(Arc::new(ProbedSearchView {
         repr,
-        probes: probes.clone(),
+        probes,
         below_m: p.below_m,
-    });
-    Ok((view, probes))
+    }))
 }
 
 /// Who labels the student's states.
