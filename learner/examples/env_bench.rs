@@ -11,6 +11,11 @@
 //! steps). `representation` encodes through the inference API's CPU path,
 //! `representation-burn` through burn's `encode` (its threads:
 //! RAYON_NUM_THREADS).
+//!
+//! `env_bench --quick`: a few batch steps of 2 environments on one thread,
+//! from ground truth and through the representation's CPU path, which runs
+//! in seconds in a debug build (scripts/test.sh): that the benchmark still
+//! runs, not a measurement.
 
 use learner::models::{Encoder, ModelConfig, Normaliser, ReprNet, init};
 use learner::rl::observe::{GroundTruth, Observer};
@@ -19,13 +24,25 @@ use std::sync::Arc;
 use std::time::Instant;
 
 fn main() {
-    let usage =
-        "usage: env_bench ground-truth|representation|representation-burn NUM_ENVS THREADS STEPS";
+    let usage = "usage: env_bench ground-truth|representation|representation-burn NUM_ENVS \
+                 THREADS STEPS, or env_bench --quick";
     let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("--quick") {
+        bench("ground-truth", 2, 1, 20);
+        bench("representation", 2, 1, 2);
+        return;
+    }
     let what = args.get(1).expect(usage).as_str();
     let n: usize = args.get(2).expect(usage).parse().expect(usage);
     let threads: usize = args.get(3).expect(usage).parse().expect(usage);
     let steps: usize = args.get(4).expect(usage).parse().expect(usage);
+    bench(what, n, threads, steps);
+}
+
+/// One run: `steps` batch steps of `n` environments observed by `what`,
+/// printed as a JSON line.
+fn bench(what: &str, n: usize, threads: usize, steps: usize) {
+    let usage = "env_bench: the observation is ground-truth, representation or representation-burn";
     let observer: Arc<dyn Observer> = match what {
         "ground-truth" => Arc::new(GroundTruth),
         "representation" | "representation-burn" => {

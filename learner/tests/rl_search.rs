@@ -131,25 +131,6 @@ fn the_search_step_follows_its_spiral() {
     }
     .means(&o)[3];
     assert!((quarter - 0.25 * whole).abs() < 1e-12, "{quarter} {whole}");
-    // Stuck (the lateral force above stick_n): the slide length along the
-    // box's push; below it, or with stick_n unset, the spiral's step.
-    let sticky = TouchSearch {
-        cfg: TouchSearchConfig {
-            stick_n: Some(2.0),
-            ..cfg.clone()
-        },
-        scale: Default::default(),
-    };
-    let stuck = obs([r, 0.0], 0.0, [-1.8, 2.4, cfg.press_n * 1.5]);
-    let d = sticky.step(&stuck);
-    assert!(
-        (d.x + 0.6 * cfg.slide_m).abs() < 1e-12 && (d.y - 0.8 * cfg.slide_m).abs() < 1e-12,
-        "{d}"
-    );
-    assert_eq!(d.z, 0.0);
-    assert_ne!(s.step(&stuck), d);
-    let sliding = obs([r, 0.0], 0.0, [0.0, 1.0, cfg.press_n * 1.5]);
-    assert_eq!(sticky.step(&sliding), s.step(&sliding));
     // Above the box, towards the believed opening: a full step whenever
     // the offset exceeds one; with an approach radius of 10 mm, the offset
     // times step/radius within it and a full step beyond.
@@ -230,16 +211,6 @@ fn the_search_step_follows_its_spiral() {
         (d.x - 0.6 * cfg.slide_m).abs() < 1e-12 && (d.y + 0.8 * cfg.slide_m).abs() < 1e-12,
         "{d}"
     );
-    // Stuck, the box's push still leads, bounded or not.
-    let stuck_out = obs([-0.018, 0.024], 0.0, [-1.8, 2.4, cfg.press_n * 1.5]);
-    let sticky_bounded = TouchSearch {
-        cfg: TouchSearchConfig {
-            bound_m: Some(0.015),
-            ..sticky.cfg.clone()
-        },
-        scale: Default::default(),
-    };
-    assert_eq!(sticky_bounded.step(&stuck_out), sticky.step(&stuck_out));
 }
 
 #[test]
@@ -336,13 +307,6 @@ fn bad_search_settings_are_named() {
                 ..Default::default()
             },
         ),
-        (
-            "search_teacher.stick_n",
-            TouchSearchConfig {
-                stick_n: Some(0.0),
-                ..Default::default()
-            },
-        ),
     ] {
         let e = cfg.validate().unwrap_err().to_string();
         assert!(e.contains(name), "{e}");
@@ -353,7 +317,6 @@ fn bad_search_settings_are_named() {
         representation: "model".into(),
         fit_episodes: 40,
         fit_hole_error_m: 0.01,
-        fit_roll_error_rad: 0.1,
         below_m: 0.03,
         fit_rounds: 1,
         approach: false,
@@ -371,16 +334,6 @@ fn bad_search_settings_are_named() {
             with(
                 BeliefProbeConfig {
                     below_m: 0.0,
-                    ..probe.clone()
-                },
-                0.0,
-            ),
-        ),
-        (
-            "search_teacher.probe.fit_roll_error_rad",
-            with(
-                BeliefProbeConfig {
-                    fit_roll_error_rad: -0.1,
                     ..probe.clone()
                 },
                 0.0,
@@ -426,7 +379,6 @@ fn noy_probe(rounds: u32, approach: bool) -> BeliefProbeConfig {
         representation: "unused".into(),
         fit_episodes: 2,
         fit_hole_error_m: 0.01,
-        fit_roll_error_rad: 0.0,
         below_m: 0.03,
         fit_rounds: rounds,
         approach,

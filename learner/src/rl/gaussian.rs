@@ -5,7 +5,6 @@
 
 use super::mlp::{Cache, Mlp};
 use super::obs_norm::ObsNorm;
-use super::probe::{LinearProbe, standardiser};
 use faer::Mat;
 use faer::prelude::*;
 use hw_sim::rng::{self, SimRng};
@@ -100,84 +99,6 @@ impl GaussianPolicy {
         let mut c = Cache::default();
         self.mlp().forward(&self.net, inputs, &mut c);
         c.output().to_vec()
-    }
-
-    /// Sets the first hidden layer's first units to read `probes` (linear
-    /// maps of the observations, [`LinearProbe`]), one unit per target in
-    /// order: unit j's pre-activation becomes (reading − c) / (2 s), with c
-    /// and s the reading's mean and deviation over the batch `obs`, so that
-    /// its tanh is near-linear over what the batch spans. The other units
-    /// and layers are left as they are. Returns the ranges of
-    /// [`GaussianPolicy::net`] it set (the planted units' weights, then
-    /// their biases), for a fit to hold ([`super::mlp::MseFit::run_holding`]).
-    ///
-    /// Why: a student of a teacher that acts on such a reading fits its
-    /// own training episodes well and unseen ones poorly; given the reading
-    /// exactly it fits them about twice as well (docs/experiments.md, "A
-    /// student started from its teacher's probes"). Planted, the reading is
-    /// a feature the fit starts from and may still change.
-    ///
-    /// The observation normalisation is read as it stands: plant after
-    /// [`ObsNorm::update`], not before (a later update shifts the planted
-    /// units as it shifts every other).
-    pub fn plant_probes(
-        &mut self,
-        probes: &[&LinearProbe],
-        obs: &[f64],
-    ) -> Result<[std::ops::Range<usize>; 2], String> {
-        let d = self.sizes[0];
-        let units: usize = probes.iter().map(|p| p.targets).sum();
-        if self.sizes.len() < 3 || self.sizes[1] < units {
-            return Err(format!(
-                "planting {units} probe readings needs a first hidden layer of at least {units} \
-                 units; the policy's layers are {:?}",
-                self.sizes
-            ));
-        }
-        if let Some(p) = probes.iter().find(|p| p.features() != d) {
-            return Err(format!(
-                "a probe reads {} features; the policy observes {d}",
-                p.features()
-            ));
-        }
-        if obs.is_empty() || !obs.len().is_multiple_of(d) {
-            return Err(format!(
-                "{} observation values are not a batch of {d}-component observations",
-                obs.len()
-            ));
-        }
-        let (shift, scale) = match &self.obs_norm {
-            Some(n) => n.affine(),
-            None => (vec![0.0; d], vec![1.0; d]),
-        };
-        let h = self.sizes[1];
-        let mut unit = 0;
-        for p in probes {
-            let t = p.targets;
-            let readings: Vec<f64> = obs.chunks_exact(d).flat_map(|o| p.predict(o)).collect();
-            let (mean, sd) = standardiser(readings.chunks_exact(t), t);
-            for k in 0..t {
-                let c = mean[k];
-                // A reading constant over the batch (its deviation at the
-                // standardiser's floor) gets unit gain.
-                let g = if sd[k] > 1e-12 {
-                    1.0 / (2.0 * sd[k])
-                } else {
-                    1.0
-                };
-                // reading = Σ wᵢ (oᵢ − μᵢ)/σᵢ + b with oᵢ = shiftᵢ + uᵢ/scaleᵢ,
-                // uᵢ the network's input.
-                let mut bias = p.weights[d * t + k] - c;
-                for i in 0..d {
-                    let w = p.weights[i * t + k] / p.sd[i];
-                    self.net[unit * d + i] = g * w / scale[i];
-                    bias += w * (shift[i] - p.mean[i]);
-                }
-                self.net[h * d + unit] = g * bias;
-                unit += 1;
-            }
-        }
-        Ok([0..unit * d, h * d..h * d + unit])
     }
 
     /// Draws actions for a batch of observations: mean + σ·ε.
@@ -395,63 +316,5 @@ mod tests {
         for (p, w) in b.predict(&obs, &times).iter().zip(&y) {
             assert!((p - w).abs() < 1e-4, "{p} vs {w}");
         }
-    }
-
-    /// Observations of 5 components, spread and shifted unlike each other.
-    fn odd_obs(n: usize) -> Vec<f64> {
-        let mut r = rng::seeded(9, n as u64);
-        (0..n * 5)
-            .map(|k| rng::normal(&mut r) * (1 + k % 5) as f64 + (k % 5) as f64)
-            .collect()
-    }
-
-    #[test]
-    fn planted_units_read_the_probes() {
-        let obs = odd_obs(60);
-        let rows: Vec<Vec<f64>> = obs.chunks(5).map(|o| o.to_vec()).collect();
-        let lin = |o: &[f64], a: f64| a + 2.0 * o[0] - 0.5 * o[2] + 0.1 * o[4];
-        let ys: Vec<Vec<f64>> = rows.iter().map(|o| vec![lin(o, 1.0), -o[1]]).collect();
-        // Fitted on part of the batch, so that the probes' standardisation
-        // differs from the policy's normalisation (fitted on all of it).
-        let near = LinearProbe::fit(&rows[..40], &ys[..40], 0.0).unwrap();
-        let ys: Vec<Vec<f64>> = rows.iter().map(|o| vec![lin(o, -3.0) + o[3]]).collect();
-        let far = LinearProbe::fit(&rows[20..], &ys[20..], 1e-3).unwrap();
-        let mut rng = rng::seeded(4, 0);
-        let mut p = GaussianPolicy::new(5, &[6, 4], 2, 0.0, &mut rng);
-        let mut norm = ObsNorm::new(5, 5.0);
-        norm.update(&obs);
-        p.obs_norm = Some(norm);
-        let before = p.net.clone();
-        assert_eq!(p.plant_probes(&[&near, &far], &obs), Ok([0..15, 30..33]));
-        // Each planted unit's pre-activation is (reading − mean) / (2 sd)
-        // over the batch, computed here from the probes alone.
-        let readings: Vec<Vec<f64>> = rows
-            .iter()
-            .map(|o| near.predict(o).into_iter().chain(far.predict(o)).collect())
-            .collect();
-        let inputs = p.inputs(&obs);
-        for j in 0..3 {
-            let col: Vec<f64> = readings.iter().map(|r| r[j]).collect();
-            let c = col.iter().sum::<f64>() / 60.0;
-            let s = (col.iter().map(|r| (r - c).powi(2)).sum::<f64>() / 60.0).sqrt();
-            for (u, r) in inputs.chunks(5).zip(&col) {
-                let pre: f64 = (0..5).map(|i| p.net[j * 5 + i] * u[i]).sum::<f64>() + p.net[30 + j];
-                assert!((pre - (r - c) / (2.0 * s)).abs() < 1e-9, "unit {j}: {pre}");
-            }
-        }
-        // The other first-layer units and the later layers are untouched.
-        for (k, (a, b)) in p.net.iter().zip(&before).enumerate() {
-            let planted = k < 15 || (30..33).contains(&k);
-            if !planted {
-                assert_eq!(a, b, "parameter {k}");
-            }
-        }
-        // Too few units, or a probe of other features, are refused.
-        let mut narrow = GaussianPolicy::new(5, &[2], 2, 0.0, &mut rng);
-        let err = narrow.plant_probes(&[&near, &far], &obs).unwrap_err();
-        assert!(err.contains("at least 3 units"), "{err}");
-        let mut wide = GaussianPolicy::new(6, &[8], 2, 0.0, &mut rng);
-        let err = wide.plant_probes(&[&near], &odd_obs(10)[..48]).unwrap_err();
-        assert!(err.contains("reads 5 features"), "{err}");
     }
 }

@@ -253,24 +253,6 @@ impl MseFit {
         y: &[f64],
         rng: &mut SimRng,
     ) {
-        self.run_holding(mlp, params, adam, x, y, rng, &[]);
-    }
-
-    /// [`MseFit::run`] with the parameters in `held` (index ranges of
-    /// `params`) left as they are: their gradient is zeroed before every
-    /// Adam step, so a fresh `adam` never moves them (one that moved them
-    /// before keeps its momentum: hold them from the first step).
-    #[allow(clippy::too_many_arguments)]
-    pub fn run_holding(
-        &self,
-        mlp: &Mlp,
-        params: &mut [f64],
-        adam: &mut Adam,
-        x: &[f64],
-        y: &[f64],
-        rng: &mut SimRng,
-        held: &[std::ops::Range<usize>],
-    ) {
         let (d, k) = (mlp.input(), mlp.output());
         let n = x.len() / d;
         assert_eq!(y.len(), n * k, "one target row per input row");
@@ -298,9 +280,6 @@ impl MseFit {
                     *g = -2.0 * self.l2 * w;
                 }
                 mlp.backward(params, &cache, &dout, &mut grad);
-                for r in held {
-                    grad[r.clone()].fill(0.0);
-                }
                 adam.ascend(params, &grad, self.learning_rate);
             }
         }
@@ -344,29 +323,6 @@ mod tests {
         let want = numeric(&m, &p, &x, &v);
         for (g, w) in got.iter().zip(&want) {
             assert!((g - w).abs() < 1e-7, "{g} vs {w}");
-        }
-    }
-
-    #[test]
-    fn a_fit_leaves_held_parameters_alone() {
-        let (m, p0, x) = net();
-        let y: Vec<f64> = (0..6).map(|k| (k as f64 * 0.9).cos()).collect();
-        let fit = MseFit {
-            epochs: 20,
-            minibatch: 2,
-            learning_rate: 1e-2,
-            l2: 1e-3,
-        };
-        let mut p = p0.clone();
-        let held = [0..6, 15..17];
-        let mut rng = hw_sim::rng::seeded(3, 0);
-        fit.run_holding(&m, &mut p, &mut Adam::default(), &x, &y, &mut rng, &held);
-        for (k, (a, b)) in p.iter().zip(&p0).enumerate() {
-            if held.iter().any(|r| r.contains(&k)) {
-                assert_eq!(a, b, "held parameter {k} moved");
-            } else {
-                assert_ne!(a, b, "parameter {k} was not fitted");
-            }
         }
     }
 

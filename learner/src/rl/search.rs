@@ -59,14 +59,6 @@ pub struct TouchSearchConfig {
     /// Told the roll by a probe of z, 0.1 kept it closer to the hole's than
     /// 1 (docs/experiments.md, "A policy that searches by touch").
     pub roll_gain: f64,
-    /// Lateral force, N, above which the tip is taken to be stuck: the step
-    /// then goes the slide length along the box's lateral push instead of
-    /// along the spiral, unwinding the trajectory target's lead instead of
-    /// winding it further (a stuck tip that slips throws a memoryless spiral
-    /// out by the lead it stored: docs/experiments.md, "The touch search on
-    /// the four pegs"). None (the default): always the spiral. Sliding
-    /// freely the lateral force is about 1 N.
-    pub stick_n: Option<f64>,
     /// Above the box the search steps towards the believed opening by the
     /// believed offset times `step_m / approach_radius_m` within this
     /// radius of it, and by `step_m` towards it farther out, m. None (the
@@ -93,7 +85,7 @@ pub struct TouchSearchConfig {
     /// search turns back towards it, m: from `bound_m` to `bound_m` +
     /// [`BOUND_RAMP_M`] the spiral's step blends into a slide of `slide_m`
     /// straight in, proportionally to the overshoot, so the search orbits
-    /// at about that radius (not while stuck, `stick_n`). None (the
+    /// at about that radius. None (the
     /// default): unbounded. Why: a tip that drifted out (a student whose
     /// step is a few tens of degrees off its teacher's, or the friction's
     /// lead) kept spiralling outward, and a teacher's labels out there only
@@ -125,14 +117,6 @@ pub struct BeliefProbeConfig {
     /// over the top face around the opening.
     #[serde(default = "default_fit_error")]
     pub fit_hole_error_m: f64,
-    /// Standard deviation of a per-episode error of the roll the first
-    /// round's search is told, rad: it leaves the peg rolled off the hole
-    /// in those episodes, so that the probe sees roll errors to read (a
-    /// search told the true roll keeps it aligned). 0 by default: with 0.1
-    /// rad the probe of full-near read the roll worse (docs/experiments.md,
-    /// "A policy that searches by touch").
-    #[serde(default = "default_fit_roll_error")]
-    pub fit_roll_error_rad: f64,
     /// The probe is fitted on, and used at, states below this height above
     /// the box, m; higher up the search is told the truth.
     #[serde(default = "default_below")]
@@ -175,10 +159,6 @@ fn default_fit_error() -> f64 {
     0.01
 }
 
-fn default_fit_roll_error() -> f64 {
-    0.0
-}
-
 fn default_below() -> f64 {
     0.03
 }
@@ -199,7 +179,6 @@ impl Default for TouchSearchConfig {
             press_n: 2.0,
             lead_m_per_n: 0.002,
             roll_gain: 1.0,
-            stick_n: None,
             approach_radius_m: None,
             descent_m: None,
             descent_until_m: 0.02,
@@ -255,11 +234,7 @@ impl TouchSearchConfig {
                 ));
             }
         }
-        for (name, v) in [
-            ("stick_n", self.stick_n),
-            ("descent_m", self.descent_m),
-            ("bound_m", self.bound_m),
-        ] {
+        for (name, v) in [("descent_m", self.descent_m), ("bound_m", self.bound_m)] {
             if let Some(v) = v
                 && !(v.is_finite() && v > 0.0)
             {
@@ -317,13 +292,6 @@ impl TouchSearchConfig {
                     p.fit_rounds,
                     "fit_episodes × fit_rounds must be at most 1 000 000 (the fitting \
                      episodes' seeds stay apart from DAgger's and evaluation's)",
-                ));
-            }
-            if !(p.fit_roll_error_rad.is_finite() && p.fit_roll_error_rad >= 0.0) {
-                return Err(FieldError::new(
-                    f("probe.fit_roll_error_rad"),
-                    p.fit_roll_error_rad,
-                    "must be finite and not negative",
                 ));
             }
             if !(p.fit_hole_error_m.is_finite() && p.fit_hole_error_m >= 0.0) {
@@ -456,12 +424,6 @@ impl TouchSearch {
             } else {
                 -c.step_m
             };
-            if let Some(stick) = c.stick_n
-                && fxy > stick
-            {
-                // Stuck: step with the box's push, unwinding the lead.
-                return Vector3::new(f.x / fxy * c.slide_m, f.y / fxy * c.slide_m, dz);
-            }
             let mut lat = [(-ry + k * rx) * c.slide_m, (rx + k * ry) * c.slide_m];
             if let Some(bound) = c.bound_m {
                 let w = ((r - bound) / BOUND_RAMP_M).clamp(0.0, 1.0);
@@ -594,8 +556,8 @@ fn tell_by_probes(probes: &BeliefProbes, below_m: f64, z: &[f64], o: &mut [f64])
 
 /// Fits a [`ProbedSearchView`]'s probe. The first round: `cfg.fit_episodes`
 /// episodes (seeds from `first_seed`) of the search `search` (its settings,
-/// told the truth with a `cfg.fit_hole_error_m` error and the roll with a
-/// per-episode `cfg.fit_roll_error_rad` one instead of by a probe), in
+/// told the truth with a `cfg.fit_hole_error_m` error instead of by a
+/// probe), in
 /// `env_cfg`'s world, each state where the probe is read (below
 /// `cfg.below_m` above the box and not in the opening) giving a row: the z
 /// means; the tip's true x, y relative to the hole and the peg's roll
@@ -665,17 +627,11 @@ pub fn fit_belief_probe(
         for ep in 0..cfg.fit_episodes {
             let seed = first_seed + round * cfg.fit_episodes + ep;
             env.reset(seed, camera)?;
-            let roll_error = if round == 0 {
-                cfg.fit_roll_error_rad * hw_sim::rng::normal(&mut hw_sim::rng::seeded(seed, 0x7011))
-            } else {
-                0.0
-            };
             loop {
                 let v = env.view().expect("reset gives a view");
                 let s = v.task.s_m;
                 let mut o = [0.0; SEARCH_VIEW_DIM];
                 view.observe(std::slice::from_ref(&v), &mut o);
-                o[3] += roll_error;
                 let near = reads_belief(s.z, cfg.below_m);
                 let above = cfg.approach && reads_approach(s.z, cfg.below_m);
                 if near || above {

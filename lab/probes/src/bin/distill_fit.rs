@@ -33,11 +33,6 @@
 //! `DISTILL_FIT_L2=λ` fits with that L2 penalty on every parameter (0 by
 //! default, as `learner policy distill`).
 //!
-//! `DISTILL_FIT_PLANT=FILE[,FILE…]` starts the fit with those probes'
-//! readings planted in the first hidden layer
-//! ([`GaussianPolicy::plant_probes`]); with `DISTILL_FIT_HOLD` set as
-//! well (to any value) the fit leaves them as planted.
-//!
 //! `DISTILL_FIT_PROBE=FILE` appends a linear probe's readings of each
 //! observation (a `search-probe.json`) to it: the same information, made
 //! explicit, to tell what the student cannot fit from what it cannot find.
@@ -410,21 +405,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut norm = ObsNorm::new(d, 5.0);
     norm.update(&obs);
     policy.obs_norm = Some(norm);
-    let mut held = Vec::new();
-    if let Ok(files) = std::env::var("DISTILL_FIT_PLANT") {
-        let mut probes = Vec::new();
-        for f in files.split(',') {
-            let p: learner::rl::probe::LinearProbe = serde_json::from_slice(&std::fs::read(f)?)?;
-            p.check()?;
-            probes.push(p);
-        }
-        let refs: Vec<_> = probes.iter().collect();
-        let set = policy.plant_probes(&refs, &obs)?;
-        if std::env::var("DISTILL_FIT_HOLD").is_ok() {
-            held = set.to_vec();
-        }
-        println!("planted probe readings from {files} (held: {held:?})");
-    }
     let inputs = policy.inputs(&obs);
     let mut adam = Adam::default();
     let l2: f64 = std::env::var("DISTILL_FIT_L2").map_or(Ok(0.0), |v| v.parse())?;
@@ -451,14 +431,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .join(" ")
     };
     for e in 1..=epochs {
-        fit.run_holding(
+        fit.run(
             &mlp,
             &mut policy.net,
             &mut adam,
             &inputs,
             &targets,
             &mut rng,
-            &held,
         );
         if e == 1 || e % 10 == 0 || e == epochs {
             let (tr, _, _) = score(&policy, &train);

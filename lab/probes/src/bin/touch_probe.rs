@@ -17,7 +17,6 @@
 //!   `TOUCH_STEP_MM`, `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N`,
 //!   `TOUCH_DESCENT_UNTIL_MM` override its settings (in `zsearch` too),
 //!   `TOUCH_DESCENT_MM` sets `descent_m`, `TOUCH_BOUND_MM` `bound_m`,
-//!   `TOUCH_STICK_N` sets `stick_n`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
 //!   triangle, semicircle, hexagon) picks the peg, `TOUCH_BOX_YAW_RAD` the
 //!   box's yaw range (`policy eval --box-yaw-range-rad`). Prints each
@@ -203,7 +202,6 @@ fn overrides(sc: &mut TouchSearchConfig) {
             *v = Some(s.parse::<f64>().expect(name) * unit);
         }
     };
-    opt("TOUCH_STICK_N", &mut sc.stick_n, 1.0);
     opt("TOUCH_DESCENT_MM", &mut sc.descent_m, 1e-3);
     opt("TOUCH_BOUND_MM", &mut sc.bound_m, 1e-3);
 }
@@ -317,9 +315,6 @@ fn zsearch(model: &str, world: &str, fit: u64, test: u64) {
         representation: model.into(),
         fit_episodes: fit,
         fit_hole_error_m: fit_error_m(),
-        // TOUCH_FIT_ROLL_ERROR_RAD: the fitting episodes' roll error.
-        fit_roll_error_rad: std::env::var("TOUCH_FIT_ROLL_ERROR_RAD")
-            .map_or(0.0, |v| v.parse().expect("rad")),
         // TOUCH_PROBE_BELOW_MM: the height below which the probe is fitted
         // and read (30 mm, the default, otherwise).
         below_m: std::env::var("TOUCH_PROBE_BELOW_MM").map_or(0.03, |v| {

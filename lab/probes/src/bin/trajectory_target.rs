@@ -3,8 +3,8 @@
 //! fast path: completion rate, time to completion, controller faults and
 //! peak contact force, as a Markdown table (docs/paper.md).
 //!
-//! `cargo run --release -p learner --example trajectory_target -- [seeds]
-//! [actions] [noise_m]`: `seeds` box poses per peg (default 8), episodes of
+//! `cargo run --manifest-path lab/probes/Cargo.toml --release --bin
+//! trajectory_target -- [seeds] [actions] [noise_m]`: `seeds` box poses per peg (default 8), episodes of
 //! `actions` 20 Hz actions (default 100, a collection episode's 5 s), and
 //! Gaussian noise of `noise_m` added to each position step (default 0; the
 //! collection mix uses 0.001).

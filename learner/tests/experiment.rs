@@ -1,0 +1,418 @@
+//! `learner experiment` end to end at a tiny scale, on the representation
+//! tests' small dataset: collection through the policy's camera, every
+//! stage and its resume, DAgger from each variant's own probe.
+
+mod common;
+
+use common::{SIDE, dataset};
+use learner::dataset::Dataset;
+use std::path::{Path, PathBuf};
+
+/// An experiment without its dataset collects it in the policy
+/// configuration's world: the representation learns the camera the policy
+/// will see through. Only the pegs `collect_pegs` names are collected (the
+/// transfer experiments' representation that has seen one peg).
+#[test]
+fn an_experiment_collects_through_the_policys_camera() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    let dir = test_support::scratch_dir("experiment-camera");
+    // The policy's camera, which the collection's own world shares.
+    let camera = format!(
+        "width = {SIDE}\nheight = {SIDE}\neye_m = [0.9, -0.24, 0.77]\ntarget_m = [0.58, 0.0, 0.2]\n"
+    );
+    let policy = dir.join("policy.toml");
+    std::fs::write(
+        &policy,
+        format!("num_envs = 2\nenv_steps = 400\n\n[env.world.camera]\n{camera}"),
+    )
+    .unwrap();
+    let repr = dir.join("repr.toml");
+    std::fs::write(
+        &repr,
+        format!("[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n"),
+    )
+    .unwrap();
+    let data = dir.join("data");
+    // The collection's own world: the policy's camera, the box turned by at
+    // most 0.05 rad (the policy's world keeps the default 0.26).
+    let world = dir.join("world.toml");
+    std::fs::write(
+        &world,
+        format!("[camera]\n{camera}\n[task]\nbox_yaw_range_rad = 0.05\n"),
+    )
+    .unwrap();
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {data:?}\ncollect_states = 120\n\
+             collect_pegs = [\"hexagon\", \"triangle\"]\ncollect_world = {world:?}\n\n\
+             [policy]\nconfig = {policy:?}\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n"
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    // Stopped once the dataset is built: only the collection is tested.
+    let built = || data.join("meta.json").exists();
+    let e = run(&cfg, &dir.join("out"), &RunOptions::default(), &built).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let ds = Dataset::open(&data).unwrap();
+    let pcfg = learner::rl::run::read_config(&policy).unwrap();
+    let camera = ds.meta.camera.expect("kept");
+    assert!(camera.same_camera(&pcfg.env.world.camera.calibration()));
+    assert!(!camera.same_camera(&hw_sim::config::CameraConfig::default().calibration()));
+    let manifest = std::fs::read_to_string(dir.join("out/collect/manifest.jsonl")).unwrap();
+    // Taken in turn by episode number (workers may finish out of order).
+    let episodes: Vec<serde_json::Value> = manifest
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(episodes.len() >= 2, "{manifest}");
+    for e in &episodes {
+        let i = e["episode"].as_u64().unwrap() as usize;
+        assert_eq!(e["peg"], ["hexagon", "triangle"][i % 2], "{manifest}");
+    }
+    let log =
+        learner_node::log::LogReader::open(&dir.join("out/collect/episode-000000.mcap")).unwrap();
+    let logged = &log.read_config(None).unwrap()[0].1;
+    assert_eq!(
+        logged.world.task.box_yaw_range_rad, 0.05,
+        "collected in collect_world"
+    );
+    assert_eq!(pcfg.env.world.task.box_yaw_range_rad, 0.26);
+    // A collection world with another camera is refused before anything
+    // runs, naming the field.
+    std::fs::write(&world, "[task]\nbox_yaw_range_rad = 0.05\n").unwrap();
+    let mut other = cfg.clone();
+    other.data.dataset = dir.join("data2");
+    let e = run(&other, &dir.join("out3"), &RunOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("data.collect_world") && e.contains("camera"),
+        "{e}"
+    );
+    assert!(!dir.join("out3/collect").exists());
+    // The dataset, now there, under a policy with another camera: refused
+    // before any training, naming the dataset.
+    std::fs::write(
+        &policy,
+        format!("num_envs = 2\n\n[env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n"),
+    )
+    .unwrap();
+    let e = run(&cfg, &dir.join("out2"), &RunOptions::default(), &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("data.dataset") && e.contains("is not the policy's world's"),
+        "{e}"
+    );
+    assert!(!dir.join("out2/Full/repr").exists());
+}
+
+/// A Full Model of d = 16 at the test images' size, one depth convolution
+/// per stage, written as `repr.toml` in `dir`: the experiments' tests'
+/// representation.
+fn tiny_repr_config(dir: &Path) -> PathBuf {
+    let repr = dir.join("repr.toml");
+    std::fs::write(
+        &repr,
+        format!(
+            "[model]\nkind = \"full\"\nlatent_dim = 16\nimage_size = {SIDE}\n\
+             depth_convs_per_stage = 1\n\n[train]\nbatch = 32\nepochs = 3\nlr = 1e-3\n\
+             test_fraction = 0.25\nshuffle_blocks = 4\n"
+        ),
+    )
+    .unwrap();
+    repr
+}
+
+/// `learner experiment` end to end at a tiny scale: a representation
+/// variant and the ground-truth reference, each trained and evaluated on
+/// two pegs (one of them a transfer); a second invocation finds every stage
+/// done and redoes none.
+#[test]
+fn an_experiment_runs_every_stage_and_resumes() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    let dir = test_support::scratch_dir("experiment");
+    let repr = tiny_repr_config(&dir);
+    let policy = dir.join("policy.toml");
+    std::fs::write(
+        &policy,
+        format!(
+            "num_envs = 2\nthreads = 2\nenv_steps = 400\n\n[env]\nmax_steps = 20\n\n\
+             [env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+             [policy]\nbatch_steps = 40\nhidden = [8]\n"
+        ),
+    )
+    .unwrap();
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
+             [policy]\nconfig = {:?}\nenv_steps = 40\n\n\
+             [eval]\nepisodes = 2\npegs = [\"square\", \"hexagon\"]\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {:?}\npaper_completed = 0.78\n\n\
+             [[variant]]\nname = \"ground-truth\"\n",
+            dataset(),
+            policy,
+            repr
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    let out = dir.join("out");
+    let opts = RunOptions::default();
+    let rows = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(rows.len(), 4, "two variants × two pegs");
+    assert_eq!(rows[0].variant, "Full");
+    assert_eq!(rows[0].paper_completed, Some(0.78));
+    for r in &rows {
+        assert_eq!(r.report.episodes, 2);
+        assert!((r.report.outcomes.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    }
+    // The variant's policy observed its representation's z (d = 16).
+    let c = learner::rl::run::read_checkpoint(&out.join("Full/policy/checkpoint.json")).unwrap();
+    assert_eq!(c.state.policy.sizes[0], 16);
+    assert_eq!(c.state.env_steps, 40);
+    let gt = learner::rl::run::read_checkpoint(&out.join("ground-truth/policy/checkpoint.json"))
+        .unwrap();
+    assert_eq!(
+        gt.state.policy.sizes[0],
+        learner::rl::observe::GROUND_TRUTH_DIM
+    );
+    for f in [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "completed-square.png",
+        "completed-hexagon.png",
+        "Full/repr/model/model.json",
+        "Full/eval-hexagon.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 4, "{md}");
+    assert!(
+        md.contains("| Full | hexagon | 2 |") && md.contains("| 78% |"),
+        "{md}"
+    );
+    let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    assert_eq!(stages.lines().count(), 1 + 2 + 4, "{stages}");
+    // Again: everything is on file.
+    let again = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(again, rows);
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        stages
+    );
+    // Another evaluation seed for one variant: only its evaluations are
+    // done again, and the other variant's rows stay in the results.
+    let mut reseeded = cfg.clone();
+    reseeded.eval.seed = 7;
+    let only_gt = RunOptions {
+        only: vec!["ground-truth".into()],
+        ..Default::default()
+    };
+    let mixed = run(&reseeded, &out, &only_gt, &|| false).unwrap();
+    assert_eq!(mixed.len(), 4);
+    assert_eq!(mixed[..2], rows[..2], "the Full rows are kept from file");
+    let stages2 = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    assert_eq!(stages2.lines().count(), 7 + 2, "{stages2}");
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 4, "{md}");
+    // Stopped after the first variant (a new evaluation seed, Ctrl-C once
+    // its last evaluation is on file): that variant's rows are in the
+    // results already, the second's not.
+    let mut seed9 = cfg.clone();
+    seed9.eval.seed = 9;
+    let full_seed = || {
+        std::fs::read(out.join("Full/eval-hexagon.json"))
+            .ok()
+            .and_then(|t| serde_json::from_slice::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["seed"].as_u64())
+    };
+    let e = run(&seed9, &out, &opts, &|| full_seed() == Some(9)).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert_eq!(md.lines().count(), 2 + 2, "{md}");
+    assert!(
+        md.contains("| Full | square |") && !md.contains("ground-truth"),
+        "{md}"
+    );
+    // The paper's number belongs to the training peg, not to transfer.
+    assert_eq!(rows[1].peg, hw_sim::PegShape::Hexagon);
+    assert_eq!(rows[1].paper_completed, None);
+    // Stopped (Ctrl-C) in a fresh directory: an error that says so, and
+    // the same call afterwards finishes.
+    let fresh = dir.join("stopped");
+    let e = run(&cfg, &fresh, &only_gt, &|| true).unwrap_err();
+    assert!(e.to_string().contains("stopped"), "{e}");
+    let resumed = run(&cfg, &fresh, &only_gt, &|| false).unwrap();
+    assert_eq!(resumed.len(), 2);
+    // A name that is not a variant is refused.
+    let e = run(
+        &cfg,
+        &out,
+        &RunOptions {
+            only: vec!["Fu11".into()],
+            ..Default::default()
+        },
+        &|| false,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("Fu11"), "{e}");
+}
+
+/// `learner experiment` through DAgger (`[policy] distill`): each variant's
+/// student observes its own z, and its teacher's probe reads the same
+/// representation (the ground truth's teacher is told the truth, no probe);
+/// a variant given an already trained `model` trains none; the evaluated
+/// policy is the last round's; a second invocation redoes nothing.
+#[test]
+fn an_experiment_distils_from_each_variants_own_probe() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    use learner::rl::distill::DistillConfig;
+    let dir = test_support::scratch_dir("experiment-distill");
+    let repr = tiny_repr_config(&dir);
+    // The probe's band reaches the start (below_m 1 m), so that 20-step
+    // episodes give it states to fit.
+    let distill = dir.join("distill.toml");
+    std::fs::write(
+        &distill,
+        format!(
+            "[search_teacher.probe]\nrepresentation = \"replaced\"\nfit_episodes = 1\n\
+             below_m = 1.0\n\n\
+             [student]\nnum_envs = 2\nthreads = 2\n\n[student.env]\nmax_steps = 20\n\n\
+             [student.env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+             [student.policy]\nhidden = [8]\n\n[student.validation]\nepisodes = 1\n\n\
+             [dagger]\nrounds = 2\nsteps_per_round = 40\nepochs = 2\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let model = out.join("Full/repr/model");
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
+             [policy]\ndistill = {:?}\n\n[eval]\nepisodes = 2\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\npaper_completed = 0.78\n\n\
+             [[variant]]\nname = \"ground-truth\"\n\n\
+             [[variant]]\nname = \"reused\"\nrepresentation = {repr:?}\nmodel = {model:?}\n",
+            dataset(),
+            distill,
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    let opts = RunOptions::default();
+    let rows = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(rows.len(), 3, "three variants on the training peg");
+    assert_eq!(rows[0].paper_completed, Some(0.78));
+    for r in &rows {
+        assert_eq!(r.report.episodes, 2);
+    }
+    let recorded = |v: &str| -> DistillConfig {
+        let text = std::fs::read(out.join(v).join("policy/distill-config.json")).unwrap();
+        serde_json::from_slice(&text).unwrap()
+    };
+    let probe_of = |v: &str| {
+        recorded(v)
+            .search_teacher
+            .unwrap()
+            .probe
+            .map(|p| p.representation)
+    };
+    // Full's teacher and student read Full's model, and so do the reused
+    // variant's, which trained no representation of its own.
+    assert_eq!(probe_of("Full"), Some(model.clone()));
+    assert_eq!(probe_of("reused"), Some(model.clone()));
+    assert!(!out.join("reused/repr").exists());
+    assert_eq!(probe_of("ground-truth"), None);
+    for (v, dim) in [
+        ("Full", 16),
+        ("reused", 16),
+        ("ground-truth", learner::rl::observe::GROUND_TRUTH_DIM),
+    ] {
+        let c =
+            learner::rl::run::read_checkpoint(&out.join(v).join("policy/checkpoint.json")).unwrap();
+        assert_eq!(c.state.iteration, 2, "{v}: both rounds");
+        assert_eq!(c.state.policy.sizes[0], dim, "{v}");
+        assert!(
+            out.join(v).join("policy/rounds/round-001.bin").exists(),
+            "{v}"
+        );
+        // The last round's policy was evaluated.
+        let e: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join(v).join("eval-square.json")).unwrap())
+                .unwrap();
+        assert_eq!(e["policy_iteration"], 2, "{v}");
+    }
+    assert!(out.join("Full/policy/search-probe.json").exists());
+    let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    // Full: representation, policy, evaluation; the others: policy and
+    // evaluation.
+    assert_eq!(stages.lines().count(), 3 + 2 + 2, "{stages}");
+    assert_eq!(stages.matches("DAgger, 2 rounds").count(), 3, "{stages}");
+    let again = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(again, rows);
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        stages
+    );
+    // The last round is what is evaluated, whatever validated best: a
+    // checkpoint whose best validation names round 1 is evaluated again at
+    // round 2.
+    let ckpt = out.join("reused/policy/checkpoint.json");
+    let mut c = learner::rl::run::read_checkpoint(&ckpt).unwrap();
+    c.best_validated.as_mut().unwrap().validation.iteration = 1;
+    std::fs::write(&ckpt, serde_json::to_vec(&c).unwrap()).unwrap();
+    std::fs::remove_file(out.join("reused/eval-square.json")).unwrap();
+    let only_reused = RunOptions {
+        only: vec!["reused".into()],
+        ..Default::default()
+    };
+    run(&cfg, &out, &only_reused, &|| false).unwrap();
+    let e: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("reused/eval-square.json")).unwrap())
+            .unwrap();
+    assert_eq!(e["policy_iteration"], 2);
+    // A distillation without a probe is refused before anything runs.
+    let text = std::fs::read_to_string(&distill).unwrap();
+    let unprobed = "[search_teacher]\n\n".to_string() + &text[text.find("[student]").unwrap()..];
+    let bad = dir.join("bad-distill.toml");
+    std::fs::write(&bad, unprobed).unwrap();
+    let mut c = cfg.clone();
+    c.policy.distill = Some(bad);
+    let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
+    assert!(e.to_string().contains("no [search_teacher.probe]"), "{e}");
+    assert!(!dir.join("refused/Full").exists(), "nothing ran");
+    // A model trained otherwise than the variant's own would be is refused:
+    // more epochs, or another architecture.
+    let mut longer = cfg.clone();
+    longer.representation.epochs = Some(2);
+    let e = run(&longer, &out, &only_reused, &|| false).unwrap_err();
+    assert!(e.to_string().contains("trained 1 epochs"), "{e}");
+    let other = dir.join("repr-d8.toml");
+    std::fs::write(
+        &other,
+        std::fs::read_to_string(&repr)
+            .unwrap()
+            .replace("latent_dim = 16", "latent_dim = 8"),
+    )
+    .unwrap();
+    let mut narrower = cfg.clone();
+    narrower.variant[2].representation = Some(other);
+    let e = run(&narrower, &out, &only_reused, &|| false).unwrap_err();
+    assert!(e.to_string().contains("model configuration"), "{e}");
+    // A model that is not there is named before anything runs for it.
+    let mut missing = cfg.clone();
+    missing.variant[2].model = Some(dir.join("nowhere"));
+    let e = run(&missing, &out, &only_reused, &|| false).unwrap_err();
+    assert!(e.to_string().contains("nowhere"), "{e}");
+}
