@@ -59,7 +59,7 @@ fn bench(what: &str, n: usize, threads: usize, steps: usize) {
     };
     let cfg = RlEnvConfig::default();
     let mut env = VecEnv::new(&cfg, n, observer.clone(), threads).expect("environment");
-    let mut rng = hw_sim::rng::seeded(1, 0);
+    let mut rng = stack_common::rng::seeded(1, 0);
     let mut seed = 0u64;
     let which: Vec<_> = (0..n)
         .map(|i| {
@@ -73,7 +73,7 @@ fn bench(what: &str, n: usize, threads: usize, steps: usize) {
     let mut episodes = 0usize;
     for _ in 0..steps {
         for a in &mut actions {
-            *a = 0.5 * hw_sim::rng::normal(&mut rng);
+            *a = 0.5 * stack_common::rng::normal(&mut rng);
         }
         let done: Vec<usize> = env
             .step(&actions)

@@ -39,9 +39,12 @@ fn main() {
         ..ModelConfig::default()
     };
     let (s, d) = (cfg.image_size, cfg.latent_dim);
-    let mut r = hw_sim::rng::seeded(1, 0);
-    let mut randn =
-        |n: usize| -> Vec<f32> { (0..n).map(|_| hw_sim::rng::normal(&mut r) as f32).collect() };
+    let mut r = stack_common::rng::seeded(1, 0);
+    let mut randn = |n: usize| -> Vec<f32> {
+        (0..n)
+            .map(|_| stack_common::rng::normal(&mut r) as f32)
+            .collect()
+    };
     let train = what == "train";
     let (kind, gpu_side) = match std::env::var("REPR_BENCH_DEVICE").as_deref() {
         Ok("cuda") => (DeviceKind::Cuda, Some("burn-cuda")),

@@ -2,7 +2,7 @@
 //! (the jitter harness's latency histograms; next, learning curves and
 //! evaluation results). Drawn with plotters into a pixel buffer in DejaVu
 //! Sans, which ships in `learner/assets/` so that no system font is needed,
-//! and written with [`hw_sim::png`].
+//! and written with [`stack_common::png`].
 
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::{AsRangedCoord, Ranged, ValueFormatter};
@@ -42,7 +42,7 @@ pub enum PlotError {
     },
     /// The picture could not be written.
     #[error(transparent)]
-    Png(#[from] hw_sim::png::PngError),
+    Png(#[from] stack_common::png::PngError),
 }
 
 /// How a series is drawn.
@@ -221,7 +221,7 @@ impl Chart {
     /// Draws the chart into a PNG file at `path`.
     pub fn write_png(&self, path: impl AsRef<Path>) -> Result<(), PlotError> {
         let px = self.render()?;
-        hw_sim::png::write(path, self.size.0, self.size.1, 3, &px)?;
+        stack_common::png::write(path, self.size.0, self.size.1, 3, &px)?;
         Ok(())
     }
 

@@ -3,7 +3,7 @@
 //! anywhere): an error naming the offset, never a panic, and a recovered copy
 //! that holds every intact message.
 
-use learner_node::log::events::{Event, Outcome, Reset};
+use learner_node::log::events::{EpisodeEnd, Event, Reset};
 use learner_node::log::{
     self, LogOptions, LogReader, LogWriter, ReadError, RunConfig, RunMode, topics,
 };
@@ -89,7 +89,7 @@ fn write_log(path: &Path, opts: LogOptions) -> Vec<SensorFrame> {
     }
     w.event(
         2_999_000_000,
-        &Event::Outcome(Outcome {
+        &Event::Outcome(EpisodeEnd {
             stage: hw_sim::Stage::Touched,
             duration_s: Some(2.9),
             actions: Some(59),

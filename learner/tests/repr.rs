@@ -333,7 +333,7 @@ fn configurations_are_checked_and_the_shipped_files_load() {
     let mut n = 0;
     for e in std::fs::read_dir(&dir).unwrap() {
         let p = e.unwrap().path();
-        let cfg = learner::train::TrainConfig::from_file(&p)
+        let cfg = learner::train::ReprTrainConfig::from_file(&p)
             .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         n += 1;
         let name = p.file_stem().unwrap().to_str().unwrap().to_string();
@@ -369,12 +369,12 @@ fn configurations_are_checked_and_the_shipped_files_load() {
     let bad = test_support::scratch_dir("bad-config");
     let p = bad.join("x.toml");
     std::fs::write(&p, "[train]\nlr = -1.0\n").unwrap();
-    let e = learner::train::TrainConfig::from_file(&p)
+    let e = learner::train::ReprTrainConfig::from_file(&p)
         .unwrap_err()
         .to_string();
     assert!(e.contains("train.lr"), "{e}");
     std::fs::write(&p, "[model]\nlatent = 3\n").unwrap();
-    let e = learner::train::TrainConfig::from_file(&p)
+    let e = learner::train::ReprTrainConfig::from_file(&p)
         .unwrap_err()
         .to_string();
     assert!(e.contains("latent"), "{e}");

@@ -12,11 +12,11 @@ use burn::prelude::*;
 use common::{SIDE, dataset};
 use learner::dataset::{self, Dataset};
 use learner::models::{Encoder, ModelKind, ObservationRef};
-use learner::train::{self, Split, TrainConfig, TrainOptions};
+use learner::train::{self, ReprTrainConfig, Split, TrainOptions};
 use std::path::Path;
 
-fn small(kind: ModelKind, epochs: u32) -> TrainConfig {
-    let mut c = TrainConfig::default();
+fn small(kind: ModelKind, epochs: u32) -> ReprTrainConfig {
+    let mut c = ReprTrainConfig::default();
     c.model.kind = kind;
     c.model.latent_dim = 16;
     c.model.image_size = SIDE as usize;
@@ -445,7 +445,7 @@ fn distill_keeps_a_camera_observing_teachers_camera() {
     c.config.observation = ObservationKind::Representation(s.model_dir.clone());
     c.config.env.world.camera.width = SIDE;
     c.config.env.world.camera.height = SIDE;
-    c.state.policy = GaussianPolicy::new(16, &[8], 4, -1.0, &mut hw_sim::rng::seeded(1, 0));
+    c.state.policy = GaussianPolicy::new(16, &[8], 4, -1.0, &mut stack_common::rng::seeded(1, 0));
     c.best = None;
     c.best_validated = None;
     let path = run.join("on-z.json");

@@ -68,7 +68,7 @@ fn teacher(dir: &Path) -> std::path::PathBuf {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let path = out.join("checkpoint.json");
     let mut c = read_checkpoint(&path).unwrap();
-    let mut rng = hw_sim::rng::seeded(7, 0);
+    let mut rng = stack_common::rng::seeded(7, 0);
     let mut p = GaussianPolicy::new(18, &[16, 16], 4, -1.0, &mut rng);
     p.net = p.mlp().init(&mut rng, 4.0);
     c.state.policy = p;

@@ -72,8 +72,8 @@ impl BatchEnv for Reach {
     }
     fn reset(&mut self, which: &[(usize, u64)]) -> Result<(), RlEnvError> {
         for &(i, seed) in which {
-            let mut rng = hw_sim::rng::seeded(seed, 0);
-            self.goal[i] = hw_sim::rng::uniform(&mut rng, -1.0, 1.0);
+            let mut rng = stack_common::rng::seeded(seed, 0);
+            self.goal[i] = stack_common::rng::uniform(&mut rng, -1.0, 1.0);
             self.x[i] = 0.0;
             self.t[i] = 0;
             self.sum[i] = 0.0;

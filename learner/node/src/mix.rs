@@ -9,7 +9,7 @@ use crate::policy::{
     Action4, HeuristicConfig, HeuristicPolicy, Observation, Phase, RandomConfig, RandomPolicy,
     TaskGeometry, WrenchHistory,
 };
-use hw_sim::rng;
+use stack_common::rng;
 
 /// The policy mix.
 #[derive(Debug, Clone, PartialEq)]

@@ -174,10 +174,10 @@ impl HoleError {
                         .rotate_left(23)
                         .wrapping_mul(0xff51_afd7_ed55_8ccd)
                 });
-        let mut rng = hw_sim::rng::seeded(seed, 0x401e);
+        let mut rng = stack_common::rng::seeded(seed, 0x401e);
         [
-            self.std_m * hw_sim::rng::normal(&mut rng),
-            self.std_m * hw_sim::rng::normal(&mut rng),
+            self.std_m * stack_common::rng::normal(&mut rng),
+            self.std_m * stack_common::rng::normal(&mut rng),
         ]
     }
 }
@@ -203,7 +203,7 @@ impl Observer for HoleError {
 pub enum CameraMismatch {
     /// The world's camera settings are invalid.
     #[error(transparent)]
-    Invalid(#[from] hw_sim::FieldError),
+    Invalid(#[from] shared_mem_schema::config::FieldError),
     /// The world's camera is not the one the observer was trained through.
     #[error(
         "the world's camera ({world}) is not the camera the representation was trained with \

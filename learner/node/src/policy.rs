@@ -9,9 +9,9 @@
 
 use crate::proprio::Proprio;
 use hw_sim::convert::unit_quaternion;
-use hw_sim::rng;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use shared_mem_schema::SensorFrame;
+use stack_common::rng;
 
 /// Readings kept for the policy (the paper's F/T window is 32 samples).
 pub const WRENCH_WINDOW: usize = 32;

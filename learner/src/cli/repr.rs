@@ -58,7 +58,7 @@ pub enum ReprCmd {
 
 /// Runs one `learner repr` subcommand.
 pub fn run(cmd: ReprCmd) -> Result<()> {
-    use crate::train::{self, TrainConfig, TrainOptions};
+    use crate::train::{self, ReprTrainConfig, TrainOptions};
     match cmd {
         ReprCmd::Train {
             config,
@@ -68,7 +68,7 @@ pub fn run(cmd: ReprCmd) -> Result<()> {
             epochs,
             device,
         } => {
-            let mut cfg = TrainConfig::from_file(&config)?;
+            let mut cfg = ReprTrainConfig::from_file(&config)?;
             if let Some(e) = epochs {
                 cfg.train.epochs = e;
             }

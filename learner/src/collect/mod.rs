@@ -15,7 +15,7 @@ pub use error::CollectError;
 
 use crate::env::FastEnv;
 use hw_sim::{PegShape, WorldConfig};
-use learner_node::log::events::{Event, Outcome, Reset};
+use learner_node::log::events::{EpisodeEnd, Event, Reset};
 use learner_node::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};
 use learner_node::mix::{EpisodePolicy, Mix, MixedPolicy};
 use learner_node::policy::TaskGeometry;
@@ -411,7 +411,7 @@ pub fn run_episode(
     let t = hw_time_ns(env.world().time_s());
     log.event(
         t,
-        &Event::Outcome(Outcome {
+        &Event::Outcome(EpisodeEnd {
             stage: best,
             duration_s: None,
             actions: None,

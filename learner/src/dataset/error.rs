@@ -264,7 +264,7 @@ pub enum DatasetError {
         path: PathBuf,
         /// Why.
         #[source]
-        source: hw_sim::png::PngError,
+        source: stack_common::png::PngError,
     },
     /// A log could not be read.
     #[error(transparent)]

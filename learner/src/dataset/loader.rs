@@ -1,9 +1,9 @@
 //! The shuffling, streaming loader with pairing negatives.
 
 use super::*;
-use hw_sim::rng;
 use rand::RngExt;
 use rand::seq::SliceRandom;
+use stack_common::rng;
 
 /// A batch, flattened row-major, sample-major.
 #[derive(Debug, Clone, Default)]

@@ -47,9 +47,11 @@ pub fn contact_sheet(ds: &Dataset, n: usize, path: &Path) -> Result<()> {
             }
         }
     }
-    hw_sim::png::write(path, sw as u32, sh as u32, 3, &img).map_err(|source| DatasetError::Sheet {
-        path: path.to_path_buf(),
-        source,
+    stack_common::png::write(path, sw as u32, sh as u32, 3, &img).map_err(|source| {
+        DatasetError::Sheet {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }
 

@@ -236,7 +236,7 @@ mod tests {
             }
             for v in &cfg.variant {
                 if let Some(f) = &v.representation {
-                    train::TrainConfig::from_file(&root.join(f))
+                    train::ReprTrainConfig::from_file(&root.join(f))
                         .unwrap_or_else(|e| panic!("{}: {e}", at(f)));
                 }
             }

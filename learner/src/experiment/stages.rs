@@ -280,7 +280,7 @@ pub(super) fn representation(
             .with_context(|| format!("variant {}: {}", v.name, meta_path.display()))?;
         // The comparison is fair only for a model trained as the variant's
         // own would be.
-        let tcfg = train::TrainConfig::from_file(repr_cfg)
+        let tcfg = train::ReprTrainConfig::from_file(repr_cfg)
             .with_context(|| format!("variant {}", v.name))?;
         let epochs = cfg.representation.epochs.unwrap_or(tcfg.train.epochs);
         ensure!(
@@ -316,8 +316,8 @@ pub(super) fn representation(
     if model.join("model.json").exists() {
         return Ok(model);
     }
-    let mut tcfg =
-        train::TrainConfig::from_file(repr_cfg).with_context(|| format!("variant {}", v.name))?;
+    let mut tcfg = train::ReprTrainConfig::from_file(repr_cfg)
+        .with_context(|| format!("variant {}", v.name))?;
     if let Some(e) = cfg.representation.epochs {
         tcfg.train.epochs = e;
     }

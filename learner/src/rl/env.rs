@@ -16,7 +16,7 @@
 
 use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
 use crate::env::{EnvError, FastEnv};
-use hw_sim::{FieldError, TaskState, WorldConfig};
+use hw_sim::{TaskState, WorldConfig};
 pub use learner_node::deploy::ActionScale;
 use learner_node::observe::ObsView;
 use learner_node::policy::{Observation, TaskGeometry};
@@ -24,6 +24,7 @@ use nalgebra::Isometry3;
 use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::Message;
+use shared_mem_schema::config::FieldError;
 
 /// The paper's simulation episode length, policy steps.
 pub const PAPER_EPISODE_STEPS: u32 = 500;

@@ -180,7 +180,7 @@ mod tests {
     fn a_deployed_policy_acts_as_its_training_policy_on_its_normalised_observation() {
         let mut env = RlEnv::new(&Default::default()).unwrap();
         env.reset(5, false).unwrap();
-        let mut rng = hw_sim::rng::seeded(1, 0);
+        let mut rng = stack_common::rng::seeded(1, 0);
         let mut policy = GaussianPolicy::new(GroundTruth.dim(), &[8, 6], 4, 0.0, &mut rng);
         // Statistics far from the identity: every component shifted and
         // spread around values unlike these observations.
@@ -276,7 +276,7 @@ mod tests {
         let enc = Encoder::new(net, model.clone(), normaliser, &dev);
         let file = enc.to_file();
         let reference = Representation::new(Box::new(enc.with_fast_path(false)));
-        let mut rng = hw_sim::rng::seeded(9, 0);
+        let mut rng = stack_common::rng::seeded(9, 0);
         let mut policy = GaussianPolicy::new(16, &[8], 4, 0.0, &mut rng);
         for w in &mut policy.net {
             *w *= 10.0; // actions that follow z

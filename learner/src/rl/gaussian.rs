@@ -7,8 +7,8 @@ use super::mlp::{Cache, Mlp};
 use super::obs_norm::ObsNorm;
 use faer::Mat;
 use faer::prelude::*;
-use hw_sim::rng::{self, SimRng};
 use serde::{Deserialize, Serialize};
+use stack_common::rng::{self, SimRng};
 
 /// A diagonal Gaussian policy: an MLP's output is the mean, log σ is a
 /// free parameter per action component. With `obs_norm` the observations
@@ -94,7 +94,7 @@ impl GaussianPolicy {
     }
 
     /// Means for a batch of the network's inputs (what
-    /// [`GaussianPolicy::inputs`] gives; what an update's [`Batch`] holds).
+    /// [`GaussianPolicy::inputs`] gives; what an update's [`RolloutBatch`] holds).
     pub fn net_means(&self, inputs: &[f64]) -> Vec<f64> {
         let mut c = Cache::default();
         self.mlp().forward(&self.net, inputs, &mut c);
@@ -162,7 +162,7 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// One batch of on-policy samples for an update.
 #[derive(Debug, Clone, Default)]
-pub struct Batch {
+pub struct RolloutBatch {
     /// The network's inputs (the observations, normalised where the policy
     /// normalises them: [`GaussianPolicy::inputs`]), batch × observation
     /// size.

@@ -9,8 +9,8 @@
 //! linear.
 
 use super::adam::Adam;
-use hw_sim::rng::{self, SimRng};
 use rand::seq::SliceRandom;
+use stack_common::rng::{self, SimRng};
 
 /// The network's shape; parameters are kept apart (a flat slice) so that
 /// TRPO can try candidates without copying the network.
@@ -292,7 +292,7 @@ mod tests {
 
     fn net() -> (Mlp, Vec<f64>, Vec<f64>) {
         let m = Mlp::new(&[3, 5, 4, 2]);
-        let mut rng = hw_sim::rng::seeded(7, 0);
+        let mut rng = stack_common::rng::seeded(7, 0);
         let p = m.init(&mut rng, 1.0);
         let x: Vec<f64> = (0..9).map(|k| (k as f64 * 0.37).sin()).collect();
         (m, p, x)

@@ -24,6 +24,7 @@ pub mod probe;
 pub mod represent;
 pub mod reward;
 pub mod run;
+pub mod run_config;
 pub mod search;
 pub mod train;
 pub mod trpo;

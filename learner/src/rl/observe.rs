@@ -74,7 +74,7 @@ impl ObservationKind {
             ObservationKind::GroundTruth => std::sync::Arc::new(GroundTruth),
             ObservationKind::GroundTruthHoleError(std_m) => {
                 if !(std_m.is_finite() && *std_m >= 0.0) {
-                    return Err(hw_sim::FieldError::new(
+                    return Err(shared_mem_schema::config::FieldError::new(
                         "observation.ground_truth_hole_error",
                         std_m,
                         "must be a standard deviation in metres, 0 or more",

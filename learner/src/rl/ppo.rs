@@ -12,12 +12,14 @@
 /// The optimiser PPO steps with (its own module: the value network and
 /// the MLP regression use it too).
 pub use super::adam::Adam;
-use super::gaussian::{Batch, GaussianPolicy, UpdateStats, kl_gaussian, log_prob, normalise};
+use super::gaussian::{
+    GaussianPolicy, RolloutBatch, UpdateStats, kl_gaussian, log_prob, normalise,
+};
 use super::mlp::Cache;
-use hw_sim::FieldError;
-use hw_sim::rng::SimRng;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::FieldError;
+use stack_common::rng::SimRng;
 
 /// PPO's own settings (`[policy.ppo]`). Defaults are the PPO paper's for
 /// its continuous-control (MuJoCo) benchmark: ε 0.2, 10 epochs, minibatches
@@ -106,7 +108,7 @@ pub struct Clipped {
 /// (one per sample of the batch).
 pub fn clipped_surrogate(
     policy: &GaussianPolicy,
-    batch: &Batch,
+    batch: &RolloutBatch,
     old_log_prob: &[f64],
     idx: &[usize],
     clip: f64,
@@ -161,7 +163,7 @@ pub fn clipped_surrogate(
 /// surrogate's gradient (its norm capped at `max_grad_norm`).
 pub fn ppo_update(
     policy: &mut GaussianPolicy,
-    batch: &mut Batch,
+    batch: &mut RolloutBatch,
     cfg: &PpoConfig,
     adam: &mut Adam,
     rng: &mut SimRng,
@@ -227,7 +229,7 @@ mod tests {
     /// objective by hand.
     #[test]
     fn the_clipped_objective_on_known_inputs() {
-        let mut rng = hw_sim::rng::seeded(1, 0);
+        let mut rng = stack_common::rng::seeded(1, 0);
         let p = GaussianPolicy::new(1, &[2], 1, 0.0, &mut rng);
         let m = p.means(&[0.0; 4]);
         // Four samples at the same state; the old log-probabilities are
@@ -239,7 +241,7 @@ mod tests {
             .collect();
         let ratios = [1.5f64, 0.5, 1.1, 0.7];
         let old: Vec<f64> = lp.iter().zip(ratios).map(|(l, r)| l - r.ln()).collect();
-        let batch = Batch {
+        let batch = RolloutBatch {
             obs: vec![0.0; 4],
             actions,
             advantages: vec![2.0, -1.0, 3.0, 1.0],
@@ -261,7 +263,7 @@ mod tests {
 
     #[test]
     fn the_gradient_matches_finite_differences() {
-        let mut rng = hw_sim::rng::seeded(4, 0);
+        let mut rng = stack_common::rng::seeded(4, 0);
         let mut p = GaussianPolicy::new(3, &[5], 2, -0.2, &mut rng);
         for w in &mut p.net {
             *w *= 3.0;
@@ -277,7 +279,7 @@ mod tests {
             .enumerate()
             .map(|(i, (a, m))| log_prob(a, m, &p.log_std) + 0.03 * (i as f64 - 2.5))
             .collect();
-        let batch = Batch {
+        let batch = RolloutBatch {
             obs,
             actions,
             advantages: (0..6).map(|k| (k as f64 * 1.9).sin()).collect(),
@@ -307,7 +309,7 @@ mod tests {
 
     #[test]
     fn an_update_improves_the_surrogate_and_stays_near_the_old_policy() {
-        let mut rng = hw_sim::rng::seeded(5, 0);
+        let mut rng = stack_common::rng::seeded(5, 0);
         let mut p = GaussianPolicy::new(2, &[8], 1, 0.0, &mut rng);
         let obs: Vec<f64> = (0..400).map(|k| (k as f64 * 0.37).sin()).collect();
         let actions = p.sample(&obs, &mut rng);
@@ -319,7 +321,7 @@ mod tests {
             .zip(actions.iter().zip(&means))
             .map(|(o, (a, m))| (a - m) * o[0].signum())
             .collect();
-        let mut batch = Batch {
+        let mut batch = RolloutBatch {
             obs,
             actions,
             advantages,

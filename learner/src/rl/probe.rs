@@ -202,12 +202,12 @@ mod tests {
     #[test]
     fn a_linear_map_is_recovered_and_bad_rows_are_named() {
         // y = (2 a − b + 3, 0.5 b) on scattered rows; a small ridge.
-        let mut rng = hw_sim::rng::seeded(5, 0);
+        let mut rng = stack_common::rng::seeded(5, 0);
         let x: Vec<Vec<f64>> = (0..200)
             .map(|_| {
                 vec![
-                    hw_sim::rng::uniform(&mut rng, -1.0, 1.0),
-                    hw_sim::rng::uniform(&mut rng, 10.0, 30.0),
+                    stack_common::rng::uniform(&mut rng, -1.0, 1.0),
+                    stack_common::rng::uniform(&mut rng, 10.0, 30.0),
                 ]
             })
             .collect();

@@ -2,11 +2,12 @@
 //! the vectorised fast path with checkpoints, learning curves (CSV and PNG)
 //! and a progress bar; the evaluation of a checkpoint over N episodes.
 
-use super::env::{RlEnv, RlEnvConfig, RlEnvError};
+use super::env::{RlEnv, RlEnvError};
 use super::gaussian::GaussianPolicy;
-use super::observe::ObservationKind;
 use super::reward::{Outcome, normalised_return};
-use super::train::{Algorithm, PolicyConfig};
+use super::run_config::training_observer;
+pub use super::run_config::{TrainConfig, ValidationConfig};
+use super::train::Algorithm;
 use super::train::{IterationStats, Trainer, TrainerState};
 use super::value::Baseline;
 use super::vec::{BatchEnv, VecEnv, all_cores, par_map};
@@ -15,62 +16,6 @@ use learner_node::progress::Progress;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-/// A training run's configuration (TOML; every field defaulted).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TrainConfig {
-    /// Seed of the run (policy initialisation, episode seeds, noise).
-    pub seed: u64,
-    /// Environments stepped together.
-    pub num_envs: usize,
-    /// Threads (0: all cores).
-    pub threads: usize,
-    /// Environment steps to train for (the paper: 2000 episodes of 500).
-    pub env_steps: u64,
-    /// A checkpoint every this many updates (and at the end).
-    pub checkpoint_every: u64,
-    /// What the policy observes.
-    pub observation: ObservationKind,
-    /// The environment.
-    pub env: RlEnvConfig,
-    /// The policy and its learning algorithm.
-    pub policy: PolicyConfig,
-    /// Validation episodes during training, which choose the policy to
-    /// evaluate.
-    pub validation: ValidationConfig,
-    /// Start from another run's last policy and baseline (its
-    /// `checkpoint.json`) instead of fresh weights: a new run under this
-    /// configuration, its counters from zero. Its observation must be this
-    /// run's.
-    pub init_from: Option<PathBuf>,
-}
-
-/// Validation: every `every` updates the current policy's mean runs
-/// `episodes` episodes on seeds of their own, and the best validated policy
-/// is the one evaluated and deployed. Off by default (the paper evaluates
-/// the best policy logged in training, by its training episodes' reward).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ValidationConfig {
-    /// Validate every this many updates (0: never).
-    pub every: u64,
-    /// Episodes per validation.
-    pub episodes: usize,
-    /// Seed of the first validation episode: apart from the training
-    /// episodes' seeds and from evaluation's (1 000 000 on).
-    pub seed: u64,
-}
-
-impl Default for ValidationConfig {
-    fn default() -> Self {
-        Self {
-            every: 0,
-            episodes: 10,
-            seed: 2_000_000,
-        }
-    }
-}
 
 /// One validation's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -101,23 +46,6 @@ pub struct ValidatedPolicy {
     pub validation: ValidationPoint,
     /// The policy.
     pub policy: GaussianPolicy,
-}
-
-impl Default for TrainConfig {
-    fn default() -> Self {
-        Self {
-            seed: 1,
-            num_envs: 4,
-            threads: 0,
-            env_steps: 1_000_000,
-            checkpoint_every: 10,
-            observation: ObservationKind::GroundTruth,
-            env: RlEnvConfig::default(),
-            policy: PolicyConfig::default(),
-            validation: ValidationConfig::default(),
-            init_from: None,
-        }
-    }
 }
 
 /// What a checkpoint file holds.
@@ -295,35 +223,6 @@ impl CurvePoint {
     }
 }
 
-/// The training environments' observer: the configuration's, or with a
-/// hole error and `training.hole_error_ramp_steps` its ramped version,
-/// returned beside it for the loop to advance.
-type TrainingObserver = (
-    std::sync::Arc<dyn super::observe::Observer>,
-    Option<std::sync::Arc<super::observe::RampedHoleError>>,
-);
-
-/// See [`TrainingObserver`].
-fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, RlEnvError> {
-    if let ObservationKind::GroundTruthHoleError(std_m) = cfg.observation
-        && cfg.env.training.hole_error_ramp_steps > 0
-    {
-        // The plain observer checks the deviation.
-        cfg.observation.observer_on(cfg.threads)?;
-        let r = std::sync::Arc::new(super::observe::RampedHoleError::new(std_m));
-        let observer: std::sync::Arc<dyn super::observe::Observer> = r.clone();
-        return Ok((observer, Some(r)));
-    }
-    if cfg.env.training.hole_error_ramp_steps > 0 {
-        return Err(RlEnvError::Config(hw_sim::FieldError::new(
-            "env.training.hole_error_ramp_steps",
-            cfg.env.training.hole_error_ramp_steps,
-            "ramps a hole error: needs observation = { ground_truth_hole_error = σ }",
-        )));
-    }
-    Ok((cfg.observation.observer_on(cfg.threads)?, None))
-}
-
 /// Why a run failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -461,12 +360,14 @@ pub fn train(
             (cfg, None, Vec::new(), None, Vec::new(), None)
         };
     if cfg.validation.every > 0 && cfg.validation.episodes == 0 {
-        return Err(RlEnvError::Config(hw_sim::FieldError::new(
-            "validation.episodes",
-            0,
-            "must be at least 1 when validation.every is set",
-        ))
-        .into());
+        return Err(
+            RlEnvError::Config(shared_mem_schema::config::FieldError::new(
+                "validation.episodes",
+                0,
+                "must be at least 1 when validation.every is set",
+            ))
+            .into(),
+        );
     }
     let (observer, ramp) = training_observer(&cfg)?;
     let env = VecEnv::new(&cfg.env, cfg.num_envs, observer, cfg.threads)?;
@@ -528,7 +429,7 @@ pub fn train(
                      (policy.baseline, policy.value.hidden); a fresh one is fitted",
                     from.display()
                 );
-                let mut rng = hw_sim::rng::seeded(cfg.seed, 901);
+                let mut rng = stack_common::rng::seeded(cfg.seed, 901);
                 baseline = Baseline::new(
                     cfg.policy.baseline,
                     env.obs_dim(),

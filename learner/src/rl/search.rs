@@ -24,9 +24,9 @@
 use super::env::ActionScale;
 use super::observe::{ObsView, Observer};
 use super::probe::LinearProbe;
-use hw_sim::FieldError;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::FieldError;
 
 /// The search's settings (`[search_teacher]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

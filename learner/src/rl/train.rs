@@ -10,15 +10,15 @@
 //! stream, so a run is the same whatever the number of threads.
 
 use super::env::RlEnvError;
-use super::gaussian::{Batch, GaussianPolicy, UpdateStats, gae};
+use super::gaussian::{GaussianPolicy, RolloutBatch, UpdateStats, gae};
 use super::obs_norm::ObsNorm;
 use super::ppo::{Adam, PpoConfig, ppo_update};
 use super::reward::{Outcome, normalised_return};
 use super::trpo::{TrpoConfig, trpo_step};
 use super::value::{Baseline, BaselineKind, ValueConfig, explained_variance};
 use super::vec::BatchEnv;
-use hw_sim::FieldError;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::FieldError;
 
 /// The policy-gradient algorithm of a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -224,7 +224,7 @@ struct Segment {
 struct Collected {
     /// Its `obs` is empty until the batch is complete: the network's inputs
     /// are made from `raw` then, under the statistics that include it.
-    batch: Batch,
+    batch: RolloutBatch,
     /// The observations as the environment gave them.
     raw: Vec<f64>,
     /// Step of each sample over the episode length.
@@ -318,7 +318,7 @@ impl<E: BatchEnv> Trainer<E> {
     /// A fresh run: a new policy drawn from `seed`.
     pub fn new(env: E, cfg: PolicyConfig, seed: u64) -> Result<Self, RlEnvError> {
         cfg.validate()?;
-        let mut rng = hw_sim::rng::seeded(seed, 900);
+        let mut rng = stack_common::rng::seeded(seed, 900);
         let mut policy = GaussianPolicy::new(
             env.obs_dim(),
             &cfg.hidden,
@@ -329,7 +329,7 @@ impl<E: BatchEnv> Trainer<E> {
         if cfg.normalise_observations {
             policy.obs_norm = Some(ObsNorm::new(env.obs_dim(), cfg.observation_clip));
         }
-        let mut rng = hw_sim::rng::seeded(seed, 901);
+        let mut rng = stack_common::rng::seeded(seed, 901);
         let baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
         let state = TrainerState::fresh(policy, baseline, seed);
         Self::resume(env, cfg, state)
@@ -420,7 +420,7 @@ impl<E: BatchEnv> Trainer<E> {
         let (od, ad) = (self.env.obs_dim(), self.env.act_dim());
         let max_steps = self.env.max_steps();
         let horizon = max_steps.max(1) as f64;
-        let mut rng = hw_sim::rng::seeded(self.state.seed, 1000 + self.state.iteration);
+        let mut rng = stack_common::rng::seeded(self.state.seed, 1000 + self.state.iteration);
         let mut col = Collected::default();
         let mut episodes = Vec::new();
         let mut collected = 0usize;
@@ -521,7 +521,7 @@ impl<E: BatchEnv> Trainer<E> {
                 // number of threads, and after a resume.
                 // (Stream 2·2³² + k: apart from the action noise's 1000 + k.)
                 let mut order =
-                    hw_sim::rng::seeded(self.state.seed, (2 << 32) + self.state.iteration);
+                    stack_common::rng::seeded(self.state.seed, (2 << 32) + self.state.iteration);
                 ppo_update(
                     &mut self.state.policy,
                     &mut batch,
@@ -532,7 +532,8 @@ impl<E: BatchEnv> Trainer<E> {
             }
         };
         // The value network's minibatch order from its own stream (3·2³² + k).
-        let mut order = hw_sim::rng::seeded(self.state.seed, (3 << 32) + self.state.iteration);
+        let mut order =
+            stack_common::rng::seeded(self.state.seed, (3 << 32) + self.state.iteration);
         self.state.baseline.fit(
             &batch.obs,
             &times,

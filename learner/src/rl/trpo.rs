@@ -9,7 +9,9 @@
 //! cross terms. `F v` is then one forward-mode pass (J v), a scaling and one
 //! reverse-mode pass (Jᵀ ·) of [`Mlp`].
 
-use super::gaussian::{Batch, GaussianPolicy, UpdateStats, dot, kl_gaussian, log_prob, normalise};
+use super::gaussian::{
+    GaussianPolicy, RolloutBatch, UpdateStats, dot, kl_gaussian, log_prob, normalise,
+};
 use super::mlp::{Cache, Mlp};
 use serde::{Deserialize, Serialize};
 
@@ -48,8 +50,8 @@ impl Default for TrpoConfig {
 
 impl TrpoConfig {
     /// Checks every value, naming the first bad one.
-    pub fn validate(&self) -> Result<(), hw_sim::FieldError> {
-        use hw_sim::FieldError;
+    pub fn validate(&self) -> Result<(), shared_mem_schema::config::FieldError> {
+        use shared_mem_schema::config::FieldError;
         if !(self.max_kl.is_finite() && self.max_kl > 0.0) {
             return Err(FieldError::new(
                 "policy.trpo.max_kl",
@@ -128,13 +130,13 @@ pub struct Linearisation<'a> {
     policy: &'a GaussianPolicy,
     mlp: Mlp,
     cache: Cache,
-    batch: &'a Batch,
+    batch: &'a RolloutBatch,
     old_log_prob: Vec<f64>,
 }
 
 impl<'a> Linearisation<'a> {
     /// The old policy's pass over `batch`.
-    pub fn new(policy: &'a GaussianPolicy, batch: &'a Batch) -> Self {
+    pub fn new(policy: &'a GaussianPolicy, batch: &'a RolloutBatch) -> Self {
         let mlp = policy.mlp();
         let mut cache = Cache::default();
         mlp.forward(&policy.net, &batch.obs, &mut cache);
@@ -231,7 +233,11 @@ impl<'a> Linearisation<'a> {
 /// full step scaled to the KL bound (½ sᵀFs = max_kl), then halved until
 /// the mean KL is within `max_kl` and the surrogate improves by at least
 /// `accept_ratio` of the linear expectation.
-pub fn trpo_step(policy: &mut GaussianPolicy, batch: &mut Batch, cfg: &TrpoConfig) -> UpdateStats {
+pub fn trpo_step(
+    policy: &mut GaussianPolicy,
+    batch: &mut RolloutBatch,
+    cfg: &TrpoConfig,
+) -> UpdateStats {
     normalise(&mut batch.advantages);
     let old = policy.flat();
     let (best, stats) = {
@@ -307,8 +313,8 @@ mod tests {
 
     /// A tiny policy and batch: 3 observations in, one hidden layer of 4,
     /// 2 actions; 5 samples.
-    fn tiny() -> (GaussianPolicy, Batch) {
-        let mut rng = hw_sim::rng::seeded(3, 0);
+    fn tiny() -> (GaussianPolicy, RolloutBatch) {
+        let mut rng = stack_common::rng::seeded(3, 0);
         let mut p = GaussianPolicy::new(3, &[4], 2, 0.0, &mut rng);
         // Larger output weights than the 0.1-scaled start: a Fisher with
         // clear structure.
@@ -321,7 +327,7 @@ mod tests {
         let advantages = (0..5).map(|k| (k as f64 * 1.3).cos()).collect();
         (
             p,
-            Batch {
+            RolloutBatch {
                 obs,
                 actions,
                 advantages,
@@ -329,7 +335,7 @@ mod tests {
         )
     }
 
-    fn explicit_fisher(p: &GaussianPolicy, batch: &Batch) -> Mat<f64> {
+    fn explicit_fisher(p: &GaussianPolicy, batch: &RolloutBatch) -> Mat<f64> {
         let mlp = p.mlp();
         let mut c = Cache::default();
         mlp.forward(&p.net, &batch.obs, &mut c);

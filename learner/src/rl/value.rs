@@ -13,9 +13,9 @@
 use super::adam::Adam;
 use super::gaussian::LinearBaseline;
 use super::mlp::{Cache, Mlp};
-use hw_sim::FieldError;
-use hw_sim::rng::SimRng;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::FieldError;
+use stack_common::rng::SimRng;
 
 /// Which baseline (`policy.baseline`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -280,13 +280,13 @@ mod tests {
     fn the_value_network_fits_a_nonlinear_value_the_linear_baseline_cannot() {
         // V = 100·sin(3·o₀)·o₁ + 50·t over 2 inputs: far from
         // [o, o², t, …]'s span.
-        let mut rng = hw_sim::rng::seeded(4, 0);
+        let mut rng = stack_common::rng::seeded(4, 0);
         let n = 2000;
         let (mut obs, mut times, mut y) = (vec![], vec![], vec![]);
         for k in 0..n {
             let (a, b) = (
-                hw_sim::rng::uniform(&mut rng, -1.0, 1.0),
-                hw_sim::rng::uniform(&mut rng, -1.0, 1.0),
+                stack_common::rng::uniform(&mut rng, -1.0, 1.0),
+                stack_common::rng::uniform(&mut rng, -1.0, 1.0),
             );
             let t = (k % 100) as f64 / 100.0;
             obs.extend([a, b]);

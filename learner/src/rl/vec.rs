@@ -84,7 +84,12 @@ impl VecEnv {
         threads: usize,
     ) -> Result<Self, RlEnvError> {
         if n == 0 {
-            return Err(hw_sim::FieldError::new("num_envs", 0, "must be at least 1").into());
+            return Err(shared_mem_schema::config::FieldError::new(
+                "num_envs",
+                0,
+                "must be at least 1",
+            )
+            .into());
         }
         let envs = (0..n)
             .map(|_| RlEnv::for_training(cfg))

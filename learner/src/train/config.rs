@@ -65,7 +65,7 @@ impl Default for TrainSettings {
 /// A whole training configuration file.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct TrainConfig {
+pub struct ReprTrainConfig {
     /// The model.
     pub model: ModelConfig,
     /// Loss weights.
@@ -118,7 +118,7 @@ impl DeviceKind {
     }
 }
 
-impl TrainConfig {
+impl ReprTrainConfig {
     /// Reads and validates a configuration file.
     pub fn from_file(path: &Path) -> Result<Self> {
         let cfg: Self = read_toml(path)?;

@@ -7,7 +7,7 @@
 use super::checkpoint;
 use super::metrics::Row;
 use super::run::{evaluate, files, prepare};
-use super::{DeviceKind, Result, Split, TrainConfig, TrainError, io_err};
+use super::{DeviceKind, ReprTrainConfig, Result, Split, TrainError, io_err};
 use crate::dataset::{Dataset, Loader, LoaderConfig, Sample};
 use crate::models::{Modalities, ModelConfig, Normaliser, ReprNet};
 use crate::plot::{Chart, Series};
@@ -35,7 +35,7 @@ pub struct EvalOptions {
 
 /// The evaluation's results.
 #[derive(Debug, Clone)]
-pub struct EvalReport {
+pub struct ReprEvalReport {
     /// One row per sensor set: its name and the test metrics.
     pub rows: Vec<(String, Row)>,
     /// The table as Markdown.
@@ -45,9 +45,9 @@ pub struct EvalReport {
 /// Runs the evaluation and writes `table.md`, `flow_actions.png`,
 /// `pca_z_contact.png`, `pca_z_stage.png` and `pca_z_policy.png` (the
 /// pictures for predictive models) into `opts.out`.
-pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
+pub fn eval(opts: &EvalOptions) -> Result<ReprEvalReport> {
     let cfg_path = opts.run.join(files::CONFIG);
-    let cfg = TrainConfig::from_file(&cfg_path)?;
+    let cfg = ReprTrainConfig::from_file(&cfg_path)?;
     let split_path = opts.run.join(files::SPLIT);
     let text = std::fs::read(&split_path).map_err(io_err(&split_path))?;
     let split: Split = serde_json::from_slice(&text).map_err(|e| TrainError::BadFile {
@@ -141,7 +141,7 @@ pub fn eval(opts: &EvalOptions) -> Result<EvalReport> {
             &device,
         )?;
     }
-    Ok(EvalReport { rows, markdown })
+    Ok(ReprEvalReport { rows, markdown })
 }
 
 fn fmt(x: f64) -> String {
@@ -176,7 +176,7 @@ fn last_train_row(run: &std::path::Path) -> Result<Option<Row>> {
 }
 
 fn table(
-    cfg: &TrainConfig,
+    cfg: &ReprTrainConfig,
     split: &Split,
     ds: &Dataset,
     test: &[(String, Row)],
@@ -340,9 +340,11 @@ fn flow_picture(
         }
     }
     let path = opts.out.join("flow_actions.png");
-    hw_sim::png::write(&path, w as u32, h as u32, 3, &px).map_err(|e| TrainError::Record {
-        path: path.clone(),
-        what: e.to_string(),
+    stack_common::png::write(&path, w as u32, h as u32, 3, &px).map_err(|e| {
+        TrainError::Record {
+            path: path.clone(),
+            what: e.to_string(),
+        }
     })?;
     Ok(())
 }

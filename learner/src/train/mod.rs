@@ -14,7 +14,7 @@ pub mod metrics;
 pub mod run;
 pub mod split;
 
-pub use config::{DeviceKind, TrainConfig, TrainSettings};
+pub use config::{DeviceKind, ReprTrainConfig, TrainSettings};
 pub use run::{TrainOptions, TrainSummary, train};
 pub use split::Split;
 

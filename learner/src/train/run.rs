@@ -2,7 +2,7 @@
 
 use super::checkpoint::{self, ExportMeta, LoopState};
 use super::metrics::{CSV_HEADER, Metrics, Row, write_curves};
-use super::{DeviceKind, Result, Split, TrainConfig, TrainError, io_err};
+use super::{DeviceKind, ReprTrainConfig, Result, Split, TrainError, io_err};
 use crate::dataset::{Batch, Dataset, Loader, LoaderConfig};
 use crate::models::losses::{LabelTensors, losses};
 use crate::models::net::tensor;
@@ -11,8 +11,8 @@ use crate::models::{
 };
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
-use hw_sim::rng;
 use learner_node::policy::WRENCH_WINDOW;
+use stack_common::rng;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -61,7 +61,7 @@ pub mod files {
 /// The network, its optimiser and the loop's state, fresh or resumed.
 type Trainee = (ReprNet, ModuleOptimizer, LoopState);
 
-fn start(cfg: &TrainConfig, out: &Path, resume: bool, device: &Device) -> Result<Trainee> {
+fn start(cfg: &ReprTrainConfig, out: &Path, resume: bool, device: &Device) -> Result<Trainee> {
     let net = crate::models::init::seeded(ReprNet::new(&cfg.model, device), cfg.train.seed);
     let optim = AdamConfig::new()
         .with_beta_1(cfg.train.beta1 as f32)
@@ -73,7 +73,7 @@ fn start(cfg: &TrainConfig, out: &Path, resume: bool, device: &Device) -> Result
     let text = toml::to_string(cfg).expect("the configuration serialises");
     if resume {
         // The same run, but for its length: a resume may extend it.
-        let mut before = TrainConfig::from_file(&cfg_path)?;
+        let mut before = ReprTrainConfig::from_file(&cfg_path)?;
         before.train.epochs = cfg.train.epochs;
         if &before != cfg {
             return Err(TrainError::BadFile {
@@ -104,7 +104,7 @@ fn start(cfg: &TrainConfig, out: &Path, resume: bool, device: &Device) -> Result
 }
 
 /// Checks the dataset against the model.
-fn check_dataset(cfg: &TrainConfig, ds: &Dataset) -> Result<()> {
+fn check_dataset(cfg: &ReprTrainConfig, ds: &Dataset) -> Result<()> {
     let m = &ds.meta;
     let s = cfg.model.image_size;
     if m.width != s || m.height != s {
@@ -179,7 +179,7 @@ fn noise(seed: u64, step: u64, b: usize, d: usize, device: &Device) -> Tensor<2>
 /// `episodes` of `ds`.
 pub fn evaluate(
     net: &ReprNet,
-    cfg: &TrainConfig,
+    cfg: &ReprTrainConfig,
     ds: &Dataset,
     norm: &Normaliser,
     episodes: &[u32],
@@ -223,7 +223,7 @@ pub fn evaluate(
 /// Trains `cfg` on the dataset in `data`, writing into `out`; `stop` is
 /// asked after every step (true: checkpoint and return, e.g. on Ctrl-C).
 pub fn train(
-    cfg: &TrainConfig,
+    cfg: &ReprTrainConfig,
     data: &Path,
     out: &Path,
     opts: &TrainOptions,

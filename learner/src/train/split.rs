@@ -2,9 +2,9 @@
 //! sides, and the test split is never trained on.
 
 use crate::dataset::Meta;
-use hw_sim::rng;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
+use stack_common::rng;
 
 /// Which episodes are in which split.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -224,7 +224,7 @@ fn a_representation_policy_drives_the_stack_live() {
         .unwrap()
     };
     export(&model_dir, hw_sim::config::CameraConfig::default());
-    let mut rng = hw_sim::rng::seeded(9, 0);
+    let mut rng = stack_common::rng::seeded(9, 0);
     let mut policy = GaussianPolicy::new(16, &[8], 4, 0.0, &mut rng);
     // Larger output weights than a fresh policy's: actions that follow z.
     for w in &mut policy.net {

@@ -398,7 +398,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let split = rounds.len() - test_rounds;
     let (train, test) = (merge(&rounds[..split]), merge(&rounds[split..]));
     let (d, k) = (train.obs_dim, train.act_dim);
-    let mut rng = hw_sim::rng::seeded(1, 0);
+    let mut rng = stack_common::rng::seeded(1, 0);
     let mut policy = GaussianPolicy::new(d, &hidden, k, 0.0, &mut rng);
     let obs: Vec<f64> = train.obs.iter().map(|&v| v as f64).collect();
     let targets: Vec<f64> = train.actions.iter().map(|&v| v as f64).collect();
@@ -451,7 +451,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let (_, reach0, n) = score(
-        &GaussianPolicy::new(d, &hidden, k, 0.0, &mut hw_sim::rng::seeded(2, 0)),
+        &GaussianPolicy::new(d, &hidden, k, 0.0, &mut stack_common::rng::seeded(2, 0)),
         &test,
     );
     println!(

@@ -78,7 +78,7 @@ fn mlp_probe(x: &[Vec<f64>], y: &[Vec<f64>], train: &[usize], test: &[usize]) ->
         epochs: 100,
         ..Default::default()
     };
-    let mut rng = hw_sim::rng::seeded(12, 0);
+    let mut rng = stack_common::rng::seeded(12, 0);
     (0..y[0].len())
         .map(|t| {
             let ytr: Vec<f64> = train.iter().map(|&i| y[i][t]).collect();
@@ -129,7 +129,7 @@ fn main() {
     let mut env = RlEnv::new(&cfg).expect("env");
     learner::rl::observe::check_camera(&cfg.world.camera, observer.as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
-    let mut rng = hw_sim::rng::seeded(11, 0);
+    let mut rng = stack_common::rng::seeded(11, 0);
     let (mut z, mut own, mut targets, mut episode) = (vec![], vec![], vec![], vec![]);
     for ep in 0..episodes {
         env.reset(3_000_000 + ep, true).expect("reset");
@@ -139,9 +139,9 @@ fn main() {
         let mut goal = [0.0; 3];
         if at_box {
             goal = [
-                hw_sim::rng::uniform(&mut rng, -0.015, 0.015),
-                hw_sim::rng::uniform(&mut rng, -0.015, 0.015),
-                hw_sim::rng::uniform(&mut rng, 0.002, 0.020),
+                stack_common::rng::uniform(&mut rng, -0.015, 0.015),
+                stack_common::rng::uniform(&mut rng, -0.015, 0.015),
+                stack_common::rng::uniform(&mut rng, 0.002, 0.020),
             ];
         }
         for _ in 0..steps {
@@ -158,12 +158,12 @@ fn main() {
                 (0..4)
                     .map(|k| {
                         let aim = if k < 3 { to[k] / 0.01 } else { 0.0 };
-                        (aim + 0.3 * hw_sim::rng::normal(&mut rng)).clamp(-1.0, 1.0)
+                        (aim + 0.3 * stack_common::rng::normal(&mut rng)).clamp(-1.0, 1.0)
                     })
                     .collect()
             } else {
                 (0..4)
-                    .map(|_| hw_sim::rng::uniform(&mut rng, -1.0, 1.0))
+                    .map(|_| stack_common::rng::uniform(&mut rng, -1.0, 1.0))
                     .collect()
             };
             // Probed only once the tip is within 3 cm of the box top.

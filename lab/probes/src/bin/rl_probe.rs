@@ -58,7 +58,7 @@ fn main() {
     learner::rl::observe::check_camera(&cfg.world.camera, observer.as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
     let mut heuristic = learner_node::policy::HeuristicPolicy::new(Default::default());
-    let mut rng = hw_sim::rng::seeded(7, 0);
+    let mut rng = stack_common::rng::seeded(7, 0);
     let mut counts = [0u32; 4];
     let mut terminated = 0;
     for ep in 0..episodes {

@@ -598,7 +598,7 @@ fn zfit(model: &str, world: &str, fit: u64, test: u64) {
     let flat = |v: &[Vec<f64>]| v.iter().flatten().copied().collect::<Vec<f64>>();
     let (x_fit, y_fit, x_test) = (flat(&xs), flat(&ys), flat(&xt));
     for hidden in [vec![64, 64], vec![256, 256]] {
-        let mut rng = hw_sim::rng::seeded(1, 0);
+        let mut rng = stack_common::rng::seeded(1, 0);
         let mut net = GaussianPolicy::new(d, &hidden, 2, 0.0, &mut rng);
         let mut norm = ObsNorm::new(d, 5.0);
         norm.update(&x_fit);

@@ -5,7 +5,7 @@ use super::node::{ActionPacer, PolicyNode, Seen};
 use super::{EpisodeOutcome, LiveConfig, NodeError, task_geometry};
 use crate::deploy::DeployedPolicy;
 use crate::log::LogWriter;
-use crate::log::events::{Event, Outcome, Reset};
+use crate::log::events::{EpisodeEnd, Event, Reset};
 use crate::log::{RunConfig, RunMode};
 use crate::mix::{EpisodePolicy, MixedPolicy};
 use crate::observe::{ObsView, task_state};
@@ -266,7 +266,7 @@ impl LiveEpisode {
         let mut log = self.log;
         log.event(
             t_end,
-            &Event::Outcome(Outcome {
+            &Event::Outcome(EpisodeEnd {
                 stage: self.best_stage,
                 duration_s: Some(duration_s),
                 actions: Some(self.actions),

@@ -17,7 +17,7 @@ pub enum Event {
         stage: Stage,
     },
     /// The episode ended.
-    Outcome(Outcome),
+    Outcome(EpisodeEnd),
 }
 
 /// What an episode started from.
@@ -47,7 +47,7 @@ pub struct Reset {
 
 /// How an episode ended.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Outcome {
+pub struct EpisodeEnd {
     /// Best stage reached.
     pub stage: Stage,
     /// Live runs: hardware time from the first frame to the end, s.

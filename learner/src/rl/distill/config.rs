@@ -3,8 +3,8 @@
 
 use crate::rl::run::{RunError, TrainConfig, read_toml};
 use crate::rl::search::TouchSearchConfig;
-use hw_sim::FieldError;
 use serde::{Deserialize, Serialize};
+use shared_mem_schema::config::FieldError;
 use std::path::{Path, PathBuf};
 
 /// A distillation's configuration (TOML).

@@ -14,8 +14,8 @@ use crate::rl::search::{
 };
 use crate::rl::train::TrainerState;
 use crate::rl::vec::{BatchEnv, VecEnv};
-use hw_sim::rng;
 use learner_node::progress::Progress;
+use stack_common::rng;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
