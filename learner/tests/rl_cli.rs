@@ -193,6 +193,12 @@ fn ppo_trains_and_the_evaluation_takes_transfer_and_perturbations() {
     let calm = eval(&[], "calm.json");
     let again = eval(&[], "again.json");
     assert_eq!(calm, again, "an evaluation is repeatable");
+    // Actions drawn from the Gaussian: seeded by the episode, so repeatable,
+    // and not the mean's episode.
+    let sampled = eval(&["--sample"], "sampled.json");
+    assert!(sampled.sampled && !calm.sampled);
+    assert_eq!(sampled, eval(&["--sample"], "sampled-again.json"));
+    assert_ne!(calm.normalised, sampled.normalised, "sampled actions");
     // The same seed and policy: only the perturbation differs.
     let pushed = eval(
         &["--set", "env.world.perturbations.random_pushes=3"],

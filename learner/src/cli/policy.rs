@@ -87,6 +87,10 @@ pub enum PolicyCmd {
         /// paper's choice).
         #[arg(long)]
         last: bool,
+        /// Draw each action from the policy's Gaussian, as in training
+        /// (seeded by the episode), instead of taking its mean.
+        #[arg(long)]
+        sample: bool,
     },
 }
 
@@ -142,6 +146,7 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
             sets,
             json,
             last,
+            sample,
         } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             let c = run::read_checkpoint(&checkpoint)?;
@@ -156,12 +161,18 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
             );
             let chosen = c.chosen_policy(last);
             println!("evaluating {chosen}");
-            let r = run::evaluate(chosen.policy, &cfg, episodes, seed, stop)?;
+            let act = if sample {
+                run::Act::Sample
+            } else {
+                run::Act::Mean
+            };
+            let r = run::evaluate_acting(chosen.policy, &cfg, episodes, seed, act, stop)?;
             println!(
-                "{} episodes ({} peg, trained on {}): normalised reward {:.3}",
+                "{} episodes ({} peg, trained on {}, {} action): normalised reward {:.3}",
                 r.episodes,
                 cfg.env.world.task.peg.name(),
                 trained_on.name(),
+                if sample { "sampled" } else { "mean" },
                 r.mean_normalised
             );
             for o in Outcome::ALL.into_iter().rev() {

@@ -651,6 +651,22 @@ pub struct EvalReport {
     pub mean_normalised: f64,
     /// Normalised reward of each episode, in seed order.
     pub normalised: Vec<f64>,
+    /// Whether the actions were drawn from the policy's Gaussian
+    /// ([`Act::Sample`]) rather than its mean.
+    #[serde(default)]
+    pub sampled: bool,
+}
+
+/// How an evaluated policy acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Act {
+    /// Its mean action (the paper's and this project's default).
+    #[default]
+    Mean,
+    /// An action drawn from its Gaussian, as in training, from a generator
+    /// seeded by the episode's seed (repeatable): a memoryless policy's
+    /// noise is part of how it searches.
+    Sample,
 }
 
 /// Runs `episodes` episodes (seeds `seed`, `seed + 1`, …) of `policy`'s
@@ -661,6 +677,18 @@ pub fn evaluate(
     cfg: &TrainConfig,
     episodes: usize,
     seed: u64,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<EvalReport, RunError> {
+    evaluate_acting(policy, cfg, episodes, seed, Act::Mean, stop)
+}
+
+/// [`evaluate`], the policy acting as `act` says.
+pub fn evaluate_acting(
+    policy: &GaussianPolicy,
+    cfg: &TrainConfig,
+    episodes: usize,
+    seed: u64,
+    act: Act,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<EvalReport, RunError> {
     let n = cfg.num_envs.clamp(1, episodes.max(1));
@@ -684,9 +712,13 @@ pub fn evaluate(
                 break;
             }
             env.reset(seed + k as u64, camera)?;
+            let mut rng = stack_common::rng::seeded(seed + k as u64, 0xe7a1);
             loop {
                 observer.observe(&[env.view().expect("reset")], &mut obs);
-                let a = policy.means(&obs);
+                let a = match act {
+                    Act::Mean => policy.means(&obs),
+                    Act::Sample => policy.sample(&obs, &mut rng),
+                };
                 let o = env.step(&a, camera)?;
                 if o.done() {
                     done.push((k, o));
@@ -714,5 +746,6 @@ pub fn evaluate(
         mean_normalised: norm.iter().sum::<f64>() / episodes.max(1) as f64,
         normalised: norm,
         outcomes,
+        sampled: act == Act::Sample,
     })
 }
