@@ -50,8 +50,12 @@ trap 'rm -rf "$quick_dir"' EXIT
 "$target_dir/debug/examples/render_frames" "$quick_dir/frames" square
 "$target_dir/debug/examples/fuzz_cycle" 200 1
 "$target_dir/debug/robot-model" robot-model/urdf/panda.urdf --q "0 -0.3 0 -2 0 1.6 0.8" --frame peg_tip
+# The representation's benchmarks: every convolution layer under each
+# kernel choice, and a training step and both inference paths.
+"$target_dir/debug/examples/conv_bench" --quick
+"$target_dir/debug/examples/repr_bench" --quick
 # TODO (lead): the learner's benchmarks and examples named in README.md and
-# docs/performance.md (env_bench, repr_bench, conv_bench; the research probes
+# docs/performance.md (env_bench; the research probes
 # rl_probe, touch_probe, distill_fit, repr_probe, trajectory_target, which
 # are moving to lab/), and the tests crate's `jitter` binary, each with a
 # quick mode here once they have settled where they live.
