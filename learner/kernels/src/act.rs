@@ -175,7 +175,6 @@ impl<B: Backend + ActTrain, C: CheckpointStrategy> ActTrain for Autodiff<B, C> {
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// Values and input gradient against the composition the model used
     /// before, `0.1·x + 0.9·relu(x)` (whose gradient at 0 is the slope, as

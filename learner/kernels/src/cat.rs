@@ -180,7 +180,6 @@ impl<B: Backend + CatTrain, C: CheckpointStrategy> CatTrain for Autodiff<B, C> {
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// Values and both inputs' gradients against burn's `cat` under
     /// autodiff, with the second input a broadcast view (the flow

@@ -1,7 +1,7 @@
 //! What the operations' `flex` passes share: f32 storage in and out, and
 //! outputs allocated without zeroing.
 
-use burn::backend::{DType, TensorMetadata, flex::FlexTensor};
+use burn::backend::{DType, flex::FlexTensor};
 use std::mem::MaybeUninit;
 
 /// Values per rayon task of the elementwise passes: large enough that a

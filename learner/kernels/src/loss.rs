@@ -408,7 +408,6 @@ impl<B: Backend + LossTrain, C: CheckpointStrategy> LossTrain for Autodiff<B, C>
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// The endpoint error's values and gradient against the same formula of
     /// burn's tensor operations (tracked op by op by autodiff), on a flow of

@@ -273,7 +273,6 @@ impl<B: Backend + ResizeTrain, C: CheckpointStrategy> ResizeTrain for Autodiff<B
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// flex's passes against the products form (the GPU backends' default
     /// bodies, run on flex's primitives), forward and adjoint, on the

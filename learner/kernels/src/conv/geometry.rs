@@ -178,7 +178,7 @@ pub(super) fn two_mut(
 
 /// Whether `g`'s forward pass (on its [`Shifted`](super::shifted::Shifted)
 /// layout) takes [`direct`](mod@direct)'s kernel.
-pub(super) fn direct(g: &Geometry) -> bool {
+pub(super) fn direct_forward(g: &Geometry) -> bool {
     !g.settings.products_only() && direct::covers(g.cout, g.wo)
 }
 

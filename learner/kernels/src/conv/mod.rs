@@ -74,7 +74,7 @@ use burn::backend::{Flex, flex::FlexTensor};
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::prelude::*;
-use geometry::{Geometry, add_bias_grad, direct, direct_weight_grad};
+use geometry::{Geometry, add_bias_grad, direct_forward, direct_weight_grad};
 use grouped::{forward_grouped, grouped, wb_backward_grouped, x_backward_grouped};
 use rayon::prelude::*;
 use shifted::{
@@ -287,7 +287,7 @@ fn forward(g: &Geometry, x: &[f32], w: &[f32], b: &[f32], y: &mut [MaybeUninit<f
         "conv2d: the input, weight, bias or output does not match the layer's shape"
     );
     // A stacked layer the kernel covers reads its views tap by tap too.
-    let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct(g)));
+    let by_taps = Shifted::of(g).or_else(|| Shifted::stacked(g).filter(|_| direct_forward(g)));
     if grouped(g) {
         forward_grouped(g, x, w, b, y)
     } else if let Some(sh) = by_taps {

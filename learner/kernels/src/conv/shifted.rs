@@ -5,7 +5,9 @@
 //! [`direct`](mod@direct)'s second kernel.
 
 use super::direct;
-use super::geometry::{Geometry, add_bias_grad, direct, gemm, per_task, sum_grads, two_mut};
+use super::geometry::{
+    Geometry, add_bias_grad, direct_forward, gemm, per_task, sum_grads, two_mut,
+};
 use crate::flex::zeroed;
 use faer::{MatMut, MatRef};
 use rayon::prelude::*;
@@ -31,14 +33,14 @@ use std::ops::Range;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Shifted {
     /// Stride.
-    s: usize,
+    pub(super) s: usize,
     /// Row length of a phase plane (the padded row length for stride 1).
-    wq: usize,
+    pub(super) wq: usize,
     /// Values per phase plane of a channel, with `⌈k/s⌉ − 1` zeros after it
     /// so that the last tap's view stays inside.
-    plane: usize,
+    pub(super) plane: usize,
     /// Output positions computed per channel (`Ho·wq`).
-    n: usize,
+    pub(super) n: usize,
 }
 
 /// Strided layers with fewer input channels are not [`Shifted`]: a tap's
@@ -50,7 +52,7 @@ pub(super) const PHASED_MIN_CIN: usize = 8;
 impl Shifted {
     /// The layer as k² products over views: stride 1 with a kernel larger
     /// than 1, or strided with at least [`PHASED_MIN_CIN`] input channels.
-    fn of(g: &Geometry) -> Option<Self> {
+    pub(super) fn of(g: &Geometry) -> Option<Self> {
         let s = g.stride;
         let usable = if s == 1 {
             g.k > 1
@@ -64,11 +66,11 @@ impl Shifted {
     /// its im2col matrix is stacked from the split input's tap views, each
     /// row one contiguous copy (`im2col` gathers every s-th value and fills
     /// the padding row by row, 9 % of a training step in a profile).
-    fn stacked(g: &Geometry) -> Option<Self> {
+    pub(super) fn stacked(g: &Geometry) -> Option<Self> {
         (g.stride > 1 && g.k >= g.stride && g.cin < PHASED_MIN_CIN).then(|| Self::layout(g))
     }
 
-    fn layout(g: &Geometry) -> Self {
+    pub(super) fn layout(g: &Geometry) -> Self {
         let s = g.stride;
         let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
         let wq = wp.div_ceil(s);
@@ -81,18 +83,18 @@ impl Shifted {
     }
 
     /// Values of one sample's split input: s² phases of `Cin` planes.
-    fn len(&self, g: &Geometry) -> usize {
+    pub(super) fn len(&self, g: &Geometry) -> usize {
         self.s * self.s * g.cin * self.plane
     }
 
     /// Where tap `t` (`ky·k + kx`) starts in the split input.
-    fn offset(&self, g: &Geometry, t: usize) -> usize {
+    pub(super) fn offset(&self, g: &Geometry, t: usize) -> usize {
         let (ky, kx, s) = (t / g.k, t % g.k, self.s);
         ((ky % s) * s + kx % s) * g.cin * self.plane + (ky / s) * self.wq + kx / s
     }
 
     /// Where input position `(c, iy, ix)` lies in the split input.
-    fn at(&self, g: &Geometry, c: usize, iy: usize, ix: usize) -> usize {
+    pub(super) fn at(&self, g: &Geometry, c: usize, iy: usize, ix: usize) -> usize {
         let (py, px, s) = (iy + g.pad, ix + g.pad, self.s);
         ((py % s) * s + px % s) * g.cin * self.plane + c * self.plane + (py / s) * self.wq + px / s
     }
@@ -103,7 +105,7 @@ impl Shifted {
     /// per rayon task, reused sample after sample of one layer call).
     /// Zeroing it whole per sample took about 1 % of a training step (a
     /// profile).
-    fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
+    pub(super) fn pad(&self, g: &Geometry, x: &[f32], xp: &mut [f32]) {
         for c in 0..g.cin {
             for iy in 0..g.h {
                 let src = &x[(c * g.h + iy) * g.w..][..g.w];
@@ -143,7 +145,7 @@ impl Shifted {
 
     /// The adjoint of [`Shifted::pad`]: the image positions of `xp` into
     /// `dx [Cin, H, W]` (the padding's dropped).
-    fn unpad(&self, g: &Geometry, xp: &[f32], dx: &mut [f32]) {
+    pub(super) fn unpad(&self, g: &Geometry, xp: &[f32], dx: &mut [f32]) {
         for c in 0..g.cin {
             for iy in 0..g.h {
                 let dst = &mut dx[(c * g.h + iy) * g.w..][..g.w];
@@ -158,13 +160,13 @@ impl Shifted {
     }
 
     /// Each tap's [`Shifted::offset`], for [`Shifted::views`].
-    fn tap_offsets(&self, g: &Geometry) -> Vec<usize> {
+    pub(super) fn tap_offsets(&self, g: &Geometry) -> Vec<usize> {
         (0..g.k * g.k).map(|t| self.offset(g, t)).collect()
     }
 
     /// The split input as [`direct`](mod@direct)'s kernels read it, the taps at
     /// `offsets` (from [`Shifted::tap_offsets`]).
-    fn views<'a>(&self, offsets: &'a [usize]) -> direct::Views<'a> {
+    pub(super) fn views<'a>(&self, offsets: &'a [usize]) -> direct::Views<'a> {
         direct::Views {
             plane: self.plane,
             wq: self.wq,
@@ -173,7 +175,7 @@ impl Shifted {
     }
 
     /// The split input seen from tap `t`: `[Cin, Ho·wq]`.
-    fn view<'a>(&self, g: &Geometry, xp: &'a [f32], t: usize) -> MatRef<'a, f32> {
+    pub(super) fn view<'a>(&self, g: &Geometry, xp: &'a [f32], t: usize) -> MatRef<'a, f32> {
         let off = self.offset(g, t);
         MatRef::from_row_major_slice_with_stride(&xp[off..], g.cin, self.n, self.plane)
     }
@@ -183,7 +185,12 @@ impl Shifted {
     /// two strides swapped (row stride 1, column stride the row stride), so
     /// a product into it writes outside the view (a heap corruption,
     /// measured here); its column-major constructor is right.
-    fn view_mut<'a>(&self, g: &Geometry, xp: &'a mut [f32], t: usize) -> MatMut<'a, f32> {
+    pub(super) fn view_mut<'a>(
+        &self,
+        g: &Geometry,
+        xp: &'a mut [f32],
+        t: usize,
+    ) -> MatMut<'a, f32> {
         let off = self.offset(g, t);
         MatMut::from_column_major_slice_with_stride_mut(&mut xp[off..], self.n, g.cin, self.plane)
             .transpose_mut()
@@ -233,7 +240,7 @@ pub(super) enum Kernel<'a> {
 
 impl Kernel<'_> {
     /// The weights as given.
-    fn weights(&self) -> &[f32] {
+    pub(super) fn weights(&self) -> &[f32] {
         match *self {
             Kernel::Own(w) | Kernel::Flipped(w) => w,
         }
@@ -241,7 +248,7 @@ impl Kernel<'_> {
 
     /// Tap `t`'s weight from input channel `ci` to output channel `co` of
     /// the convolution `g` applies.
-    fn at(&self, g: &Geometry, t: usize, co: usize, ci: usize) -> f32 {
+    pub(super) fn at(&self, g: &Geometry, t: usize, co: usize, ci: usize) -> f32 {
         let kk = g.k * g.k;
         match *self {
             Kernel::Own(w) => w[(co * g.cin + ci) * kk + t],
@@ -251,7 +258,7 @@ impl Kernel<'_> {
 
     /// Tap `t`'s `[Cout, Cin]` matrix for the convolution `g` applies, from
     /// `wt`, [`taps_major`] of [`Kernel::weights`].
-    fn tap<'b>(&self, g: &Geometry, wt: &'b [f32], t: usize) -> MatRef<'b, f32> {
+    pub(super) fn tap<'b>(&self, g: &Geometry, wt: &'b [f32], t: usize) -> MatRef<'b, f32> {
         match *self {
             Kernel::Own(_) => tap(g, wt, t),
             Kernel::Flipped(_) => {
@@ -274,7 +281,7 @@ pub(super) fn forward_shifted(
 ) {
     let outs = g.outs();
     let kk = g.k * g.k;
-    let direct = direct(g);
+    let direct = direct_forward(g);
     let packed =
         direct.then(|| direct::pack(g.cout, g.cin, kk, |t, co, ci| kernel.at(g, t, co, ci)));
     // (Both layouts hold Cout·Cin per tap, so the flipped layer's is built

@@ -3,7 +3,7 @@
 //! im2col tile of a band of output rows stacked from the split input by
 //! contiguous copies, one faer product per band.
 
-use super::banded::{BAND_TILE, band, band_rows};
+use super::banded::{BAND_TILE, band};
 use super::geometry::{Geometry, add_bias_grad, gemm, per_task, sum_grads};
 #[cfg(doc)]
 use super::shifted::PHASED_MIN_CIN;
@@ -15,7 +15,7 @@ use std::mem::MaybeUninit;
 use std::ops::Range;
 
 /// Output rows per band of a [`Shifted::stacked`] layer, its stacked tile
-/// kept within [`band_rows`]'s size.
+/// kept within [`band_rows`](super::banded::band_rows)'s size.
 pub(super) fn stacked_rows(g: &Geometry, sh: Shifted) -> usize {
     (BAND_TILE / (g.taps() * sh.wq).max(1)).clamp(1, g.ho)
 }

@@ -252,11 +252,11 @@ fn shifted_paths_match_im2col() {
         // Every other case 3 columns wider than high.
         let width = if i % 2 == 1 { side + 3 } else { side };
         let g = Geometry::new(&[b, cin, side, width], &[cout, cin, k, k], s, p);
-        direct_passes += usize::from(direct(&g));
+        direct_passes += usize::from(direct_forward(&g));
         if s == 1 {
             // The input gradient's own convolution (padded by k − 1 − p).
             let gt = Geometry::new(&[b, cout, g.ho, g.wo], &[cin, cout, k, k], 1, k - 1 - p);
-            direct_passes += usize::from(direct(&gt));
+            direct_passes += usize::from(direct_forward(&gt));
         }
         let sh = Shifted::of(&g).expect("a shifted geometry");
         let mut rng = fastrand::Rng::with_seed(3);
@@ -335,7 +335,7 @@ fn grouped_paths_match_im2col() {
             short_last += usize::from(!b.is_multiple_of(m));
             tiled += usize::from(groups > 1);
             assert!(
-                g.outs() <= GROUPED_OUTS && grouped(&g),
+                g.outs() <= crate::DEFAULT_GROUPED_OUTS && grouped(&g),
                 "{g:?} is not grouped: grouped_outs set below the default?"
             );
             let mut rng = fastrand::Rng::with_seed(11);
@@ -511,7 +511,7 @@ fn settings_choose_the_routes_not_the_values() {
         let ours = Geometry::new(&[b, cin, side, side], &[cout, cin, k, k], s, p)
             .with_settings(KernelSettings::DEFAULT);
         let other = ours.with_settings(settings);
-        assert!(!direct(&other) && !direct_weight_grad(&other) && !split_direct(&other));
+        assert!(!direct_forward(&other) && !direct_weight_grad(&other) && !split_direct(&other));
         if settings.grouped_outs == 0 {
             assert!(grouped(&ours) && !grouped(&other));
         }
