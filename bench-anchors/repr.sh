@@ -3,8 +3,8 @@
 # against PyTorch running the same architecture (bench-anchors/torch-repr/bench.py),
 # alternately, ROUNDS rounds, on the same machine in one run.
 #   training: one Adam step of the Full Model at batch 64, 128×128 px, 2 threads,
-#   with the training convolution (learner::models::conv_train, "ours-conv")
-#   and with burn's own (LEARNER_CONV=burn, "burn-flex")
+#   with the training kernels (learner-kernels, "ours-conv")
+#   and with burn's own (--kernels burn, "burn-flex")
 #   inference: z means at batch 1 and 64, one thread: burn's encode ("burn-flex")
 #   and the inference API's CPU path ("ours-fast", learner::models::fast)
 # PyTorch is installed from PyPI into .venv-torch (a benchmark anchor, not a
@@ -19,7 +19,7 @@ source bench-anchors/repr-setup.sh
 for r in $(seq 1 "$ROUNDS"); do
     echo "== round $r of $ROUNDS"
     RAYON_NUM_THREADS=2 $BIN train 64 5 | tee -a "$OUT"
-    LEARNER_CONV=burn RAYON_NUM_THREADS=2 $BIN train 64 5 | tee -a "$OUT"
+    RAYON_NUM_THREADS=2 $BIN --kernels burn train 64 5 | tee -a "$OUT"
     $PY train 64 5 2 | tee -a "$OUT"
     RAYON_NUM_THREADS=1 $BIN infer 1 30 | tee -a "$OUT"
     RAYON_NUM_THREADS=1 $BIN infer-fast 1 30 | tee -a "$OUT"

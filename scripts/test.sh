@@ -51,9 +51,10 @@ trap 'rm -rf "$quick_dir"' EXIT
 "$target_dir/debug/examples/fuzz_cycle" 200 1
 "$target_dir/debug/robot-model" robot-model/urdf/panda.urdf --q "0 -0.3 0 -2 0 1.6 0.8" --frame peg_tip
 "$target_dir/debug/examples/env_bench" --quick
+# The representation's benchmarks: every convolution layer under each
+# kernel choice, and a training step and both inference paths.
+"$target_dir/debug/examples/conv_bench" --quick
+"$target_dir/debug/examples/repr_bench" --quick
 # The research probes are lab code (lab/probes/, a workspace of their own,
 # built on demand), not run here.
-# TODO (lead): the learner's other benchmarks named in README.md and
-# docs/performance.md (repr_bench, conv_bench), and the tests crate's
-# `jitter` binary, each with a quick mode here once they have settled where
-# they live.
+# TODO (lead): the tests crate's `jitter` binary, with a quick mode here.

@@ -3,19 +3,28 @@
 //! depth encoders and the flow decoder (128×128 px, d = 128), the forward
 //! pass and the backward pass (input, weight and bias gradients) at batch
 //! B on burn's `flex` backend under autodiff, through the model's own call
-//! (`conv_train::conv2d`, `conv_train::conv_transpose2d`); the median over
+//! (`learner_kernels::conv2d`, `learner_kernels::conv_transpose2d`); the median over
 //! `reps` after one warm-up, in ms and in GFLOP/s of the layer's
 //! multiply-adds (2 per MAC; the backward pass counts twice the forward's,
 //! whether or not the layer's input needs its gradient). One JSON line per
-//! layer. `LEARNER_CONV=burn` times burn's own convolution instead,
-//! `LEARNER_CONV=products` ours without `conv_direct`'s kernel.
+//! layer. `--kernels burn` times burn's own convolution instead,
+//! `--kernels products` ours without the direct kernels (`ours`, the
+//! default: `learner_kernels::KernelChoice`); `--grouped-outs N` groups
+//! the maps of up to N positions (0: none; default
+//! `learner_kernels::DEFAULT_GROUPED_OUTS`).
 //!
-//! Usage: `conv_bench BATCH REPS` (threads: RAYON_NUM_THREADS).
+//! Usage: `conv_bench [--kernels ours|products|burn] [--grouped-outs N]
+//! BATCH REPS` (threads: RAYON_NUM_THREADS), or `conv_bench --quick`: every
+//! layer once at batch 1 under each choice of kernels, a few seconds in a
+//! debug build; it exercises the code and measures nothing.
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2dConfig, ConvTranspose2dConfig};
 use burn::prelude::*;
-use learner::models::conv_train::{conv_transpose2d, conv2d};
+use learner_kernels::{
+    DEFAULT_GROUPED_OUTS, KernelChoice, KernelSettings, conv_transpose2d, conv2d,
+    set_kernel_settings,
+};
 use std::time::Instant;
 
 fn median(mut xs: Vec<f64>) -> f64 {
@@ -74,17 +83,50 @@ const LAYERS: [Layer; 25] = [
     ("mask", 1, 64, 1, 32, 3, 1, 1, false),
 ];
 
+const USAGE: &str =
+    "usage: conv_bench [--kernels ours|products|burn] [--grouped-outs N] BATCH REPS | --quick";
+
+/// The value after flag `name` in `args`, removed with it.
+fn take_flag(args: &mut Vec<String>, name: &str) -> Option<String> {
+    let i = args.iter().position(|a| a == name)?;
+    assert!(i + 1 < args.len(), "{USAGE}");
+    let v = args.remove(i + 1);
+    args.remove(i);
+    Some(v)
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: conv_bench BATCH REPS";
-    let b: usize = args.get(1).expect(usage).parse().expect(usage);
-    let reps: usize = args.get(2).expect(usage).parse().expect(usage);
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let kernels = take_flag(&mut args, "--kernels").map(|v| v.parse().expect(USAGE));
+    let grouped_outs = take_flag(&mut args, "--grouped-outs")
+        .map_or(DEFAULT_GROUPED_OUTS, |v| v.parse().expect(USAGE));
+    let settings = |choice| KernelSettings {
+        choice,
+        grouped_outs,
+    };
+    if args.first().is_some_and(|a| a == "--quick") {
+        let choices = kernels.map_or(KernelChoice::ALL.to_vec(), |k| vec![k]);
+        for choice in choices {
+            set_kernel_settings(settings(choice));
+            bench(1, 1);
+        }
+        return;
+    }
+    let b: usize = args.first().expect(USAGE).parse().expect(USAGE);
+    let reps: usize = args.get(1).expect(USAGE).parse().expect(USAGE);
+    set_kernel_settings(settings(kernels.unwrap_or_default()));
+    bench(b, reps);
+}
+
+/// Every layer at batch `b`, the median over `reps`, under the kernel
+/// settings in force.
+fn bench(b: usize, reps: usize) {
     let threads = rayon::current_num_threads();
     let device = Device::flex().autodiff();
-    let side_name = match std::env::var("LEARNER_CONV").as_deref() {
-        Ok("burn") => "burn-flex",
-        Ok("products") => "ours-products",
-        _ => "ours-conv",
+    let side_name = match learner_kernels::kernel_settings().choice {
+        KernelChoice::Burn => "burn-flex",
+        KernelChoice::Products => "ours-products",
+        KernelChoice::Ours => "ours-conv",
     };
     for (i, &(name, count, cin, cout, side, k, s, p, transposed)) in LAYERS.iter().enumerate() {
         let x = filled([b, cin, side, side], i as u64, &device).require_grad();

@@ -5,9 +5,13 @@
 //! (bench-anchors/torch-repr/bench.py) times the same architecture; the
 //! script bench-anchors/repr.sh runs both alternately.
 //!
-//! Usage: `repr_bench train|infer|infer-fast BATCH STEPS [DEPTH_CONVS_PER_STAGE]`
-//! (threads: RAYON_NUM_THREADS; the last argument, default 3, measures the
-//! depth encoder's share). `infer` times burn's `encode`, `infer-fast` the
+//! Usage: `repr_bench [--kernels ours|products|burn] train|infer|infer-fast
+//! BATCH STEPS [DEPTH_CONVS_PER_STAGE]` (threads: RAYON_NUM_THREADS; the
+//! last argument, default 3, measures the depth encoder's share;
+//! `--kernels burn` trains with burn's own operations instead of
+//! learner-kernels', `learner_kernels::KernelChoice`), or `repr_bench
+//! --quick`: one step of each at batch 2 and 64 px, a few seconds in a
+//! debug build; it exercises the code and measures nothing. `infer` times burn's `encode`, `infer-fast` the
 //! CPU path the inference API takes (`learner::models::fast`).
 //! `REPR_BENCH_DEVICE=cuda|vulkan` runs `train` and `infer` on that burn GPU
 //! backend (a build with the feature of that name); the side is then named
@@ -20,6 +24,7 @@ use learner::models::{
     InputArrays, InputTensors, LabelArrays, LossWeights, Modalities, ModelConfig, ReprNet, init,
 };
 use learner::train::DeviceKind;
+use learner_kernels::KernelChoice;
 use std::time::Instant;
 
 fn median(mut xs: Vec<f64>) -> f64 {
@@ -27,17 +32,40 @@ fn median(mut xs: Vec<f64>) -> f64 {
     xs[xs.len() / 2]
 }
 
+const USAGE: &str = "usage: repr_bench [--kernels ours|products|burn] train|infer|infer-fast \
+                     BATCH STEPS [DEPTH_CONVS_PER_STAGE] | --quick";
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: repr_bench train|infer|infer-fast BATCH STEPS [DEPTH_CONVS_PER_STAGE]";
-    let what = args.get(1).expect(usage).clone();
-    let b: usize = args.get(2).expect(usage).parse().expect(usage);
-    let steps: usize = args.get(3).expect(usage).parse().expect(usage);
-    let threads = rayon_threads();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    if let Some(i) = args.iter().position(|a| a == "--kernels") {
+        assert!(i + 1 < args.len(), "{USAGE}");
+        let choice: KernelChoice = args.remove(i + 1).parse().expect(USAGE);
+        args.remove(i);
+        learner_kernels::set_kernel_choice(choice);
+    }
+    if args.first().is_some_and(|a| a == "--quick") {
+        let cfg = ModelConfig {
+            image_size: 64,
+            ..ModelConfig::default()
+        };
+        for what in ["train", "infer", "infer-fast"] {
+            bench(what, 2, 1, &cfg);
+        }
+        return;
+    }
+    let what = args.first().expect(USAGE).clone();
+    let b: usize = args.get(1).expect(USAGE).parse().expect(USAGE);
+    let steps: usize = args.get(2).expect(USAGE).parse().expect(USAGE);
     let cfg = ModelConfig {
-        depth_convs_per_stage: args.get(4).map_or(3, |v| v.parse().expect(usage)),
+        depth_convs_per_stage: args.get(3).map_or(3, |v| v.parse().expect(USAGE)),
         ..ModelConfig::default()
     };
+    bench(&what, b, steps, &cfg);
+}
+
+/// `what` at batch `b`, the median over `steps`, as one JSON line.
+fn bench(what: &str, b: usize, steps: usize, cfg: &ModelConfig) {
+    let threads = rayon_threads();
     let (s, d) = (cfg.image_size, cfg.latent_dim);
     let mut r = stack_common::rng::seeded(1, 0);
     let mut randn = |n: usize| -> Vec<f32> {
@@ -65,7 +93,7 @@ fn main() {
         proprio: randn(b * 8),
     };
     let x = InputTensors::new(&arrays, &dev);
-    let mut net = init::seeded(ReprNet::new(&cfg, &dev), 0);
+    let mut net = init::seeded(ReprNet::new(cfg, &dev), 0);
     let mut times = Vec::new();
     if train {
         let sign = |v: Vec<f32>| v.into_iter().map(|x| (x > 0.0) as u8 as f32).collect();
@@ -90,7 +118,7 @@ fn main() {
         for i in 0..steps + 2 {
             let t = Instant::now();
             let out = net.forward(
-                &cfg,
+                cfg,
                 &x,
                 y.action.clone(),
                 Some(eps.clone()),
@@ -112,13 +140,12 @@ fn main() {
         }
         let step = median(times);
         let phase = |k: usize| 1e3 * median(phases.iter().map(|p| p[k]).collect());
-        // `LEARNER_CONV=burn`: burn's own convolution (learner::models::conv_train).
-        let side = if let Some(g) = gpu_side {
-            g
-        } else if std::env::var("LEARNER_CONV").is_ok_and(|v| v == "burn") {
-            "burn-flex"
-        } else {
-            "ours-conv"
+        // `--kernels burn`: burn's own operations (learner_kernels::KernelChoice).
+        let side = match (gpu_side, learner_kernels::kernel_settings().choice) {
+            (Some(g), _) => g,
+            (None, KernelChoice::Burn) => "burn-flex",
+            (None, KernelChoice::Products) => "ours-products",
+            (None, KernelChoice::Ours) => "ours-conv",
         };
         println!(
             "{{\"side\": \"{side}\", \"what\": \"train\", \"batch\": {b}, \"threads\": {threads}, \"step_s\": {step:.5}, \"samples_per_s\": {:.2}, \"steps\": {steps}, \"depth_convs_per_stage\": {}, \"forward_ms\": {:.1}, \"backward_ms\": {:.1}, \"optimiser_ms\": {:.1}}}",
@@ -130,12 +157,12 @@ fn main() {
         );
     } else {
         let fast = (what == "infer-fast")
-            .then(|| learner::models::fast::fast_encoder(&net, &cfg).with_threads(threads));
+            .then(|| learner::models::fast::fast_encoder(&net, cfg).with_threads(threads));
         for i in 0..steps + 3 {
             let t = Instant::now();
             match &fast {
                 Some(f) => drop(f.encode(&arrays, Modalities::ALL)),
-                None => drop(net.encode(&cfg, &x, Modalities::ALL).mean.into_data()),
+                None => drop(net.encode(cfg, &x, Modalities::ALL).mean.into_data()),
             }
             if i >= 3 {
                 times.push(t.elapsed().as_secs_f64());

@@ -3,15 +3,12 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
-use super::cat_train::CatTrain;
-use super::conv_train::{burns_own, conv_transpose2d, conv2d};
 use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
-use super::resize_train::{self, ResizeTrain};
-use burn::backend::Dispatch;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
+use learner_kernels::{conv_transpose2d, conv2d};
 
 /// Width of the action encoding.
 const ACTION_FEATURES: usize = 32;
@@ -68,33 +65,21 @@ fn up(cin: usize, cout: usize, device: &Device) -> ConvTranspose2d {
         .init(device)
 }
 
-/// `a` and `b` joined along the channels: one operation with its own
-/// backward pass ([`super::cat_train`]), or burn's `cat` under
-/// `LEARNER_CONV=burn`.
+/// `a` and `b` joined along the channels: [`learner_kernels::cat_channels`],
+/// one operation with its own backward pass (burn's `cat` under
+/// `KernelChoice::Burn`).
 fn join(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
-    if burns_own() {
-        return Tensor::cat(vec![a, b], 1);
-    }
-    Tensor::from_dispatch(<Dispatch as CatTrain>::cat_channels_train(
-        a.into_dispatch(),
-        b.into_dispatch(),
-    ))
+    learner_kernels::cat_channels(a, b)
 }
 
-/// Bilinear upsampling by `factor` with aligned corners, one operation with
-/// its own backward pass ([`super::resize_train`]; on the GPU backends two
-/// products with constant interpolation matrices, `U_h · X · U_wᵀ`: burn's
-/// GPU backends have no backward pass for `interpolate`). With
-/// `LEARNER_CONV=burn` those products of burn's operations, tracked one by
-/// one. The same map as `interpolate(.., Bilinear, align_corners)`, tested
-/// against it.
+/// Bilinear upsampling by `factor` with aligned corners:
+/// [`learner_kernels::upsample_bilinear`], one operation with its own
+/// backward pass (on the GPU backends two products with constant
+/// interpolation matrices: burn's GPU backends have no backward pass for
+/// `interpolate`). The same map as `interpolate(.., Bilinear,
+/// align_corners)`, tested against it.
 fn upsample(x: Tensor<4>, factor: usize) -> Tensor<4> {
-    let x = x.into_dispatch();
-    Tensor::from_dispatch(if burns_own() {
-        resize_train::products::<Dispatch>(x, factor, false)
-    } else {
-        <Dispatch as ResizeTrain>::upsample_train(x, factor)
-    })
+    learner_kernels::upsample_bilinear(x, factor)
 }
 
 /// Channels of the up-convolutions, coarsest first.
@@ -276,7 +261,7 @@ mod tests {
             .fold(0.0, f32::max)
     }
 
-    /// Our upsampling (`resize_train` on flex) is burn's bilinear
+    /// Our upsampling (`learner_kernels::upsample_bilinear` on flex) is burn's bilinear
     /// interpolation, in value and in gradient, on a non-square map at both
     /// factors the decoders use, and
     /// on maps one pixel high and one pixel square (the reconstruction

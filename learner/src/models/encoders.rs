@@ -6,11 +6,8 @@
 use burn::nn::conv::{Conv1d, Conv1dConfig, Conv2d, Conv2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
-use burn::tensor::activation::relu;
 
-use super::act_train::ActTrain;
-use super::conv_train::{burns_own, conv2d};
-use burn::backend::Dispatch;
+use learner_kernels::conv2d;
 
 /// Slope of every leaky ReLU (the authors' code uses 0.1).
 pub const LEAKY_SLOPE: f64 = 0.1;
@@ -18,21 +15,12 @@ pub const LEAKY_SLOPE: f64 = 0.1;
 /// Six stride-2 layers bring an image of side S to S/64.
 pub const IMAGE_DOWNSAMPLE: usize = 64;
 
-/// Leaky ReLU with [`LEAKY_SLOPE`], as one operation with its own
-/// backward pass ([`super::act_train`]; one pass each way on the CPU).
-/// With `LEARNER_CONV=burn` (the benchmark's A/B switch) it is the
-/// composition `slope·x + (1 − slope)·relu(x)` of burn's primitives: ReLU
-/// has its own backward, while burn's `leaky_relu` is a comparison and a
-/// `mask_where` whose two passes took 11 % of a training step on `flex`
-/// (docs/performance.md).
+/// Leaky ReLU with [`LEAKY_SLOPE`]: [`learner_kernels::leaky_relu`], one
+/// operation with its own backward pass (one pass each way on the CPU;
+/// burn's primitives under `KernelChoice::Burn`, the benchmark's A/B
+/// switch).
 pub fn act<const D: usize>(x: Tensor<D>) -> Tensor<D> {
-    if burns_own() {
-        return x.clone().mul_scalar(LEAKY_SLOPE) + relu(x).mul_scalar(1.0 - LEAKY_SLOPE);
-    }
-    Tensor::from_dispatch(<Dispatch as ActTrain>::leaky_train(
-        x.into_dispatch(),
-        LEAKY_SLOPE,
-    ))
+    learner_kernels::leaky_relu(x, LEAKY_SLOPE)
 }
 
 /// A multilayer perceptron: leaky ReLU between layers, none after the last.

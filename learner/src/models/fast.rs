@@ -58,7 +58,7 @@ fn layers(mlp: &Mlp) -> Vec<Dense> {
 
 fn conv(c: &Conv2d) -> Conv {
     let [cout, cin, _, _] = c.weight.val().dims();
-    let (k, stride, pad) = super::conv_train::square(c);
+    let (k, stride, pad) = learner_kernels::conv2d_geometry(c);
     Conv {
         k,
         stride,

@@ -12,7 +12,7 @@
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::prelude::*;
-use hw_sim::rng;
+use stack_common::rng;
 
 struct SeededInit {
     rng: rng::SimRng,

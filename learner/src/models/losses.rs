@@ -7,11 +7,8 @@
 //! pairing loss is over every sample; the KL over every posterior.
 
 use super::config::LossWeights;
-use super::conv_train::burns_own;
 use super::inputs::LabelArrays;
-use super::loss_train::{self, LossTrain};
 use super::net::{Outputs, tensor};
-use burn::backend::Dispatch;
 use burn::prelude::*;
 
 /// Keeps the endpoint error's square root differentiable at zero flow.
@@ -71,30 +68,19 @@ impl LabelTensors {
 }
 
 /// Binary cross-entropy of `logits` against 0/1 `targets`, elementwise,
-/// in the stable form max(x, 0) − x·y + ln(1 + e^−|x|), as one operation
-/// with its own backward pass ([`super::loss_train`]); the targets get no
-/// gradient. With `LEARNER_CONV=burn` (the benchmark's A/B switch) it is
-/// the same form of burn's primitives.
+/// in the stable form max(x, 0) − x·y + ln(1 + e^−|x|):
+/// [`learner_kernels::bce_with_logits`], one operation with its own
+/// backward pass; the targets get no gradient.
 pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) -> Tensor<D> {
-    let (x, y) = (logits.into_dispatch(), targets.into_dispatch());
-    Tensor::from_dispatch(if burns_own() {
-        loss_train::composed::<Dispatch>(x, y)
-    } else {
-        <Dispatch as LossTrain>::bce_train(x, y)
-    })
+    learner_kernels::bce_with_logits(logits, targets)
 }
 
 /// Per-sample average endpoint error of `pred` against `target`, both
 /// `[B, 2, S, S]`: the mean over pixels of the flow vectors' distance, `[B]`.
-/// One operation with its own backward pass ([`super::loss_train`]); with
-/// `LEARNER_CONV=burn` the same formula of burn's primitives.
+/// [`learner_kernels::endpoint_error`], one operation with its own
+/// backward pass.
 pub fn endpoint_error(pred: Tensor<4>, target: Tensor<4>) -> Tensor<1> {
-    let (p, t, eps) = (pred.into_dispatch(), target.into_dispatch(), EPE_EPS);
-    Tensor::from_dispatch(if burns_own() {
-        loss_train::epe_composed::<Dispatch>(p, t, eps)
-    } else {
-        <Dispatch as LossTrain>::epe_train(p, t, eps)
-    })
+    learner_kernels::endpoint_error(pred, target, EPE_EPS)
 }
 
 fn per_sample_mean<const D: usize>(t: Tensor<D>) -> Tensor<1> {

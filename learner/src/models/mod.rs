@@ -13,14 +13,15 @@
 //!   use (a trained model's z means for a batch of observations); on the
 //!   CPU it runs [`fast`], a copy of the encoders' arithmetic outside burn.
 //!
+//! The training operations whose burn compositions were slow on the CPU
+//! (the convolutions, the leaky ReLU, the losses' elementwise parts, the
+//! upsampling, the channel concatenation) are the crate `learner_kernels`'
+//! (`learner/kernels`): the network's code calls its operations.
+//!
 //! Training loops, checkpoints and evaluation live in [`crate::train`];
 //! nothing here reads files except the exported model's loader.
 
-pub mod act_train;
-pub mod cat_train;
 pub mod config;
-mod conv_direct;
-pub mod conv_train;
 pub mod decoders;
 pub mod encoder;
 pub mod encoders;
@@ -28,10 +29,8 @@ pub mod fast;
 pub mod fusion;
 pub mod init;
 pub mod inputs;
-pub mod loss_train;
 pub mod losses;
 pub mod net;
-pub mod resize_train;
 
 pub use config::{EeTarget, LossWeights, Modalities, ModelConfig, ModelKind};
 pub use encoder::Encoder;

@@ -1,13 +1,13 @@
 //! Direct, register-blocked convolution kernels for the training path on
-//! x86-64 with AVX and FMA, for `conv_train`'s layers that read a
-//! zero-padded, possibly phase-split input (`conv_train::Shifted`) and whose
+//! x86-64 with AVX and FMA, for the convolution's layers that read a
+//! zero-padded, possibly phase-split input ([`super::shifted::Shifted`]) and whose
 //! output rows are a multiple of 16 wide and output channels a multiple of
 //! 4 (the depth encoder's 64², 32² and 16² stages, the RGB encoder's first
 //! three layers, the first layers of both):
 //!
 //! - [`forward`], the forward pass (and the stride-1 input gradient, itself
 //!   such a convolution, and each phase of a strided layer's input
-//!   gradient, `conv_train::x_backward_split`). Through faer a layer was k² products with an
+//!   gradient, [`super::split`]). Through faer a layer was k² products with an
 //!   inner dimension of `Cin` (16–64), each reading and adding into the
 //!   whole output: the 16-channel layers ran at about 27 GFLOP/s where wider
 //!   products reach 50 (docs/performance.md). Here each block of 6 (or 4)
@@ -17,9 +17,9 @@
 //!   input channel in registers over every output position, where faer's
 //!   products had a small output and a long inner dimension.
 //!
-//! It owns nothing but the arithmetic: `conv_train` builds the input and
+//! It owns nothing but the arithmetic: [`super`] builds the input and
 //! says where each tap's view starts; other geometries and other CPUs keep
-//! `conv_train`'s products.
+//! the other routes' products.
 
 use std::mem::MaybeUninit;
 
@@ -154,7 +154,7 @@ const GX: usize = 8;
 /// Whether [`weight_grad`] runs a layer with `cout` output channels and
 /// output rows `wo` wide on this CPU: multiples of [`CO`] and [`GX`] (its
 /// loads read whole rows of 8). Where it is faster than faer's products is
-/// `conv_train`'s choice.
+/// the convolution's choice ([`super::geometry::direct_weight_grad`]).
 pub(crate) fn runs_weight_grad(cout: usize, wo: usize) -> bool {
     cout.is_multiple_of(CO) && wo.is_multiple_of(GX) && cpu()
 }
@@ -492,7 +492,7 @@ mod tests {
             let packed = pack(cout, cin, kk, |t, co, ci| wat(co, ci, t));
             // SAFETY: `forward` writes every value.
             let y = unsafe {
-                crate::models::conv_train::written(cout * outs, |y| {
+                crate::flex::written(cout * outs, |y| {
                     forward(&xp, views, cin, &packed, &b, ho, wo, y)
                 })
             };

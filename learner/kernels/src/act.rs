@@ -11,7 +11,8 @@
 //! a positive slope both have the same sign, and the output is the tensor
 //! the next layer keeps for its own backward pass anyway.
 
-use super::conv_train::{f32s, flex_tensor, written};
+use crate::flex::{CHUNK, f32s, flex_tensor, written};
+use crate::kernel_settings;
 use burn::backend::autodiff::{
     Autodiff,
     checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
@@ -19,9 +20,29 @@ use burn::backend::autodiff::{
     ops::{Backward, Ops, OpsKind},
 };
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::backend::{Backend, Dispatch, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::prelude::*;
+use burn::tensor::activation::relu;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
+
+/// The leaky ReLU `x` where `x > 0`, else `slope·x` (`slope` in (0, 1)),
+/// elementwise and differentiable: one operation with its own backward
+/// pass ([`ActTrain`]; one pass each way on `flex`). Under
+/// [`KernelChoice::Burn`](crate::KernelChoice) it is the composition
+/// `slope·x + (1 − slope)·relu(x)` of burn's tensor operations: ReLU has
+/// its own backward, while burn's `leaky_relu` is a comparison and a
+/// `mask_where` whose two passes took 11 % of a training step on `flex`
+/// (docs/performance.md).
+pub fn leaky_relu<const D: usize>(x: Tensor<D>, slope: f64) -> Tensor<D> {
+    if kernel_settings().burns_own() {
+        return x.clone().mul_scalar(slope) + relu(x).mul_scalar(1.0 - slope);
+    }
+    Tensor::from_dispatch(<Dispatch as ActTrain>::leaky_train(
+        x.into_dispatch(),
+        slope,
+    ))
+}
 
 /// Elementwise leaky ReLU, differentiable.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
@@ -61,10 +82,6 @@ fn composed_backward<B: Backend>(
 
 #[cfg(any(feature = "cuda", feature = "vulkan"))]
 impl ActTrain for burn::backend::Cube {}
-
-/// Values per rayon task: large enough that a task is worth its start
-/// (this file's passes and [`super::loss_train`]'s).
-pub(super) const CHUNK: usize = 1 << 15;
 
 impl ActTrain for Flex {
     fn leaky_train(x: FlexTensor, slope: f64) -> FlexTensor {
@@ -158,7 +175,6 @@ impl<B: Backend + ActTrain, C: CheckpointStrategy> ActTrain for Autodiff<B, C> {
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// Values and input gradient against the composition the model used
     /// before, `0.1·x + 0.9·relu(x)` (whose gradient at 0 is the slope, as

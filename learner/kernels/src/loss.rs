@@ -12,8 +12,9 @@
 //! was six such passes forward and about as many backward, so it is one
 //! each way too. The targets are data: no gradient flows to them.
 
-use super::act_train::CHUNK;
-use super::conv_train::{f32s, flex_tensor, written};
+use crate::flex::CHUNK;
+use crate::flex::{f32s, flex_tensor, written};
+use crate::kernel_settings;
 use burn::backend::autodiff::{
     Autodiff,
     checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
@@ -21,10 +22,40 @@ use burn::backend::autodiff::{
     ops::{Backward, Ops, OpsKind},
 };
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::backend::{Backend, Dispatch, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::prelude::*;
 use burn::tensor::Shape;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
+
+/// Binary cross-entropy of `logits` against 0/1 `targets`, elementwise, in
+/// the stable form `max(x, 0) − x·y + ln(1 + e^−|x|)`: one operation with
+/// its own backward pass ([`LossTrain`]); the targets get no gradient.
+/// Under [`KernelChoice::Burn`](crate::KernelChoice) the same form of
+/// burn's primitives.
+pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) -> Tensor<D> {
+    let (x, y) = (logits.into_dispatch(), targets.into_dispatch());
+    Tensor::from_dispatch(if kernel_settings().burns_own() {
+        composed::<Dispatch>(x, y)
+    } else {
+        <Dispatch as LossTrain>::bce_train(x, y)
+    })
+}
+
+/// Per-sample average endpoint error of the flow `pred` against `target`,
+/// both `[B, 2, S, S]`: the mean over pixels of `sqrt(Δu² + Δv² + eps)`,
+/// `[B]` (`eps` keeps the square root differentiable at zero). One
+/// operation with its own backward pass ([`LossTrain`]); the target gets
+/// no gradient. Under [`KernelChoice::Burn`](crate::KernelChoice) the same
+/// formula of burn's primitives.
+pub fn endpoint_error(pred: Tensor<4>, target: Tensor<4>, eps: f32) -> Tensor<1> {
+    let (p, t) = (pred.into_dispatch(), target.into_dispatch());
+    Tensor::from_dispatch(if kernel_settings().burns_own() {
+        epe_composed::<Dispatch>(p, t, eps)
+    } else {
+        <Dispatch as LossTrain>::epe_train(p, t, eps)
+    })
+}
 
 /// Elementwise binary cross-entropy of logits against targets, and the
 /// flow's endpoint error, each differentiable in its prediction.
@@ -69,7 +100,7 @@ pub trait LossTrain: Backend {
 
 /// A flow's `[B, 2, H, W]`, checked.
 fn flow_dims(shape: &[usize]) -> [usize; 3] {
-    match super::conv_train::dims4("endpoint error", "a flow", shape) {
+    match crate::flex::dims4("endpoint error", "a flow", shape) {
         [b, 2, h, w] => [b, h, w],
         _ => panic!("endpoint error: a flow of shape {shape:?}, not two channels"),
     }
@@ -88,7 +119,7 @@ fn epe_norms<B: Backend>(
 
 /// The endpoint error of `B`'s primitives: the GPU backends', and flex's
 /// for other dtypes than f32.
-pub(super) fn epe_composed<B: Backend>(
+fn epe_composed<B: Backend>(
     pred: FloatTensor<B>,
     target: FloatTensor<B>,
     eps: f32,
@@ -116,8 +147,8 @@ fn epe_composed_backward<B: Backend>(
 
 /// The stable form of `B`'s primitives: the GPU backends' cross-entropy,
 /// flex's for other dtypes than f32, and the model's under
-/// `LEARNER_CONV=burn` (where autodiff tracks each primitive).
-pub(super) fn composed<B: Backend>(x: FloatTensor<B>, y: FloatTensor<B>) -> FloatTensor<B> {
+/// `KernelChoice::Burn` (where autodiff tracks each primitive).
+fn composed<B: Backend>(x: FloatTensor<B>, y: FloatTensor<B>) -> FloatTensor<B> {
     let softplus = B::float_log(B::float_add_scalar(
         B::float_exp(B::float_neg(B::float_abs(x.clone()))),
         1.0.into(),
@@ -377,7 +408,6 @@ impl<B: Backend + LossTrain, C: CheckpointStrategy> LossTrain for Autodiff<B, C>
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// The endpoint error's values and gradient against the same formula of
     /// burn's tensor operations (tracked op by op by autodiff), on a flow of

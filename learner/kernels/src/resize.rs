@@ -11,7 +11,8 @@
 //! the planes split over rayon's threads; the GPU backends (burn's `Cube`)
 //! keep the products through the trait's default bodies.
 
-use super::conv_train::{f32s, flex_tensor, written};
+use crate::flex::{f32s, flex_tensor, written};
+use crate::kernel_settings;
 use burn::backend::autodiff::{
     Autodiff,
     checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
@@ -19,10 +20,28 @@ use burn::backend::autodiff::{
     ops::{Backward, Ops, OpsKind},
 };
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::backend::{Backend, Dispatch, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::prelude::*;
 use burn::tensor::{Shape, TensorData};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
+
+/// Bilinear upsampling of `x [B, C, H, W]` by the integer `factor` with
+/// aligned corners (the map of burn's `interpolate(.., Bilinear,
+/// align_corners)`), differentiable: one operation with its own backward
+/// pass ([`ResizeTrain`]; on the GPU backends two products with constant
+/// interpolation matrices, `U_h · X · U_wᵀ`: burn's GPU backends have no
+/// backward pass for `interpolate`). Under
+/// [`KernelChoice::Burn`](crate::KernelChoice) those products of burn's
+/// operations, tracked one by one.
+pub fn upsample_bilinear(x: Tensor<4>, factor: usize) -> Tensor<4> {
+    let x = x.into_dispatch();
+    Tensor::from_dispatch(if kernel_settings().burns_own() {
+        products::<Dispatch>(x, factor, false)
+    } else {
+        <Dispatch as ResizeTrain>::upsample_train(x, factor)
+    })
+}
 
 /// Bilinear upsampling with aligned corners, differentiable.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
@@ -75,7 +94,7 @@ fn taps(n_in: usize, n_out: usize) -> Vec<(usize, usize, f32)> {
 /// A `[B, C, H, W]` shape and a factor of at least 1, checked.
 fn dims4(shape: &[usize], factor: usize) -> [usize; 4] {
     assert!(factor >= 1, "upsampling: a factor of 0");
-    let dims = super::conv_train::dims4("upsampling", "a tensor", shape);
+    let dims = crate::flex::dims4("upsampling", "a tensor", shape);
     assert!(
         dims.iter().all(|&d| d > 0),
         "upsampling: an empty tensor of shape {shape:?}"
@@ -87,11 +106,7 @@ fn dims4(shape: &[usize], factor: usize) -> [usize; 4] {
 /// `factor` (`U_h · X · U_wᵀ` per plane), or with `adjoint` a gradient
 /// `[B, C, H·f, W·f]` taken back (`U_hᵀ · G · U_w`). The GPU backends' both
 /// ways, and flex's for other dtypes than f32.
-pub(super) fn products<B: Backend>(
-    x: FloatTensor<B>,
-    factor: usize,
-    adjoint: bool,
-) -> FloatTensor<B> {
+fn products<B: Backend>(x: FloatTensor<B>, factor: usize, adjoint: bool) -> FloatTensor<B> {
     let [b, c, h, w] = dims4(&x.shape().to_vec(), factor);
     let (ho, wo) = if adjoint {
         assert!(
@@ -258,7 +273,6 @@ impl<B: Backend + ResizeTrain, C: CheckpointStrategy> ResizeTrain for Autodiff<B
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// flex's passes against the products form (the GPU backends' default
     /// bodies, run on flex's primitives), forward and adjoint, on the

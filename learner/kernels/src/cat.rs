@@ -10,7 +10,8 @@
 //! threads, the gradients contiguous; the GPU backends (burn's `Cube`) keep
 //! burn's `cat` and slices through the trait's default bodies.
 
-use super::conv_train::{f32s, flex_tensor, written};
+use crate::flex::{f32s, flex_tensor, written};
+use crate::kernel_settings;
 use burn::backend::autodiff::{
     Autodiff,
     checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
@@ -18,10 +19,25 @@ use burn::backend::autodiff::{
     ops::{Backward, Ops, OpsKind},
 };
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::backend::{Backend, Dispatch, Flex, TensorMetadata, backend_extension, flex::FlexTensor};
+use burn::prelude::*;
 use burn::tensor::Slice;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
+
+/// `a [B, Ca, H, W]` and `b [B, Cb, H, W]` joined along the channels, `[B,
+/// Ca + Cb, H, W]`, differentiable in both: one operation with its own
+/// backward pass ([`CatTrain`]), or burn's `cat` under
+/// [`KernelChoice::Burn`](crate::KernelChoice).
+pub fn cat_channels(a: Tensor<4>, b: Tensor<4>) -> Tensor<4> {
+    if kernel_settings().burns_own() {
+        return Tensor::cat(vec![a, b], 1);
+    }
+    Tensor::from_dispatch(<Dispatch as CatTrain>::cat_channels_train(
+        a.into_dispatch(),
+        b.into_dispatch(),
+    ))
+}
 
 /// Channel concatenation of two `[B, C, H, W]` maps, differentiable in both.
 #[backend_extension(Flex, Cube: cfg(any(feature = "cuda", feature = "vulkan")), Autodiff)]
@@ -56,7 +72,7 @@ impl CatTrain for burn::backend::Cube {}
 
 /// A `[B, C, H, W]` shape, checked.
 fn dims4(what: &str, shape: &[usize]) -> [usize; 4] {
-    super::conv_train::dims4("channel concatenation", what, shape)
+    crate::flex::dims4("channel concatenation", what, shape)
 }
 
 impl CatTrain for Flex {
@@ -164,7 +180,6 @@ impl<B: Backend + CatTrain, C: CheckpointStrategy> CatTrain for Autodiff<B, C> {
 mod tests {
     use super::*;
     use burn::backend::Dispatch;
-    use burn::prelude::*;
 
     /// Values and both inputs' gradients against burn's `cat` under
     /// autodiff, with the second input a broadcast view (the flow
