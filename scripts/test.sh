@@ -57,4 +57,6 @@ trap 'rm -rf "$quick_dir"' EXIT
 "$target_dir/debug/examples/repr_bench" --quick
 # The research probes are lab code (lab/probes/, a workspace of their own,
 # built on demand), not run here.
-# TODO (lead): the tests crate's `jitter` binary, with a quick mode here.
+# The timing harness for a second, without the real-time set-up (a check
+# that it runs, not a measurement: docs/performance.md has the real one).
+"$target_dir/debug/jitter" --duration-s 1 --no-realtime --out "$quick_dir/jitter"
