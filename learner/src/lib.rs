@@ -2,7 +2,7 @@
 //!
 //! The training toolkit, on the training machine: data collection
 //! ([`collect`]), the self-supervised dataset and its labels ([`dataset`],
-//! [`labels`]), the fast-path environment ([`env`]), charts for people
+//! [`labels`]), the fast-path environment ([`fast_env`]), charts for people
 //! ([`plot`]), the RL environment with TRPO and PPO, distillation and the
 //! conversion of a trained policy into the node's deployed format ([`rl`]),
 //! the multimodal representation with its baselines and ablations
@@ -18,8 +18,8 @@
 pub mod cli;
 pub mod collect;
 pub mod dataset;
-pub mod env;
 pub mod experiment;
+pub mod fast_env;
 pub mod labels;
 pub mod models;
 pub mod plot;

@@ -5,7 +5,7 @@
 
 use learner::collect::{CollectConfig, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use learner::labels::FlowLabeler;
 use learner_node::log::LogOptions;
 use learner_node::mix::Mix;

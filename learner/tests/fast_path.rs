@@ -5,7 +5,7 @@
 
 use hw_sim::WorldConfig;
 use learner::collect::run_episode;
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use learner_node::log::{LogOptions, LogReader, topics};
 use learner_node::mix::Mix;
 use rt_controller::{ControllerConfig, FaultReason, cycle::fault_code};

@@ -3,7 +3,7 @@
 //! poses.
 
 use hw_sim::{PegShape, Stage, WorldConfig};
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use learner_node::policy::{HeuristicConfig, HeuristicPolicy, TaskGeometry};
 use rt_controller::ControllerConfig;
 

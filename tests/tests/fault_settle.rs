@@ -11,7 +11,7 @@
 //! as the processes), so the run is deterministic.
 
 use hw_sim::WorldConfig;
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use rt_controller::ControllerConfig;
 use shared_mem_schema::ControllerMode;
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;

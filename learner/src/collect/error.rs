@@ -1,6 +1,6 @@
 //! Why a collection, or one of its episodes, failed.
 
-use crate::env::EnvError;
+use crate::fast_env::EnvError;
 use learner_node::log::LogError;
 use std::path::PathBuf;
 

@@ -13,7 +13,7 @@ mod error;
 
 pub use error::CollectError;
 
-use crate::env::FastEnv;
+use crate::fast_env::FastEnv;
 use hw_sim::{PegShape, WorldConfig};
 use learner_node::log::events::{EpisodeEnd, Event, Reset};
 use learner_node::log::{LogError, LogOptions, LogWriter, RunConfig, RunMode};

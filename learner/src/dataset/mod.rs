@@ -16,8 +16,8 @@
 
 mod balance;
 mod build;
+mod episode;
 mod error;
-mod label;
 mod loader;
 mod meta;
 mod reader;
@@ -26,8 +26,8 @@ mod sheet;
 
 pub use balance::{Balance, MOVING_M, SampleTags, StageCounts};
 pub use build::{build, find_logs};
+pub use episode::{BuildConfig, EpisodeSamples, Models, episode_samples};
 pub use error::{DatasetError, Result};
-pub use label::{BuildConfig, EpisodeSamples, Models, episode_samples};
 pub use loader::{Batch, Loader, LoaderConfig};
 pub use meta::{BlockIndex, EpisodeInfo, Meta, Moments, Stats};
 pub use reader::Dataset;

@@ -3,7 +3,7 @@
 //! feature, the optical flow and mask decoder with skip connections, and the
 //! reconstruction model's decoders.
 
-use super::encoders::{IMAGE_DOWNSAMPLE, Mlp, RGB_CHANNELS, act};
+use super::encoders::{IMAGE_DOWNSAMPLE, LeakyMlp, RGB_CHANNELS, act};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::prelude::*;
@@ -174,8 +174,8 @@ pub fn zero_maps(b: usize, d: usize, side: usize, device: &Device) -> Vec<Tensor
 pub struct ReconDecoders {
     rgb_fc: Linear,
     rgb_convs: Vec<Conv2d>,
-    wrench: Mlp,
-    proprio: Mlp,
+    wrench: LeakyMlp,
+    proprio: LeakyMlp,
 }
 
 /// Channels of the RGB reconstruction's six convolutions.
@@ -207,8 +207,8 @@ impl ReconDecoders {
         Self {
             rgb_fc: LinearConfig::new(d, RECON_START * cells).init(device),
             rgb_convs,
-            wrench: Mlp::new(&[d, 128, 64, 32, 6], device),
-            proprio: Mlp::new(&[d, 128, 64, 32, learner_node::proprio::PROPRIO], device),
+            wrench: LeakyMlp::new(&[d, 128, 64, 32, 6], device),
+            proprio: LeakyMlp::new(&[d, 128, 64, 32, learner_node::proprio::PROPRIO], device),
         }
     }
 

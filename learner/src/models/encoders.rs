@@ -25,11 +25,11 @@ pub fn act<const D: usize>(x: Tensor<D>) -> Tensor<D> {
 
 /// A multilayer perceptron: leaky ReLU between layers, none after the last.
 #[derive(Module, Debug)]
-pub struct Mlp {
+pub struct LeakyMlp {
     pub(crate) layers: Vec<Linear>,
 }
 
-impl Mlp {
+impl LeakyMlp {
     /// Layers of the widths `widths[0] → widths[1] → … → widths[n]`.
     pub fn new(widths: &[usize], device: &Device) -> Self {
         Self {
@@ -186,14 +186,14 @@ impl WrenchEncoder {
 /// The proprioception encoder: a four-layer MLP 8 → 32 → 64 → 128 → 2·d.
 #[derive(Module, Debug)]
 pub struct ProprioEncoder {
-    pub(crate) mlp: Mlp,
+    pub(crate) mlp: LeakyMlp,
 }
 
 impl ProprioEncoder {
     /// For latent size `d`.
     pub fn new(d: usize, device: &Device) -> Self {
         Self {
-            mlp: Mlp::new(
+            mlp: LeakyMlp::new(
                 &[learner_node::proprio::PROPRIO, 32, 64, 128, 2 * d],
                 device,
             ),

@@ -7,7 +7,7 @@
 //! from burn's channels-first flatten to channels-last.
 
 use super::config::ModelConfig;
-use super::encoders::{LEAKY_SLOPE, Mlp};
+use super::encoders::{LEAKY_SLOPE, LeakyMlp};
 use super::fusion::MIN_VARIANCE;
 use super::net::ReprNet;
 use burn::module::Param;
@@ -52,7 +52,7 @@ fn dense(l: &Linear) -> Dense {
     }
 }
 
-fn layers(mlp: &Mlp) -> Vec<Dense> {
+fn layers(mlp: &LeakyMlp) -> Vec<Dense> {
     mlp.layers.iter().map(dense).collect()
 }
 

@@ -23,16 +23,16 @@
 
 pub mod config;
 pub mod decoders;
-pub mod encoder;
 pub mod encoders;
 pub mod fast;
 pub mod fusion;
+pub mod inference;
 pub mod init;
 pub mod inputs;
 pub mod losses;
 pub mod net;
 
 pub use config::{EeTarget, LossWeights, Modalities, ModelConfig, ModelKind};
-pub use encoder::Encoder;
+pub use inference::Encoder;
 pub use inputs::{InputArrays, LabelArrays, Normaliser, ObservationRef};
 pub use net::{InputTensors, Outputs, ReprNet};

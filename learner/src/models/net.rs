@@ -8,7 +8,7 @@ use super::config::{Modalities, ModelConfig, ModelKind};
 use super::decoders::{
     ActionFusion, FlowDecoder, FlowPrediction, ReconDecoders, Reconstruction, zero_maps,
 };
-use super::encoders::{DepthEncoder, Mlp, ProprioEncoder, RgbEncoder, WrenchEncoder};
+use super::encoders::{DepthEncoder, LeakyMlp, ProprioEncoder, RgbEncoder, WrenchEncoder};
 use super::fusion::{self, Gaussian};
 use super::inputs::InputArrays;
 use burn::nn::{Linear, LinearConfig};
@@ -91,12 +91,12 @@ pub struct ReprNet {
     pub(crate) haptics: Option<WrenchEncoder>,
     pub(crate) proprio: Option<ProprioEncoder>,
     /// Deterministic model: the concatenated features (4 × 2d) → d.
-    pub(crate) concat_fusion: Option<Mlp>,
+    pub(crate) concat_fusion: Option<LeakyMlp>,
     action: Option<ActionFusion>,
     flow: Option<FlowDecoder>,
     contact: Option<Linear>,
     pairing: Option<Linear>,
-    ee: Option<Mlp>,
+    ee: Option<LeakyMlp>,
     recon: Option<ReconDecoders>,
 }
 
@@ -115,12 +115,12 @@ impl ReprNet {
             haptics: m.haptics.then(|| WrenchEncoder::new(d, device)),
             proprio: m.proprio.then(|| ProprioEncoder::new(d, device)),
             concat_fusion: (cfg.kind == ModelKind::Deterministic)
-                .then(|| Mlp::new(&[8 * d, 2 * d, d], device)),
+                .then(|| LeakyMlp::new(&[8 * d, 2 * d, d], device)),
             action: predictive.then(|| ActionFusion::new(d, device)),
             flow: predictive.then(|| FlowDecoder::new(d, device)),
             contact: predictive.then(|| LinearConfig::new(d, 1).init(device)),
             pairing: predictive.then(|| LinearConfig::new(d, 1).init(device)),
-            ee: predictive.then(|| Mlp::new(&[d, 128, 64, 32, cfg.ee_target.dim()], device)),
+            ee: predictive.then(|| LeakyMlp::new(&[d, 128, 64, 32, cfg.ee_target.dim()], device)),
             recon: (!predictive).then(|| ReconDecoders::new(d, s, device)),
         }
     }

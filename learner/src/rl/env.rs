@@ -15,7 +15,7 @@
 //! episode can no longer progress.
 
 use super::reward::{Outcome, RewardConfig, RewardGeometry, RewardStage, reward};
-use crate::env::{EnvError, FastEnv};
+use crate::fast_env::{EnvError, FastEnv};
 use hw_sim::{TaskState, WorldConfig};
 pub use learner_node::deploy::ActionScale;
 use learner_node::observe::ObsView;

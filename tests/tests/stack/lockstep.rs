@@ -1,7 +1,7 @@
 //! The lockstep stack equals the in-process fast path bit for bit.
 
 use hw_sim::WorldConfig;
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use learner_node::live::{PolicyNode, task_geometry};
 use learner_node::policy::{HeuristicConfig, HeuristicPolicy, Observation, WrenchHistory};
 use shared_mem_schema::rates::ACTION_PERIOD_STEPS;

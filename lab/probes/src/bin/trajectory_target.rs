@@ -10,7 +10,7 @@
 //! collection mix uses 0.001).
 
 use hw_sim::{PegShape, Stage, WorldConfig};
-use learner::env::FastEnv;
+use learner::fast_env::FastEnv;
 use learner_node::mix::{Mix, MixedPolicy};
 use learner_node::policy::TaskGeometry;
 use rt_controller::{ControllerConfig, TrajectoryTarget};
