@@ -38,12 +38,12 @@ fi
 extra=()
 if [ "$franky" = 1 ]; then
     . scripts/franky-sim-venv.sh
-    export FRANKY_SIM_PYTHON="$PWD/$FRANKY_SIM_VENV/bin/python"
+    extra+=(--franky-sim-python "$PWD/$FRANKY_SIM_VENV/bin/python")
     if [ "$hole" = 0 ]; then
         # 5 cm in front of and 10 cm below the FR3's start pose, on the
         # arm's centre line (docs/franka.md says why there).
         echo "run.sh: no --hole-pos given; using the example calibration 0.60,0.0,0.42" >&2
-        extra=(--hole-pos 0.60,0.0,0.42)
+        extra+=(--hole-pos 0.60,0.0,0.42)
     fi
 fi
 # Cargo's own progress is shown: a first build takes minutes, and a silent

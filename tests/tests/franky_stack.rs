@@ -44,7 +44,8 @@ fn the_heuristic_drives_franky_sim_through_the_stack() {
         .arg(tests::unique_namespace("franky"))
         .arg("--log-dir")
         .arg(dir.path())
-        .env("FRANKY_SIM_PYTHON", franky_sim::python())
+        .arg("--franky-sim-python")
+        .arg(franky_sim::python())
         .output()
         .expect("running learner stack");
     let stdout = String::from_utf8_lossy(&out.stdout);

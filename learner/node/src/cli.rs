@@ -177,6 +177,11 @@ pub struct StackArgs {
     /// on (default: one of this process's own in 127.20.0.0/16).
     #[arg(long)]
     pub franky_sim_address: Option<String>,
+    /// With --robot franky-sim: the Python interpreter that has franky-sim
+    /// installed (default: the repository's .venv-franky-sim, which
+    /// scripts/franky-sim-venv.sh makes).
+    #[arg(long)]
+    pub franky_sim_python: Option<PathBuf>,
 }
 
 /// The world of a run: `--world` (or the default) with the task on and
@@ -279,12 +284,20 @@ pub fn run(r: RunArgs, policy: Option<DeployedPolicy>) -> Result<()> {
 pub fn stack(s: StackArgs) -> Result<()> {
     let a = &s.episodes;
     if s.robot == RobotArg::FrankySim {
-        return stack_franky_sim(a, s.controller_config, &s.calibration, s.franky_sim_address);
+        return stack_franky_sim(
+            a,
+            s.controller_config,
+            &s.calibration,
+            s.franky_sim_address,
+            s.franky_sim_python,
+        );
     }
     anyhow::ensure!(
-        s.calibration.hole_pos.is_none() && s.franky_sim_address.is_none(),
-        "--hole-pos and --franky-sim-address are for --robot franky-sim (hw-sim reports \
-         the hole itself)"
+        s.calibration.hole_pos.is_none()
+            && s.franky_sim_address.is_none()
+            && s.franky_sim_python.is_none(),
+        "--hole-pos, --franky-sim-address and --franky-sim-python are for --robot franky-sim \
+         (hw-sim reports the hole itself)"
     );
     let world = world_config(a)?; // fail early on a bad peg or file
     let mut run_args = vec![
@@ -459,6 +472,7 @@ fn stack_franky_sim(
     controller_config: Option<PathBuf>,
     calibration: &CalibrationArgs,
     address: Option<String>,
+    python: Option<PathBuf>,
 ) -> Result<()> {
     let Some(task) = calibration.task(a.peg)? else {
         anyhow::bail!(
@@ -469,6 +483,9 @@ fn stack_franky_sim(
     };
     without_simulator(a, "--robot franky-sim")?;
     let mut franky = stack::FrankySim::from_repository();
+    if let Some(p) = python {
+        franky.python = p;
+    }
     if let Some(addr) = address {
         anyhow::ensure!(
             addr.parse::<std::net::Ipv4Addr>()

@@ -68,8 +68,8 @@ pub enum StackError {
     /// franky-sim cannot be run with the given interpreter.
     #[error(
         "franky-sim is not installed: `{} -c 'import franky_sim'` fails; run \
-         `. scripts/franky-sim-venv.sh` (./scripts/run.sh --robot franky-sim does) or set \
-         FRANKY_SIM_PYTHON"
+         `. scripts/franky-sim-venv.sh` (./scripts/run.sh --robot franky-sim does) or give \
+         --franky-sim-python"
     , .0.display())]
     FrankySimMissing(PathBuf),
     /// The rt-controller configuration for franky-sim is unusable.
@@ -231,17 +231,15 @@ pub struct FrankySim {
 }
 
 impl FrankySim {
-    /// The repository's defaults: `$FRANKY_SIM_PYTHON`, else
-    /// `.venv-franky-sim` (scripts/franky-sim-venv.sh), and an address of
+    /// The repository's defaults: `.venv-franky-sim`
+    /// (scripts/franky-sim-venv.sh), and an address of
     /// this process's own in 127.20.0.0/16 (the Franka backend's test uses
     /// 127.19.0.0/16).
     pub fn from_repository() -> Self {
         let repo = repository_root();
         let pid = std::process::id();
         Self {
-            python: std::env::var_os("FRANKY_SIM_PYTHON")
-                .map(PathBuf::from)
-                .unwrap_or_else(|| repo.join(".venv-franky-sim/bin/python")),
+            python: repo.join(".venv-franky-sim/bin/python"),
             server: repo.join("scripts/franky_sim_server.py"),
             address: format!(
                 "127.20.{}.{}",
