@@ -23,6 +23,7 @@ for arg in "$@"; do
     case "$prev/$arg" in
         --robot/franky-sim | */--robot=franky-sim) franky=1 ;;
         */--hole-pos | */--hole-pos=*) hole=1 ;;
+        */--franky-sim-python | */--franky-sim-python=*) python_given=1 ;;
         --policy/*) policy="$arg" ;;
         */--policy=*) policy="${arg#--policy=}" ;;
     esac
@@ -38,7 +39,9 @@ fi
 extra=()
 if [ "$franky" = 1 ]; then
     . scripts/franky-sim-venv.sh
-    extra+=(--franky-sim-python "$PWD/$FRANKY_SIM_VENV/bin/python")
+    if [ "${python_given:-0}" = 0 ]; then
+        extra+=(--franky-sim-python "$PWD/$FRANKY_SIM_VENV/bin/python")
+    fi
     if [ "$hole" = 0 ]; then
         # 5 cm in front of and 10 cm below the FR3's start pose, on the
         # arm's centre line (docs/franka.md says why there).

@@ -295,6 +295,15 @@ fn the_ramped_hole_error_grows_from_the_truth_to_the_full_error() {
         panic!("a ramp without a hole error was not refused");
     };
     assert!(err.to_string().contains("hole_error_ramp_steps"), "{err}");
+    // With a hole error but no validation to choose the policy, likewise.
+    let text = "num_envs = 1\nenv_steps = 10\n\
+                observation = { ground_truth_hole_error = 0.004 }\n[policy]\nbatch_steps = 10\n\
+                [env.training]\nhole_error_ramp_steps = 100\n";
+    let run: learner::rl::run::TrainConfig = toml::from_str(text).unwrap();
+    let Err(err) = learner::rl::run::train(run, &dir.path().join("run2"), false, &|| false) else {
+        panic!("a ramp without validation was not refused");
+    };
+    assert!(err.to_string().contains("[validation]"), "{err}");
 }
 
 /// Straight down at 5 mm per step (10 cm/s) from the start onto the box:

@@ -58,7 +58,8 @@ pub enum PolicyCmd {
         #[arg(long)]
         resume: bool,
     },
-    /// Runs a checkpoint's policy (its mean action) for N episodes: the
+    /// Runs a checkpoint's policy (its mean action, or with --sample an
+    /// action drawn from its Gaussian) for N episodes: the
     /// four outcome categories and the normalised episode reward. The
     /// world is the checkpoint's training world; `--set` changes any of it
     /// (another peg, pushes, noise, the box's yaw, a hole error: docs/rl.md,

@@ -94,6 +94,17 @@ pub(super) fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, R
     if let ObservationKind::GroundTruthHoleError(std_m) = cfg.observation
         && cfg.env.training.hole_error_ramp_steps > 0
     {
+        // During the ramp the training reward is earned at a smaller error
+        // than the one evaluated: only validation can choose the policy.
+        if cfg.validation.every == 0 {
+            return Err(RlEnvError::Config(
+                shared_mem_schema::config::FieldError::new(
+                    "env.training.hole_error_ramp_steps",
+                    cfg.env.training.hole_error_ramp_steps,
+                    "a ramped hole error needs [validation] (every > 0) to choose the policy",
+                ),
+            ));
+        }
         // The plain observer checks the deviation.
         cfg.observation.observer_on(cfg.threads)?;
         let r = std::sync::Arc::new(super::observe::RampedHoleError::new(std_m));

@@ -13,13 +13,13 @@
 //! - `touch_probe search SIGMA_MM EPISODES`: the touch search
 //!   (`learner::rl::search::TouchSearch`) told the hole with a per-episode
 //!   error of SIGMA_MM per axis (`observe::HoleError`, the same draw as
-//!   `policy eval --hole-error-mm`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
+//!   `policy eval --set observation={ground_truth_hole_error=σ}`); `TOUCH_PITCH_MM`, `TOUCH_SLIDE_MM`,
 //!   `TOUCH_STEP_MM`, `TOUCH_PRESS_N`, `TOUCH_LEAD_MM_PER_N`,
 //!   `TOUCH_DESCENT_UNTIL_MM` override its settings (in `zsearch` too),
 //!   `TOUCH_DESCENT_MM` sets `descent_m`, `TOUCH_BOUND_MM` `bound_m`,
 //!   `TOUCH_TRACE` prints the steps near the box, `TOUCH_PEG` (square,
 //!   triangle, semicircle, hexagon) picks the peg, `TOUCH_BOX_YAW_RAD` the
-//!   box's yaw range (`policy eval --box-yaw-range-rad`). Prints each
+//!   box's yaw range (`policy eval --set env.world.task.box_yaw_range_rad=R`). Prints each
 //!   episode and the outcomes.
 //! - `touch_probe zsearch MODEL_DIR WORLD_TOML|- FIT TEST`: the search told
 //!   where the opening is by a linear probe of a representation's z means
