@@ -119,9 +119,7 @@ pub fn run(a: CollectArgs) -> Result<()> {
         Some(p) => rt_controller_daemon::config::DaemonConfig::from_file(p)?.controller,
         None => rt_controller::ControllerConfig::default(),
     };
-    let workers = a
-        .workers
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = a.workers.unwrap_or_else(crate::rl::vec::all_cores);
     let cfg = CollectConfig {
         out_dir: a.out.clone(),
         states: a.states,

@@ -66,8 +66,7 @@ pub fn run(cmd: DatasetCmd) -> Result<()> {
                 flow_mask_min_px,
                 ..Default::default()
             };
-            let workers = workers
-                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+            let workers = workers.unwrap_or_else(crate::rl::vec::all_cores);
             let progress = learner_node::progress::Progress::new(files.len() as u64, "logs");
             let (mut done, mut skipped) = (0, 0);
             let t = std::time::Instant::now();

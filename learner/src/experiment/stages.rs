@@ -204,7 +204,7 @@ pub(super) fn ensure_dataset(
     };
     let logs = out.join("collect");
     log.start(&format!("dataset: collecting {} states", d.collect_states));
-    let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = crate::rl::vec::all_cores();
     let ccfg = CollectConfig {
         out_dir: logs.clone(),
         states: d.collect_states,

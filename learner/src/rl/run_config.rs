@@ -91,34 +91,30 @@ pub(super) type TrainingObserver = (
 
 /// See [`TrainingObserver`].
 pub(super) fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, RlEnvError> {
-    if let ObservationKind::GroundTruthHoleError(std_m) = cfg.observation
-        && cfg.env.training.hole_error_ramp_steps > 0
-    {
-        // During the ramp the training reward is earned at a smaller error
-        // than the one evaluated: only validation can choose the policy.
-        if cfg.validation.every == 0 {
-            return Err(RlEnvError::Config(
-                shared_mem_schema::config::FieldError::new(
-                    "env.training.hole_error_ramp_steps",
-                    cfg.env.training.hole_error_ramp_steps,
-                    "a ramped hole error needs [validation] (every > 0) to choose the policy",
-                ),
-            ));
-        }
-        // The plain observer checks the deviation.
-        cfg.observation.observer_on(cfg.threads)?;
-        let r = std::sync::Arc::new(super::observe::RampedHoleError::new(std_m));
-        let observer: std::sync::Arc<dyn super::observe::Observer> = r.clone();
-        return Ok((observer, Some(r)));
+    // The configuration's own observer checks its settings (σ) first.
+    let observer = cfg.observation.observer_on(cfg.threads)?;
+    let steps = cfg.env.training.hole_error_ramp_steps;
+    if steps == 0 {
+        return Ok((observer, None));
     }
-    if cfg.env.training.hole_error_ramp_steps > 0 {
-        return Err(RlEnvError::Config(
+    let refuse = |why: &str| {
+        Err(RlEnvError::Config(
             shared_mem_schema::config::FieldError::new(
                 "env.training.hole_error_ramp_steps",
-                cfg.env.training.hole_error_ramp_steps,
-                "ramps a hole error: needs observation = { ground_truth_hole_error = σ }",
+                steps,
+                why,
             ),
-        ));
+        ))
+    };
+    let ObservationKind::GroundTruthHoleError(std_m) = cfg.observation else {
+        return refuse("ramps a hole error: needs observation = { ground_truth_hole_error = σ }");
+    };
+    // During the ramp the training reward is earned at a smaller error
+    // than the one evaluated: only validation can choose the policy.
+    if cfg.validation.every == 0 {
+        return refuse("a ramped hole error needs [validation] (every > 0) to choose the policy");
     }
-    Ok((cfg.observation.observer_on(cfg.threads)?, None))
+    let r = std::sync::Arc::new(super::observe::RampedHoleError::new(std_m));
+    let observer: std::sync::Arc<dyn super::observe::Observer> = r.clone();
+    Ok((observer, Some(r)))
 }
