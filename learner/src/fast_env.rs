@@ -44,6 +44,8 @@ pub struct FastEnv {
     /// The largest force norm the controller read since the last
     /// [`FastEnv::step`] began, N (the supervisor's overload measure).
     peak_force_n: f64,
+    /// The same for the moment norm, N·m.
+    peak_moment_nm: f64,
     cycled: bool,
     /// The episode's roll reference: the roll of its first sensor frame.
     roll_ref_rad: f64,
@@ -71,6 +73,7 @@ impl FastEnv {
             episodes: 0,
             wrench: WrenchHistory::default(),
             peak_force_n: 0.0,
+            peak_moment_nm: 0.0,
             cycled: false,
             roll_ref_rad: 0.0,
             frame,
@@ -123,6 +126,12 @@ impl FastEnv {
     /// [`FastEnv::step`], N: what the supervisor's force overload compares.
     pub fn peak_force_n(&self) -> f64 {
         self.peak_force_n
+    }
+
+    /// The largest moment norm read in the cycles of the last
+    /// [`FastEnv::step`], N·m: what the supervisor's moment overload compares.
+    pub fn peak_moment_nm(&self) -> f64 {
+        self.peak_moment_nm
     }
 
     /// Starts an episode: as hw-sim's reset with a configuration (a world
@@ -189,6 +198,8 @@ impl FastEnv {
         let w = &self.frame.wrench;
         let f = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
         self.peak_force_n = self.peak_force_n.max(f);
+        let m = (w[3] * w[3] + w[4] * w[4] + w[5] * w[5]).sqrt();
+        self.peak_moment_nm = self.peak_moment_nm.max(m);
         self.hardware.apply(&mut self.world, Some(&self.command))?;
         Ok(action)
     }
@@ -197,6 +208,7 @@ impl FastEnv {
     /// its observation; `action` (if any) is applied in the first cycle.
     pub fn step(&mut self, action: Option<&Action4>) -> Result<Observation, EnvError> {
         self.peak_force_n = 0.0;
+        self.peak_moment_nm = 0.0;
         self.cycle(action)?;
         while !self.world.step_index().is_multiple_of(ACTION_PERIOD_STEPS) {
             self.cycle(None)?;

@@ -374,3 +374,83 @@ fn training_aids_apply_to_training_environments_only() {
         "{err}"
     );
 }
+
+#[test]
+fn the_overload_ramp_brings_the_training_limits_to_the_evaluated_fault() {
+    let mut cfg = config(PegShape::Square, 150);
+    cfg.action.max_step_m = 0.005;
+    cfg.training.max_force_n = Some(1.0e4);
+    cfg.training.max_moment_nm = Some(1.0e3);
+    cfg.training.overload_ramp_steps = [100, 300];
+    let t = &cfg.training;
+    assert_eq!(t.overload_share(0), 0.0);
+    assert_eq!(t.overload_share(100), 0.0);
+    assert_eq!(t.overload_share(200), 0.5);
+    assert_eq!(t.overload_share(10_000), 1.0);
+
+    let (plain_terminated, plain) = press_down(RlEnv::new(&cfg).unwrap());
+    assert!(plain_terminated);
+    // Before the ramp a training episode runs on through the impact.
+    let shared = Arc::new(learner::rl::env::Share::default());
+    let mut env = RlEnv::for_training(&cfg).unwrap();
+    env.share_overload_ramp(shared.clone());
+    assert_eq!(env.overload_limits(), Some((1.0e4, 1.0e3)));
+    let (terminated, rewards) = press_down(env);
+    assert!(!terminated);
+    assert_eq!(rewards.len(), 150);
+    // Half-way the limits are half-way to the controller's (100 N, 15 N·m).
+    shared.set(0.5);
+    let mut env = RlEnv::for_training(&cfg).unwrap();
+    env.share_overload_ramp(shared.clone());
+    let (f, m) = env.overload_limits().unwrap();
+    assert!(
+        (f - 5050.0).abs() < 1e-9 && (m - 507.5).abs() < 1e-9,
+        "{f} {m}"
+    );
+    // At the end a training episode ends on the step the fault ends the
+    // evaluated one.
+    shared.set(1.0);
+    env.share_overload_ramp(shared.clone());
+    let (terminated, rewards) = press_down(env);
+    assert!(terminated, "the ramped limit ends the episode");
+    assert_eq!(rewards.len(), plain.len(), "{rewards:?} vs {plain:?}");
+    // An evaluated environment has no training limits to ramp.
+    assert_eq!(RlEnv::new(&cfg).unwrap().overload_limits(), None);
+
+    // Bad ramps are refused by name.
+    for (ramp, aids) in [([300, 100], true), ([100, 100], true), ([0, 100], false)] {
+        let mut bad = cfg.clone();
+        bad.training.overload_ramp_steps = ramp;
+        if !aids {
+            bad.training.max_force_n = None;
+            bad.training.max_moment_nm = None;
+        }
+        let err = RlEnv::for_training(&bad).err().expect("refused");
+        assert!(
+            err.to_string().contains("training.overload_ramp_steps"),
+            "{ramp:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn a_resumed_run_adopts_an_overload_ramp_only_if_it_starts_after_the_steps_taken() {
+    let dir = test_support::scratch_dir("rl-env-overload-resume");
+    let out = dir.path().join("run");
+    let text = "num_envs = 1\nenv_steps = 20\n[policy]\nbatch_steps = 20\n\
+                [env]\nmax_steps = 20\n[env.training]\nmax_force_n = 400.0\n";
+    let mut run: learner::rl::run::TrainConfig = toml::from_str(text).unwrap();
+    let first = learner::rl::run::train(run.clone(), &out, false, &|| false).unwrap();
+    assert_eq!(first.state.env_steps, 20);
+    // A ramp that would have acted on the steps taken is not adopted.
+    run.env_steps = 40;
+    run.env.training.overload_ramp_steps = [10, 100];
+    let c = learner::rl::run::train(run.clone(), &out, true, &|| false).unwrap();
+    assert_eq!(c.config.env.training.overload_ramp_steps, [0, 0]);
+    // One that starts after them is.
+    run.env_steps = 60;
+    run.env.training.overload_ramp_steps = [c.state.env_steps, 100];
+    let c = learner::rl::run::train(run.clone(), &out, true, &|| false).unwrap();
+    assert_eq!(c.config.env.training.overload_ramp_steps, [40, 100]);
+    assert_eq!(c.state.env_steps, 60);
+}

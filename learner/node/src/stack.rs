@@ -258,7 +258,8 @@ pub fn repository_root() -> PathBuf {
 
 /// The rt-controller configuration for franky-sim: `template` (a daemon
 /// configuration with `backend.kind = "franka"`) with franky-sim's
-/// address and the stack's namespace, written to `out` (the run's record of
+/// address and the stack's namespace (and, unless the template names one,
+/// a fault record beside `out`), written to `out` (the run's record of
 /// what the daemon ran with).
 pub fn franky_sim_controller_config(
     template: &Path,
@@ -280,6 +281,11 @@ pub fn franky_sim_controller_config(
     }
     c.backend.franka.address = address.to_string();
     c.backend.namespace = namespace.to_string();
+    // A simulated robot's run keeps its fault record beside its logs, so
+    // that one run's fault does not refuse the next run's start.
+    if c.fault_record.is_none() {
+        c.fault_record = Some(out.with_extension("fault"));
+    }
     let text = format!(
         "# {} with franky-sim's address and the stack's namespace (learner stack --robot \
          franky-sim)\n{}",

@@ -179,6 +179,14 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
             for o in Outcome::ALL.into_iter().rev() {
                 println!("  {:<20} {:5.1}%", o.name(), 100.0 * r.outcomes[o.index()]);
             }
+            let count = |c: u32| r.fault_codes.iter().filter(|&&x| x == c).count();
+            println!(
+                "  ended by a controller fault: {} of {} (force overload {}, moment overload {})",
+                r.faulted(),
+                r.episodes,
+                count(4),
+                count(5)
+            );
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&r)?;
                 std::fs::write(&path, text)

@@ -25,6 +25,8 @@ use rt_controller::ControllerConfig;
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::Message;
 use shared_mem_schema::config::FieldError;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The paper's simulation episode length, policy steps.
 pub const PAPER_EPISODE_STEPS: u32 = 500;
@@ -103,6 +105,11 @@ pub struct TrainingAids {
     /// this many environment steps ([`super::observe::RampedHoleError`]);
     /// 0: σ from the start.
     pub hole_error_ramp_steps: u64,
+    /// `[from, to]` environment steps over which the training overload
+    /// limits (`max_force_n`, `max_moment_nm`) fall linearly to the
+    /// controller's own, the evaluated fault: from `to` on a training
+    /// episode ends where an evaluated one would. `[0, 0]`: no ramp.
+    pub overload_ramp_steps: [u64; 2],
 }
 
 impl Default for TrainingAids {
@@ -114,6 +121,7 @@ impl Default for TrainingAids {
             force_penalty_per_n: 0.0,
             overload_penalty: 0.0,
             hole_error_ramp_steps: 0,
+            overload_ramp_steps: [0, 0],
         }
     }
 }
@@ -140,7 +148,33 @@ impl TrainingAids {
                 return Err(FieldError::new(name, v, "must be finite and >= 0"));
             }
         }
+        let [from, to] = self.overload_ramp_steps;
+        if from > to || (to > 0 && from == to) {
+            return Err(FieldError::new(
+                "training.overload_ramp_steps",
+                format!("[{from}, {to}]"),
+                "must be [from, to] with from < to, or [0, 0] for none",
+            ));
+        }
+        if to > 0 && self.max_force_n.is_none() && self.max_moment_nm.is_none() {
+            return Err(FieldError::new(
+                "training.overload_ramp_steps",
+                format!("[{from}, {to}]"),
+                "ramps the training overload limits: set training.max_force_n or \
+                 training.max_moment_nm above the controller's",
+            ));
+        }
         Ok(())
+    }
+
+    /// The share of the way from the training limits to the evaluated
+    /// ones after `env_steps` (0 before the ramp and without one).
+    pub fn overload_share(&self, env_steps: u64) -> f64 {
+        let [from, to] = self.overload_ramp_steps;
+        if to == 0 {
+            return 0.0;
+        }
+        (env_steps.saturating_sub(from) as f64 / (to - from) as f64).min(1.0)
     }
 
     /// The reward a step with `peak_force_n` loses where the evaluated
@@ -152,6 +186,28 @@ impl TrainingAids {
             0.0
         };
         over + self.force_penalty_per_n * (peak_force_n - self.force_penalty_from_n).max(0.0)
+    }
+}
+
+/// A share in 0..1 that a training loop sets and environments on other
+/// threads read (a schedule's progress).
+#[derive(Debug, Default)]
+pub struct Share(AtomicU64);
+
+impl Share {
+    /// Sets the share, clamped to 0..1 (not finite: 1).
+    pub fn set(&self, share: f64) {
+        let s = if share.is_finite() {
+            share.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        self.0.store(s.to_bits(), Ordering::Relaxed);
+    }
+
+    /// The share set last (0 before any).
+    pub fn get(&self) -> f64 {
+        f64::from_bits(self.0.load(Ordering::Relaxed))
     }
 }
 
@@ -250,6 +306,11 @@ pub struct RlEnv {
     aids: Option<TrainingAids>,
     /// The configured (evaluated) force overload, N.
     eval_max_force_n: f64,
+    /// The configured (evaluated) moment overload, N·m.
+    eval_max_moment_nm: f64,
+    /// How far the training overload limits have fallen to the evaluated
+    /// ones (`training.overload_ramp_steps`).
+    overload_share: Arc<Share>,
 }
 
 impl RlEnv {
@@ -296,6 +357,8 @@ impl RlEnv {
             camera: None,
             aids,
             eval_max_force_n: cfg.controller.safety.max_force_n,
+            eval_max_moment_nm: cfg.controller.safety.max_moment_nm,
+            overload_share: Arc::default(),
         })
     }
 
@@ -340,7 +403,7 @@ impl RlEnv {
             r -= a.force_penalty(self.fast.peak_force_n(), self.eval_max_force_n);
         }
         self.episode_reward += r;
-        let terminated = self.fast.sensor_frame().fault_code != 0;
+        let terminated = self.fast.sensor_frame().fault_code != 0 || self.ramped_overload();
         let truncated = !terminated && self.steps >= self.max_steps;
         self.running = !(terminated || truncated);
         self.render(camera);
@@ -353,6 +416,38 @@ impl RlEnv {
             steps: self.steps,
             episode_reward: self.episode_reward,
         })
+    }
+
+    /// Makes this environment read the overload ramp's progress from `share`.
+    pub fn share_overload_ramp(&mut self, share: Arc<Share>) {
+        self.overload_share = share;
+    }
+
+    /// The training overload limits in force now, (N, N·m): the training
+    /// aids' own moved `overload_share` of the way to the evaluated ones
+    /// (None: an evaluated environment, the controller's limits alone).
+    pub fn overload_limits(&self) -> Option<(f64, f64)> {
+        let a = self.aids.as_ref()?;
+        let s = self.overload_share.get();
+        let lerp = |train: Option<f64>, eval: f64| {
+            let t = train.unwrap_or(eval);
+            t + s * (eval - t)
+        };
+        Some((
+            lerp(a.max_force_n, self.eval_max_force_n),
+            lerp(a.max_moment_nm, self.eval_max_moment_nm),
+        ))
+    }
+
+    /// The last step went past the ramped training limits, below the
+    /// controller's own (which latch a fault themselves): the training
+    /// episode ends there, as a fault would end it.
+    fn ramped_overload(&self) -> bool {
+        if self.overload_share.get() <= 0.0 {
+            return false;
+        }
+        self.overload_limits()
+            .is_some_and(|(f, m)| self.fast.peak_force_n() > f || self.fast.peak_moment_nm() > m)
     }
 
     /// The simulator's task state (present: the task is required).

@@ -341,6 +341,22 @@ pub fn train(
             }
             let mut given = cfg.clone();
             given.policy.normalise_observations = normalised;
+            // An overload ramp that starts after the steps already taken
+            // does not change the run so far: the given one is adopted.
+            let pending = |r: [u64; 2]| r[1] == 0 || r[0] >= c.state.env_steps;
+            let ramp = given.env.training.overload_ramp_steps;
+            if ramp != kept.env.training.overload_ramp_steps
+                && pending(ramp)
+                && pending(kept.env.training.overload_ramp_steps)
+            {
+                eprintln!(
+                    "learner: resuming {} at {} environment steps with \
+                     env.training.overload_ramp_steps = {ramp:?}, which starts after them",
+                    ckpt_path.display(),
+                    c.state.env_steps
+                );
+                kept.env.training.overload_ramp_steps = ramp;
+            }
             if kept != given {
                 eprintln!(
                     "learner: resuming {} with the configuration it started with; the one given \
@@ -492,6 +508,8 @@ pub fn train(
             let steps = cfg.env.training.hole_error_ramp_steps as f64;
             r.set_share(trainer.state.env_steps as f64 / steps);
         }
+        let share = cfg.env.training.overload_share(trainer.state.env_steps);
+        trainer.env().overload_share().set(share);
         let s = trainer.iterate()?;
         episodes += s.episodes.len();
         let p = CurvePoint::from_stats(&s);
@@ -655,6 +673,17 @@ pub struct EvalReport {
     /// ([`Act::Sample`]) rather than its mean.
     #[serde(default)]
     pub sampled: bool,
+    /// The controller's fault code at each episode's end, in seed order (0:
+    /// none; rt-controller's `fault_code`: 4 force, 5 moment overload).
+    #[serde(default)]
+    pub fault_codes: Vec<u32>,
+}
+
+impl EvalReport {
+    /// Episodes that ended by a controller fault.
+    pub fn faulted(&self) -> usize {
+        self.fault_codes.iter().filter(|&&c| c != 0).count()
+    }
 }
 
 /// How an evaluated policy acts.
@@ -721,7 +750,7 @@ pub fn evaluate_acting(
                 };
                 let o = env.step(&a, camera)?;
                 if o.done() {
-                    done.push((k, o));
+                    done.push((k, o, env.fast().sensor_frame().fault_code));
                     break;
                 }
             }
@@ -729,11 +758,13 @@ pub fn evaluate_acting(
         Ok::<_, RlEnvError>(done)
     });
     let mut norm = vec![0.0; episodes];
+    let mut fault_codes = vec![0; episodes];
     let mut outcomes = [0.0; 4];
     let mut done = 0;
     for r in results {
-        for (k, o) in r? {
+        for (k, o, code) in r? {
             done += 1;
+            fault_codes[k] = code;
             norm[k] = normalised_return(o.episode_reward, cfg.env.max_steps);
             outcomes[o.outcome.index()] += 1.0 / episodes as f64;
         }
@@ -747,5 +778,6 @@ pub fn evaluate_acting(
         normalised: norm,
         outcomes,
         sampled: act == Act::Sample,
+        fault_codes,
     })
 }

@@ -72,6 +72,7 @@ pub struct VecEnv {
     obs: Vec<f64>,
     outcomes: Vec<StepOutcome>,
     max_steps: u32,
+    overload_share: Arc<super::env::Share>,
 }
 
 impl VecEnv {
@@ -91,9 +92,13 @@ impl VecEnv {
             )
             .into());
         }
-        let envs = (0..n)
+        let overload_share = Arc::new(super::env::Share::default());
+        let mut envs = (0..n)
             .map(|_| RlEnv::for_training(cfg))
             .collect::<Result<Vec<_>, _>>()?;
+        for e in &mut envs {
+            e.share_overload_ramp(overload_share.clone());
+        }
         // After the world is built, so that an invalid camera is named by
         // its field rather than reported as another camera.
         super::observe::check_camera(&cfg.world.camera, observer.as_ref())?;
@@ -105,7 +110,14 @@ impl VecEnv {
             observer,
             threads: threads.min(n),
             max_steps: cfg.max_steps,
+            overload_share,
         })
+    }
+
+    /// The overload ramp's progress, read by every environment
+    /// (`training.overload_ramp_steps`; the training loop sets it).
+    pub fn overload_share(&self) -> &super::env::Share {
+        &self.overload_share
     }
 
     /// Environment `i`.
