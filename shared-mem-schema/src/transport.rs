@@ -489,13 +489,42 @@ pub fn try_drain<T: Message>(subscriber: &Sub<T>, f: impl FnMut(&T)) -> Result<u
     drain_into(subscriber, f, |f, _| f)
 }
 
+/// As [`try_drain`], but takes at most `max` messages: a loop with a
+/// deadline bounds its work per cycle whatever its peers publish; the rest
+/// stays queued for the next call. Never allocates.
+pub fn try_drain_at_most<T: Message>(
+    subscriber: &Sub<T>,
+    max: usize,
+    f: impl FnMut(&T),
+) -> Result<usize, Failure> {
+    drain_bounded(subscriber, max, f, |f, _| f)
+}
+
+/// As [`drain`], at most `max` messages (see [`try_drain_at_most`]).
+pub fn drain_at_most<T: Message>(
+    subscriber: &Sub<T>,
+    max: usize,
+    f: impl FnMut(&T),
+) -> Result<usize, TransportError> {
+    drain_bounded(subscriber, max, f, detailed::<T>)
+}
+
 fn drain_into<T: Message, E>(
     subscriber: &Sub<T>,
+    f: impl FnMut(&T),
+    err: impl FnOnce(Failure, &dyn core::fmt::Debug) -> E,
+) -> Result<usize, E> {
+    drain_bounded(subscriber, usize::MAX, f, err)
+}
+
+fn drain_bounded<T: Message, E>(
+    subscriber: &Sub<T>,
+    max: usize,
     mut f: impl FnMut(&T),
     err: impl FnOnce(Failure, &dyn core::fmt::Debug) -> E,
 ) -> Result<usize, E> {
     let mut n = 0;
-    loop {
+    while n < max {
         match subscriber.receive() {
             Ok(Some(s)) => {
                 f(s.payload());
@@ -505,6 +534,7 @@ fn drain_into<T: Message, E>(
             Err(e) => return Err(err(Failure::Receive, &e)),
         }
     }
+    Ok(n)
 }
 
 #[cfg(test)]

@@ -78,6 +78,9 @@ impl SimBackend {
     }
 }
 
+/// Most hardware states one poll of the simulator backend receives.
+pub const MAX_STATES_PER_POLL: usize = 8;
+
 impl Hardware for SimBackend {
     fn name(&self) -> &'static str {
         "sim"
@@ -86,7 +89,8 @@ impl Hardware for SimBackend {
     fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
         let mut got = false;
         let latest = &mut self.latest;
-        transport::drain(&self.states, |s| {
+        // Bounded: a peer flooding `hw/state` cannot stretch the cycle.
+        transport::drain_at_most(&self.states, MAX_STATES_PER_POLL, |s| {
             if !got || s.header.seq > latest.header.seq || s.header.episode != latest.header.episode
             {
                 *latest = *s;

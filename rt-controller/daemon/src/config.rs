@@ -17,9 +17,16 @@ pub enum DaemonConfigError {
     /// field or a wrong type.
     #[error(transparent)]
     File(#[from] ConfigFileError),
-    /// A value is out of range.
+    /// A value is out of range (its message is the whole story: no
+    /// source, so that a chain of errors does not print it twice).
     #[error("configuration: {0}")]
-    BadValue(#[from] FieldError),
+    BadValue(FieldError),
+}
+
+impl From<FieldError> for DaemonConfigError {
+    fn from(e: FieldError) -> Self {
+        Self::BadValue(e)
+    }
 }
 
 /// What drives the loop's cycles.
@@ -163,10 +170,6 @@ pub struct FrankaConfig {
     /// law's torques are already rate-limited, and the filter's lag would
     /// only take phase margin from the impedance's damping.
     pub cutoff_hz: f64,
-    /// Run the robot's automatic error recovery at start-up (clears a
-    /// reflex left by an earlier run). Off by default: a reflex is for an
-    /// operator to look at.
-    pub error_recovery: bool,
     /// `robot_estimate`, `net_ft` or `none`.
     pub wrench: WrenchSource,
     /// The external sensor of `wrench = "net_ft"`.
@@ -185,7 +188,6 @@ impl Default for FrankaConfig {
             collision_force: [20.0, 20.0, 20.0, 25.0, 25.0, 25.0],
             rate_limit: true,
             cutoff_hz: 1000.0,
-            error_recovery: false,
             wrench: WrenchSource::RobotEstimate,
             net_ft: NetFtConfig::default(),
         }
@@ -338,6 +340,11 @@ pub struct DaemonConfig {
     pub timing: TimingConfig,
     /// Real-time set-up.
     pub realtime: RealtimeConfig,
+    /// The fault record ([`crate::fault_record`]): a latched fault, or a
+    /// daemon that ended without a clean stop, refuses every later start
+    /// until `rt-controller reset`. Required with `backend.kind = "franka"`;
+    /// absent, a fault ends with the process (the simulator's runs).
+    pub fault_record: Option<std::path::PathBuf>,
 }
 
 impl Default for DaemonConfig {
@@ -348,6 +355,7 @@ impl Default for DaemonConfig {
             backend: BackendConfig::default(),
             timing: TimingConfig::default(),
             realtime: RealtimeConfig::default(),
+            fault_record: None,
         }
     }
 }
@@ -372,6 +380,22 @@ impl DaemonConfig {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot print: {e}\n"))
     }
 
+    /// What a daemon that drives a robot needs beyond [`Self::validate`]
+    /// (checked once the command line's overrides are in): a Franka's
+    /// faults must survive a restart, so it needs `fault_record`.
+    pub fn validate_for_start(&self) -> Result<(), DaemonConfigError> {
+        if self.backend.kind == BackendKind::Franka && self.fault_record.is_none() {
+            ensure(
+                false,
+                "fault_record",
+                "none",
+                "is required with backend.kind = \"franka\" (or --fault-record): a fault must \
+                 survive a restart",
+            )?;
+        }
+        Ok(())
+    }
+
     /// Checks the daemon's own values (the control law is checked against
     /// the robot model when the controller is built).
     pub fn validate(&self) -> Result<(), DaemonConfigError> {
@@ -381,6 +405,14 @@ impl DaemonConfig {
             "\"\"",
             "must name a built-in robot or a URDF file",
         )?;
+        if let Some(p) = &self.fault_record {
+            ensure(
+                !p.as_os_str().is_empty(),
+                "fault_record",
+                "\"\"",
+                "must be a file path (its folder must exist)",
+            )?;
+        }
         let t = &self.timing;
         positive("timing.hardware_timeout_ms", t.hardware_timeout_ms)?;
         positive("timing.startup_timeout_s", t.startup_timeout_s)?;

@@ -19,6 +19,13 @@ use shared_mem_schema::{
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
+/// Most action messages one cycle receives (the action queue's depth): a
+/// flooding peer cannot stretch a cycle; the rest waits in the subscriber's
+/// buffer, whose own overflow drops the oldest.
+pub const MAX_ACTIONS_PER_CYCLE: usize = 16;
+/// Most controller commands one cycle receives.
+pub const MAX_COMMANDS_PER_CYCLE: usize = 4;
+
 /// Why the daemon could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
@@ -204,14 +211,15 @@ impl<H: Hardware> Daemon<H> {
         Ok(true)
     }
 
-    /// Takes every queued action message into the queue; garbage (another
+    /// Takes the queued action messages (at most [`MAX_ACTIONS_PER_CYCLE`])
+    /// into the queue; garbage (another
     /// schema) is counted and dropped. The control law validates the
     /// values (NaN, out of range) itself. A failed receive is counted and
     /// the cycle goes on: without actions the control law holds.
     fn take_actions(&mut self) {
         let (queue, stats) = (&mut self.queue, &mut self.stats);
         let episode = self.control.episode();
-        let drained = transport::try_drain(&self.actions, |a| {
+        let drained = transport::try_drain_at_most(&self.actions, MAX_ACTIONS_PER_CYCLE, |a| {
             stats.actions_received += 1;
             if a.header.schema_version != SCHEMA_VERSION {
                 // Another schema's bytes.
@@ -243,7 +251,7 @@ impl<H: Hardware> Daemon<H> {
         let mut last: Option<ControllerCommand> = None;
         let mut received = 0u64;
         // Several at once: the newest counts (each asks for the same reset).
-        let drained = transport::try_drain(&self.commands, |c| {
+        let drained = transport::try_drain_at_most(&self.commands, MAX_COMMANDS_PER_CYCLE, |c| {
             received += 1;
             last = Some(*c);
         });

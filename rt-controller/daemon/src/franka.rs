@@ -38,8 +38,9 @@ const JOINTS: usize = 7;
 
 /// Connects to the robot of `cfg`, retrying refused or unanswered
 /// connections for `timeout_s` (a robot or simulator still starting), then
-/// applies the collision thresholds and, when configured, the automatic
-/// error recovery. Not real-time: called before the loop starts.
+/// applies the collision thresholds. It never runs the robot's error
+/// recovery: that is [`recover`], an operator's one-shot command. Not
+/// real-time: called before the loop starts.
 pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareError> {
     let version = match cfg.generation {
         FrankaGeneration::Fr3 => FciVersion::V10,
@@ -70,11 +71,6 @@ pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareErro
             }
         }
     };
-    if cfg.error_recovery {
-        robot
-            .automatic_error_recovery()
-            .map_err(|e| robot_error(&e, "automatic error recovery"))?;
-    }
     robot
         .set_collision_behavior_simple(
             cfg.contact_torque_nm,
@@ -84,6 +80,16 @@ pub fn connect(cfg: &FrankaConfig, timeout_s: f64) -> Result<Robot, HardwareErro
         )
         .map_err(|e| robot_error(&e, "setting the collision thresholds"))?;
     Ok(robot)
+}
+
+/// `rt-controller recover`: connects, runs the robot's automatic error
+/// recovery once (clears a reflex the robot latched) and disconnects. An
+/// operator's decision, never part of a start.
+pub fn recover(cfg: &FrankaConfig, timeout_s: f64) -> Result<(), HardwareError> {
+    let robot = connect(cfg, timeout_s)?;
+    robot
+        .automatic_error_recovery()
+        .map_err(|e| robot_error(&e, "automatic error recovery"))
 }
 
 /// The fault code of a robot error: the robot's reflex reasons of the

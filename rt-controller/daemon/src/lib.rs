@@ -39,6 +39,7 @@
 pub mod backend;
 pub mod config;
 pub mod control;
+pub mod fault_record;
 #[cfg(feature = "franka")]
 pub mod franka;
 pub mod netft;
@@ -56,7 +57,22 @@ pub use franka::FrankaBackend;
 pub use netft::NetFt;
 pub use rt_controller::cycle::fault_code;
 pub use shared::{
-    FAULT_FT_SENSOR, FAULT_HARDWARE_SILENT, FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT,
-    FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX, Shared,
+    FAULT_DAEMON_ERROR, FAULT_FT_SENSOR, FAULT_HARDWARE_SILENT, FAULT_ROBOT_COMMUNICATION,
+    FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX, Shared,
 };
 pub use stats::{RunSummary, Stats};
+
+/// The `rt-controller` binary's exit statuses (docs/operation.md): the
+/// systemd unit restarts only after [`exit::ERROR`] and a crash.
+pub mod exit {
+    /// Stopped on request, no fault latched.
+    pub const CLEAN: i32 = 0;
+    /// An error that left no fault (the hardware never came at start-up, a
+    /// service could not be opened): a restart may succeed.
+    pub const ERROR: i32 = 1;
+    /// A bad configuration or command line: a restart gives the same.
+    pub const CONFIG: i32 = 2;
+    /// A fault: latched in this run, or on record from an earlier one (the
+    /// start was refused). Only `rt-controller reset` lets it start again.
+    pub const FAULT: i32 = 3;
+}

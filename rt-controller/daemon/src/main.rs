@@ -4,10 +4,12 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller_daemon::config::{BackendKind, Clock, DaemonConfig, WrenchSource};
+use rt_controller_daemon::fault_record::{self, FaultRecord, RecordError, RecordState};
 use rt_controller_daemon::rt::{self, Notifier};
 use rt_controller_daemon::rt_alloc::{self, RtAllocator};
 use rt_controller_daemon::{
-    Daemon, FAULT_HARDWARE_SILENT, FrankaBackend, Hardware, NetFt, Shared, SimBackend, franka,
+    Daemon, FAULT_DAEMON_ERROR, FAULT_HARDWARE_SILENT, FrankaBackend, Hardware, HardwareError,
+    NetFt, RunSummary, Shared, SimBackend, exit, franka,
 };
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::process::{
@@ -51,6 +53,10 @@ struct Args {
     /// Sets `realtime.enabled = false`.
     #[arg(long)]
     no_realtime: bool,
+    /// Overrides `fault_record` (docs/operation.md, "Faults across
+    /// restarts").
+    #[arg(long)]
+    fault_record: Option<PathBuf>,
     /// Prints the effective configuration and exits.
     #[arg(long)]
     print_config: bool,
@@ -64,23 +70,54 @@ enum Cmd {
     /// Clears a latched fault of the daemon running in the namespace (the
     /// configuration's, or `--namespace`): sends a reset and prints the
     /// daemon's answer. Exits non-zero when the daemon refuses (hardware
-    /// still silent) or does not answer.
+    /// still silent) or does not answer. With a fault record and no daemon
+    /// running on it, clears the record instead (counted in its history).
     Reset {
         /// How long to wait for the daemon's answer, s.
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
     },
+    /// Runs the Franka's automatic error recovery once (clears a reflex
+    /// the robot latched) and exits; never part of a start. A fault on
+    /// record still needs `reset`.
+    Recover,
+}
+
+/// An error and the exit status it ends the process with
+/// ([`rt_controller_daemon::exit`]).
+struct Failure {
+    code: i32,
+    error: anyhow::Error,
+}
+
+/// Wraps an error in the exit status `code`.
+fn with(code: i32) -> impl FnOnce(anyhow::Error) -> Failure {
+    move |error| Failure { code, error }
 }
 
 fn main() {
-    tracing_subscriber::fmt().with_target(false).init();
-    match run(Args::parse()) {
-        Ok(()) => {}
-        Err(e) => {
-            error!("rt-controller: {e:#}");
-            std::process::exit(1);
+    init_logging();
+    let code = match run(Args::parse()) {
+        Ok(code) => code,
+        Err(f) => {
+            error!("rt-controller: {:#}", f.error);
+            f.code
         }
-    }
+    };
+    std::process::exit(code);
+}
+
+/// `RUST_LOG` filters (default `info`); colour only on a terminal, so
+/// that journald stores plain text.
+fn init_logging() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_target(false)
+        .with_env_filter(filter)
+        .with_ansi(std::io::stdout().is_terminal())
+        .init();
 }
 
 fn load_config(args: &Args) -> Result<DaemonConfig> {
@@ -103,54 +140,183 @@ fn load_config(args: &Args) -> Result<DaemonConfig> {
     if args.no_realtime {
         cfg.realtime.enabled = false;
     }
+    if let Some(p) = &args.fault_record {
+        cfg.fault_record = Some(p.clone());
+    }
     cfg.validate()?;
+    cfg.validate_for_start()?;
     Ok(cfg)
 }
 
-fn run(args: Args) -> Result<()> {
-    let cfg = load_config(&args)?;
+fn run(args: Args) -> Result<i32, Failure> {
+    let cfg = load_config(&args).map_err(with(exit::CONFIG))?;
     if args.print_config {
         print!("{}", cfg.to_toml());
-        return Ok(());
+        return Ok(exit::CLEAN);
     }
-    if let Some(Cmd::Reset { timeout_s }) = args.command {
-        return send_reset(&cfg.backend.namespace, timeout_s);
+    match args.command {
+        Some(Cmd::Reset { timeout_s }) => return reset_command(&cfg, timeout_s),
+        Some(Cmd::Recover) => return recover_command(&cfg),
+        None => {}
     }
     install_termination_handler();
     transport::quiet_logs();
+    // Before anything touches the arm: one daemon per record, and none
+    // past a fault on record.
+    let record = match &cfg.fault_record {
+        Some(p) => Some(Arc::new(
+            FaultRecord::lock(p).map_err(|e| with(exit::CONFIG)(e.into()))?,
+        )),
+        None => None,
+    };
+    if let Some(r) = &record {
+        let entry = r.read().map_err(|e| with(exit::FAULT)(e.into()))?;
+        if let Some(why) = fault_record::refusal(&entry) {
+            return Err(Failure {
+                code: exit::FAULT,
+                error: anyhow::anyhow!(
+                    "start refused by the fault record {}: {why}. Look at the robot and the \
+                     journal, then `rt-controller reset` clears the record (counted in {})",
+                    r.path().display(),
+                    r.history_path().display()
+                ),
+            });
+        }
+    }
     println!("# rt-controller effective configuration\n{}", cfg.to_toml());
     let model = robot_model::descriptions::load(&cfg.robot)
-        .with_context(|| format!("loading the robot `robot` = {:?}", cfg.robot))?;
-    let node = transport::create_node("rt-controller")?;
-    match cfg.backend.kind {
-        BackendKind::Sim => {
-            let hw = SimBackend::open(&node, &cfg.backend.namespace)?;
-            drive(&cfg, model, hw, &node, |_| {})
+        .with_context(|| format!("loading the robot `robot` = {:?}", cfg.robot))
+        .map_err(with(exit::CONFIG))?;
+    // The control law against the robot: a bad value is the configuration's.
+    cfg.controller
+        .validate(&model)
+        .map_err(|e| with(exit::CONFIG)(anyhow::anyhow!("{e}")))?;
+    if let Some(r) = &record {
+        r.mark_running().map_err(|e| with(exit::CONFIG)(e.into()))?;
+    }
+    let ending = start_and_drive(&cfg, model, record.clone());
+    conclude(ending, record.as_deref())
+}
+
+/// How a daemon's run ended.
+struct Ending {
+    /// The loop ran (the daemon held the arm).
+    ready: bool,
+    /// The fault latched at the end (0: none).
+    latched: u32,
+    /// The error that ended it, with the fault code it is recorded as
+    /// (0: none).
+    error: Option<(anyhow::Error, u32)>,
+}
+
+/// The record and the exit status of an ending: a fault (latched, a robot
+/// error, or an error while the arm was held) is recorded and exits
+/// [`exit::FAULT`]; an error before the arm was held [`exit::ERROR`].
+fn conclude(end: Ending, record: Option<&FaultRecord>) -> Result<i32, Failure> {
+    let fault = match &end.error {
+        Some((_, code)) if *code != 0 => *code,
+        Some(_) if end.ready => FAULT_DAEMON_ERROR,
+        _ => end.latched,
+    };
+    if let Some(r) = record {
+        let written = if fault != 0 {
+            // The monitor may have recorded it already.
+            match r.read() {
+                Ok(Some(e)) if e.state == RecordState::Fault => Ok(()),
+                _ => r.record_fault(fault),
+            }
+        } else {
+            r.clear_clean()
+        };
+        if let Err(e) = written {
+            error!("rt-controller: {e}");
         }
+    }
+    match (end.error, fault) {
+        (Some((e, _)), 0) => Err(with(exit::ERROR)(e)),
+        (Some((e, _)), _) => Err(with(exit::FAULT)(e)),
+        (None, 0) => Ok(exit::CLEAN),
+        (None, code) => Err(Failure {
+            code: exit::FAULT,
+            error: anyhow::anyhow!(
+                "stopped with fault {code} ({}) latched{}",
+                fault_record::fault_name(code),
+                if record.is_some() {
+                    "; it stays on record until `rt-controller reset`"
+                } else {
+                    ""
+                }
+            ),
+        }),
+    }
+}
+
+/// Opens the backend and runs the daemon on it.
+fn start_and_drive(
+    cfg: &DaemonConfig,
+    model: robot_model::Model,
+    record: Option<Arc<FaultRecord>>,
+) -> Ending {
+    let early = |e: anyhow::Error, code: u32| Ending {
+        ready: false,
+        latched: 0,
+        error: Some((e, code)),
+    };
+    let node = match transport::create_node("rt-controller") {
+        Ok(n) => n,
+        Err(e) => return early(e.into(), 0),
+    };
+    match cfg.backend.kind {
+        BackendKind::Sim => match SimBackend::open(&node, &cfg.backend.namespace) {
+            Ok(hw) => drive(cfg, model, hw, &node, record, |_| {}),
+            Err(e) => early(e.into(), 0),
+        },
         BackendKind::Franka => {
             let f = &cfg.backend.franka;
             info!(
                 "rt-controller: connecting to the Franka at {} ({:?})",
                 f.address, f.generation
             );
-            let robot = franka::connect(f, cfg.timing.startup_timeout_s)?;
+            let robot = match franka::connect(f, cfg.timing.startup_timeout_s) {
+                Ok(r) => r,
+                Err(e) => {
+                    let code = robot_code(&e);
+                    return early(e.into(), code);
+                }
+            };
             info!(
                 "rt-controller: connected, robot server version {}",
                 robot.server_version()
             );
             // The sensor is found and streaming before the motion starts.
             let wrench_sensor = match f.wrench {
-                WrenchSource::NetFt => Some(NetFt::connect(&f.net_ft, mono_now_ns())?),
+                WrenchSource::NetFt => match NetFt::connect(&f.net_ft, mono_now_ns()) {
+                    Ok(s) => Some(s),
+                    Err(e) => return early(e.into(), 0),
+                },
                 WrenchSource::RobotEstimate | WrenchSource::None => None,
             };
-            let hw = FrankaBackend::new(&robot, f.clone(), &model, wrench_sensor)?;
-            drive(&cfg, model, hw, &node, |hw| {
-                info!(
-                    "rt-controller: the robot's lowest control command success rate: {:.3}",
-                    hw.min_success_rate
-                );
-            })
+            match FrankaBackend::new(&robot, f.clone(), &model, wrench_sensor) {
+                Ok(hw) => drive(cfg, model, hw, &node, record, |hw| {
+                    info!(
+                        "rt-controller: the robot's lowest control command success rate: {:.3}",
+                        hw.min_success_rate
+                    );
+                }),
+                Err(e) => {
+                    let code = robot_code(&e);
+                    early(e.into(), code)
+                }
+            }
         }
+    }
+}
+
+/// The fault code a hardware error is recorded as (0: it left no fault).
+fn robot_code(e: &HardwareError) -> u32 {
+    match e {
+        HardwareError::Robot { code, .. } => *code,
+        _ => 0,
     }
 }
 
@@ -161,14 +327,23 @@ fn drive<H: Hardware>(
     model: robot_model::Model,
     hw: H,
     node: &transport::StackNode,
+    record: Option<Arc<FaultRecord>>,
     report_backend: impl FnOnce(&H),
-) -> Result<()> {
-    let mut daemon = Daemon::new(cfg.clone(), model, hw, node)
-        .map_err(|e| anyhow::anyhow!("{e}"))
-        .context("building the controller")?;
+) -> Ending {
+    let mut daemon = match Daemon::new(cfg.clone(), model, hw, node) {
+        Ok(d) => d,
+        Err(e) => {
+            return Ending {
+                ready: false,
+                latched: 0,
+                error: Some((anyhow::anyhow!("{e}").context("building the controller"), 0)),
+            };
+        }
+    };
 
     // The monitor runs at normal priority: it logs what the loop reports
-    // through atomics and feeds systemd's watchdog while the loop advances.
+    // through atomics, feeds systemd's watchdog while the loop advances and
+    // keeps the fault record.
     let notifier = Arc::new(Notifier::from_env());
     let monitor_stop = Arc::new(AtomicBool::new(false));
     let monitor = {
@@ -179,7 +354,17 @@ fn drive<H: Hardware>(
         );
         std::thread::Builder::new()
             .name("rt-monitor".into())
-            .spawn(move || monitor_loop(&shared, &stop, &notifier))?
+            .spawn(move || monitor_loop(&shared, &stop, &notifier, record.as_deref()))
+    };
+    let monitor = match monitor {
+        Ok(m) => m,
+        Err(e) => {
+            return Ending {
+                ready: false,
+                latched: 0,
+                error: Some((e.into(), 0)),
+            };
+        }
     };
 
     let report = rt::setup(&cfg.realtime);
@@ -204,7 +389,10 @@ fn drive<H: Hardware>(
         cfg.controller.period_s
     );
     let ready_notifier = notifier.clone();
+    let ready = Arc::new(AtomicBool::new(false));
+    let ready_flag = ready.clone();
     let result = daemon.run(termination_requested, move || {
+        ready_flag.store(true, Ordering::Relaxed);
         ready_notifier.notify("READY=1\nSTATUS=running");
         info!("rt-controller: hardware connected, control loop running");
     });
@@ -213,14 +401,33 @@ fn drive<H: Hardware>(
     let _ = monitor.join();
     report_backend(daemon.hardware());
     let a = rt_alloc::stats();
+    log_allocations(&a);
+    let latched = if faulted(daemon.shared.mode.load(Ordering::Relaxed)) {
+        daemon.shared.fault_code.load(Ordering::Relaxed)
+    } else {
+        0
+    };
+    let ready = ready.load(Ordering::Relaxed);
     let summary = match result {
         Ok(s) => s,
         Err(e) => {
-            log_allocations(&a);
-            return Err(e.into());
+            let code = robot_code(&e);
+            return Ending {
+                ready,
+                latched,
+                error: Some((e.into(), code)),
+            };
         }
     };
-    log_allocations(&a);
+    log_summary(&daemon, &summary);
+    Ending {
+        ready,
+        latched,
+        error: None,
+    }
+}
+
+fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
     let s = &daemon.stats;
     // Two lines: each stays short enough for a journal line (the tests
     // bound log lines at 300 characters).
@@ -256,7 +463,71 @@ fn drive<H: Hardware>(
         s.publish_errors,
         s.receive_errors
     );
-    Ok(())
+}
+
+/// `rt-controller reset`. With a fault record and no daemon running on
+/// it: clears the record (a fault, or an unclean end), counted in its
+/// history. Otherwise: a reset command to the running daemon.
+fn reset_command(cfg: &DaemonConfig, timeout_s: f64) -> Result<i32, Failure> {
+    if let Some(path) = &cfg.fault_record {
+        match FaultRecord::lock(path) {
+            Ok(r) => {
+                let cleared = match r.read() {
+                    Ok(entry) => fault_record::refusal(&entry),
+                    Err(e @ RecordError::Malformed { .. }) => Some(e.to_string()),
+                    Err(e) => return Err(with(exit::CONFIG)(e.into())),
+                };
+                let Some(why) = cleared else {
+                    println!(
+                        "rt-controller reset: no fault on record in {}, and no daemon runs on it",
+                        path.display()
+                    );
+                    return Ok(exit::CLEAN);
+                };
+                let n = r
+                    .operator_reset(&why)
+                    .map_err(|e| with(exit::ERROR)(e.into()))?;
+                warn!("rt-controller reset: cleared the fault record: {why}");
+                println!(
+                    "rt-controller reset: cleared the fault record {}: {why}; {n} resets on \
+                     record ({})",
+                    path.display(),
+                    r.history_path().display()
+                );
+                return Ok(exit::CLEAN);
+            }
+            // A daemon runs on it: it clears its own latch.
+            Err(RecordError::Held(_)) => {}
+            Err(e) => return Err(with(exit::CONFIG)(e.into())),
+        }
+    }
+    send_reset(&cfg.backend.namespace, timeout_s)
+        .map(|()| exit::CLEAN)
+        .map_err(with(exit::ERROR))
+}
+
+/// `rt-controller recover`: the Franka's automatic error recovery, once,
+/// with no daemon running on the record.
+fn recover_command(cfg: &DaemonConfig) -> Result<i32, Failure> {
+    if cfg.backend.kind != BackendKind::Franka {
+        return Err(Failure {
+            code: exit::CONFIG,
+            error: anyhow::anyhow!(
+                "`recover` runs the Franka's error recovery: needs backend.kind = \"franka\""
+            ),
+        });
+    }
+    let _record = match &cfg.fault_record {
+        Some(p) => Some(FaultRecord::lock(p).map_err(|e| with(exit::CONFIG)(e.into()))?),
+        None => None,
+    };
+    franka::recover(&cfg.backend.franka, cfg.timing.startup_timeout_s)
+        .map_err(|e| with(exit::ERROR)(e.into()))?;
+    println!(
+        "rt-controller recover: the robot's error recovery ran; a fault on record still needs \
+         `rt-controller reset`"
+    );
+    Ok(exit::CLEAN)
 }
 
 fn log_allocations(a: &rt_alloc::RtAllocStats) {
@@ -318,7 +589,17 @@ fn send_reset(namespace: &str, timeout_s: f64) -> Result<()> {
     bail!("no answer from an rt-controller in namespace '{namespace}' within {timeout_s} s")
 }
 
-fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
+/// Fault or HardwareLost.
+fn faulted(mode: u32) -> bool {
+    mode == ControllerMode::Fault as u32 || mode == ControllerMode::HardwareLost as u32
+}
+
+fn monitor_loop(
+    shared: &Shared,
+    stop: &AtomicBool,
+    notifier: &Notifier,
+    record: Option<&FaultRecord>,
+) {
     let mut last_beat = 0;
     let mut last_mode = u32::MAX;
     let mut last_command = 0;
@@ -355,6 +636,20 @@ fn monitor_loop(shared: &Shared, stop: &AtomicBool, notifier: &Notifier) {
             }
             // systemd shows it in `systemctl status`.
             notifier.notify(&format!("STATUS={name} (fault code {code})"));
+            if let Some(r) = record {
+                let kept = if faulted(mode) {
+                    r.record_fault(code)
+                } else if last_mode != u32::MAX && faulted(last_mode) {
+                    r.note_reset_command().map(|n| {
+                        warn!("rt-controller: the fault record says running again ({n} resets)");
+                    })
+                } else {
+                    Ok(())
+                };
+                if let Err(e) = kept {
+                    error!("rt-controller: {e}");
+                }
+            }
             last_mode = mode;
         }
         let command = shared.command_seq.load(Ordering::Relaxed);

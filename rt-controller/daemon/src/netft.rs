@@ -91,6 +91,9 @@ impl Record {
     }
 }
 
+/// Most datagrams one [`NetFt::read`] takes.
+pub const MAX_RECORDS_PER_READ: usize = 16;
+
 /// A streaming Net F/T.
 #[derive(Debug)]
 pub struct NetFt {
@@ -204,13 +207,15 @@ impl NetFt {
         Ok(())
     }
 
-    /// The newest wrench (N, N·m, the sensor's frame) after taking every
-    /// record that has arrived; an error if the newest is older than
+    /// The newest wrench (N, N·m, the sensor's frame) after taking the
+    /// records that have arrived (at most [`MAX_RECORDS_PER_READ`]); an error if the newest is older than
     /// `timeout_ms` at `now_ns` or reports a fault. Never blocks or
     /// allocates.
     pub fn read(&mut self, now_ns: u64) -> Result<[f64; 6], HardwareError> {
         let mut buf = [0u8; 64];
-        loop {
+        // Bounded: the sensor streams at most ~7 records per millisecond;
+        // a flood of datagrams waits in the socket for the next cycle.
+        for _ in 0..MAX_RECORDS_PER_READ {
             match self.socket.recv(&mut buf) {
                 Ok(n) => match Record::parse(&buf[..n]) {
                     Some(r) => self.take(&r, now_ns)?,

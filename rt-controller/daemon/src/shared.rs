@@ -20,6 +20,10 @@ pub const FAULT_ROBOT_OTHER: u32 = 104;
 /// longer than its time-out, or reporting a fault in its status word.
 pub const FAULT_FT_SENSOR: u32 = 105;
 
+/// Fault code of the daemon's own error while it held the arm (a service
+/// of the stack failed): the loop ended, so it is recorded as a fault.
+pub const FAULT_DAEMON_ERROR: u32 = 106;
+
 /// State the loop shares with its low-priority monitor thread (logging,
 /// systemd watchdog) through atomics only.
 #[derive(Debug, Default)]

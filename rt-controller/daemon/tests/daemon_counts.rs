@@ -77,3 +77,39 @@ fn superseded_hardware_states_are_counted_as_skipped() {
     transport::drain(&rig.torques, |c| steps.push(c.state_step)).unwrap();
     assert_eq!(steps, [0, 1, 2, 5, 6]);
 }
+
+#[test]
+fn a_cycle_receives_at_most_its_cap_of_actions_however_many_peers_flood() {
+    use rt_controller_daemon::control::MAX_ACTIONS_PER_CYCLE;
+    let mut rig = DaemonRig::new("counts-cap", |_| {});
+    let ns = rig.namespace().to_string();
+    let status_sub = transport::subscriber::<ControllerStatus>(&rig.peer, &ns).unwrap();
+    // Three peers, each filling its share of the daemon's subscriber.
+    let extra: Vec<transport::Pub<shared_mem_schema::PolicyAction>> = (0..2)
+        .map(|_| transport::publisher(&rig.peer, &ns).unwrap())
+        .collect();
+    rig.publish_state(0);
+    let mut seq = 0;
+    for p in extra.iter().chain([&rig.actions]) {
+        for _ in 0..16 {
+            seq += 1;
+            transport::send(p, &rig.action(seq, [0.0; 4])).unwrap();
+        }
+    }
+    let mut received = Vec::new();
+    for k in 0..4 {
+        rig.publish_state(k + 1);
+        cycle(&mut rig);
+        received.push(status(&mut rig, &status_sub).actions_received);
+    }
+    let per_cycle: Vec<u64> = received
+        .iter()
+        .scan(0, |last, &r| {
+            let d = r - *last;
+            *last = r;
+            Some(d)
+        })
+        .collect();
+    let cap = MAX_ACTIONS_PER_CYCLE as u64;
+    assert_eq!(per_cycle, [cap, cap, cap, 48 - 3 * cap], "{received:?}");
+}

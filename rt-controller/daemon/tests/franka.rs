@@ -119,10 +119,13 @@ fn the_daemon_drives_franky_sim() {
     let stop_ft = Arc::new(AtomicBool::new(false));
     let (ft_addr, ft) = ft_sensor(stop_ft.clone());
     let config = dir.join("rt-controller.toml");
+    let record = dir.join("rt-controller.fault");
+    let record = record.display();
     std::fs::write(
         &config,
         format!(
             r#"robot = "fr3"
+fault_record = "{record}"
 [controller]
 ee_frame = "fr3_hand_tcp"
 [backend]
