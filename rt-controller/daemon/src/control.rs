@@ -26,6 +26,11 @@ pub const MAX_ACTIONS_PER_CYCLE: usize = 16;
 /// Most controller commands one cycle receives.
 pub const MAX_COMMANDS_PER_CYCLE: usize = 4;
 
+/// The largest step in sequence number from the newest action applied in
+/// an episode to the next one admitted: a 20 Hz policy numbers its actions
+/// one by one, and 1,000 is 50 s of them.
+pub const MAX_SEQ_JUMP: u64 = 1000;
+
 /// Why the daemon could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
@@ -179,18 +184,30 @@ impl<H: Hardware> Daemon<H> {
             // Not usable: treat as silence (the timeout then faults).
             return Ok(false);
         }
+        // While the hardware is counted lost any state is read (a restarted
+        // hardware counts from its own start; a reset needs it live).
         if self.have_state
             && !self.hardware_lost
             && Some(s.header.episode) == self.control.episode()
-            && s.step == self.state.step
-            && self.last_command.state_step == s.step
-            && self.last_command.header.seq > 0
+            && (s.step <= self.state.step || s.header.t_hw_ns < self.state.header.t_hw_ns)
         {
-            // The same state again (a lockstep simulator re-publishes while
-            // it waits): answer with the same command, do not step again.
-            self.last_state_ns = now_ns;
-            let cmd = self.last_command;
-            self.hw.send(&cmd)?;
+            let repeat = s.step == self.state.step
+                && s.header.t_hw_ns == self.state.header.t_hw_ns
+                && self.cfg.timing.lockstep_actions
+                && self.last_command.state_step == s.step
+                && self.last_command.header.seq > 0;
+            if repeat {
+                // The same state again (a lockstep simulator re-publishes
+                // while it waits): answer with the same command, do not
+                // step again.
+                self.last_state_ns = now_ns;
+                let cmd = self.last_command;
+                self.hw.send(&cmd)?;
+            } else {
+                // A state that does not advance (a frozen or replaying
+                // hardware): not fresh, and the silence timer runs on.
+                self.stats.hardware_states_stale += 1;
+            }
             return Ok(false);
         }
         if self.have_state
@@ -306,8 +323,8 @@ impl<H: Hardware> Daemon<H> {
     /// observation of this episode (its `header.t_hw_ns`, a hardware time
     /// this daemon published in a sensor frame) made at most
     /// `timing.max_action_age_ms` ago on the hardware's clock, and be newer
-    /// than the last action applied this episode. Stale ones are counted
-    /// by reason.
+    /// than the last action applied this episode by at most
+    /// [`MAX_SEQ_JUMP`]. Stale ones are counted by reason.
     fn admit(&mut self, a: PolicyAction) -> Option<PolicyAction> {
         let now_hw = self.state.header.t_hw_ns;
         let max_age = (self.cfg.timing.max_action_age_ms * 1e6) as u64;
@@ -320,6 +337,10 @@ impl<H: Hardware> Daemon<H> {
             &mut s.actions_too_old
         } else if a.header.seq <= self.control.last_action_seq() {
             &mut s.actions_replayed
+        } else if self.control.last_action_seq() > 0
+            && a.header.seq - self.control.last_action_seq() > MAX_SEQ_JUMP
+        {
+            &mut s.actions_seq_jump
         } else {
             return Some(a);
         };

@@ -433,7 +433,7 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
     // bound log lines at 300 characters).
     info!(
         "rt-controller: stopped{} after {} cycles: {} overruns, {} hardware misses, {} hardware \
-         states skipped, wake-up p99 {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs",
+         states skipped, {} stale, wake-up p99 {} µs max {:.0} µs, compute p99 {} µs max {:.0} µs",
         match termination_signal() {
             0 => String::new(),
             s => format!(" (signal {s})"),
@@ -442,6 +442,7 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
         summary.overruns,
         s.hardware_misses,
         s.hardware_states_skipped,
+        s.hardware_states_stale,
         s.wakeup.quantile_us(0.99),
         s.wakeup.max_ns as f64 / 1e3,
         s.compute.quantile_us(0.99),
@@ -449,7 +450,7 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
     );
     info!(
         "rt-controller: actions: {} garbage, {} dropped from the full queue, {} stale ({} too old, \
-         {} from the future, {} of another episode, {} replayed); {} resets, {} refused commands, \
+         {} from the future, {} of another episode, {} replayed, {} jumped); {} resets, {} refused commands, \
          {} failed publications, {} failed action receives",
         daemon.shared.garbage_actions.load(Ordering::Relaxed),
         s.actions_overflow,
@@ -458,6 +459,7 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
         s.actions_from_future,
         s.actions_other_episode,
         s.actions_replayed,
+        s.actions_seq_jump,
         daemon.control.resets(),
         s.commands_refused,
         s.publish_errors,

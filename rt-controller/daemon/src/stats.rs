@@ -13,6 +13,11 @@ pub struct Stats {
     /// Hardware states never controlled because a newer one had arrived by
     /// the cycle (counted from the gaps in the states' steps).
     pub hardware_states_skipped: u64,
+    /// Hardware states dropped because they did not advance (a step or a
+    /// hardware time not above the last one's in the episode), outside a
+    /// lockstep re-publication: they neither count as fresh nor keep the
+    /// hardware from being found silent.
+    pub hardware_states_stale: u64,
     /// Actions received.
     pub actions_received: u64,
     /// Actions refused before the control law saw them (another schema
@@ -31,6 +36,10 @@ pub struct Stats {
     /// Actions dropped because their sequence number is not above the
     /// newest one applied this episode.
     pub actions_replayed: u64,
+    /// Actions dropped because their sequence number jumps more than
+    /// `control::MAX_SEQ_JUMP` past the newest one applied this episode (a
+    /// forged `u64::MAX` would otherwise starve the policy).
+    pub actions_seq_jump: u64,
     /// Controller commands received.
     pub commands: u64,
     /// Resets refused (the hardware still silent, or an unknown command).
@@ -56,6 +65,7 @@ impl Stats {
             + self.actions_too_old
             + self.actions_from_future
             + self.actions_replayed
+            + self.actions_seq_jump
     }
 
     /// Nothing counted yet.
@@ -64,6 +74,7 @@ impl Stats {
         overruns: 0,
         hardware_misses: 0,
         hardware_states_skipped: 0,
+        hardware_states_stale: 0,
         actions_received: 0,
         actions_garbage: 0,
         actions_overflow: 0,
@@ -71,6 +82,7 @@ impl Stats {
         actions_too_old: 0,
         actions_from_future: 0,
         actions_replayed: 0,
+        actions_seq_jump: 0,
         commands: 0,
         commands_refused: 0,
         publish_errors: 0,

@@ -232,3 +232,65 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     assert_eq!(rig.daemon.mode(), ControllerMode::Holding);
     assert_eq!(stale(&rig).0, too_old + 10);
 }
+
+#[test]
+fn a_hardware_that_republishes_one_state_ends_hardware_lost() {
+    let mut rig = DaemonRig::new("hw-frozen", |c| c.timing.hardware_timeout_ms = 20.0);
+    for k in 0..10 {
+        assert_eq!(step(&mut rig, k), CycleOutcome::Sent);
+    }
+    // Frozen: the same state (step 9) again and again, then an older one,
+    // for longer than the timeout. Outside lockstep none is fresh, and the
+    // silence timer runs on.
+    let start = std::time::Instant::now();
+    let mut lost = false;
+    while start.elapsed() < Duration::from_millis(500) && !lost {
+        rig.publish_state(9);
+        let now = mono_now_ns();
+        assert!(
+            !rig.daemon.poll_hardware(now).unwrap(),
+            "a repeat is not fresh"
+        );
+        lost = rig.daemon.cycle(now, false).unwrap() == CycleOutcome::HardwareLost;
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(lost, "a frozen hardware never became HardwareLost");
+    assert_eq!(rig.daemon.mode(), ControllerMode::HardwareLost);
+    assert!(rig.daemon.stats.hardware_states_stale > 0);
+}
+
+#[test]
+fn a_state_behind_the_last_one_is_dropped() {
+    let mut rig = DaemonRig::new("hw-behind", |_| {});
+    for k in 0..10 {
+        step(&mut rig, k);
+    }
+    rig.publish_state(5);
+    assert!(!rig.daemon.poll_hardware(mono_now_ns()).unwrap());
+    assert_eq!(rig.daemon.stats.hardware_states_stale, 1);
+    // The stream goes on from where it was.
+    assert_eq!(step(&mut rig, 10), CycleOutcome::Sent);
+}
+
+#[test]
+fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
+    let mut rig = DaemonRig::new("seq-jump", |_| {});
+    let mut k = 0;
+    run(&mut rig, 50, &mut k);
+    transport::send(&rig.actions, &rig.action(1, [0.001, 0.0, 0.0, 0.0])).unwrap();
+    run(&mut rig, 1, &mut k);
+    assert_eq!(rig.daemon.control.last_action_seq(), 1);
+    // A peer copies the newest frame's stamps with seq = u64::MAX.
+    transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
+    run(&mut rig, 1, &mut k);
+    assert_eq!(
+        rig.daemon.control.last_action_seq(),
+        1,
+        "the jump was applied"
+    );
+    assert_eq!(rig.daemon.stats.actions_seq_jump, 1);
+    // The policy's next action still counts.
+    transport::send(&rig.actions, &rig.action(2, [0.001, 0.0, 0.0, 0.0])).unwrap();
+    run(&mut rig, 1, &mut k);
+    assert_eq!(rig.daemon.control.last_action_seq(), 2);
+}
