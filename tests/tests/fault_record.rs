@@ -129,6 +129,22 @@ fn a_fault_survives_a_kill_and_restart_until_the_operator_resets_it() {
             .unwrap()
             .contains("running")
     );
+    // What an operator reads: the status on shared memory and the record.
+    let out = Command::new(tests::stack_bins().join("rt-controller"))
+        .args(args(
+            &ns,
+            &record,
+            &["status", "--json", "--timeout-s", "10"],
+        ))
+        .output()
+        .unwrap();
+    let status_json = text(&out);
+    assert!(out.status.success(), "{status_json}");
+    assert!(
+        status_json.contains("\"fault_code\": 0")
+            && status_json.contains("\"fault_record\": \"running"),
+        "{status_json}"
+    );
     let end = ctl.stop(Duration::from_secs(5)).expect("stopped");
     assert_eq!(end.code(), Some(0), "a clean stop");
     assert!(!record.exists(), "a clean stop leaves no record");

@@ -77,6 +77,17 @@ enum Cmd {
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
     },
+    /// Prints the running daemon's newest status (published every
+    /// `timing.status_period_ms` on shared memory) and the fault record's
+    /// state; exits 1 when no daemon answers within the time-out.
+    Status {
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+        /// How long to wait for a status, s.
+        #[arg(long, default_value_t = 2.0)]
+        timeout_s: f64,
+    },
     /// Runs the Franka's automatic error recovery once (clears a reflex
     /// the robot latched) and exits; never part of a start. A fault on
     /// record still needs `reset`.
@@ -157,6 +168,7 @@ fn run(args: Args) -> Result<i32, Failure> {
     match args.command {
         Some(Cmd::Reset { timeout_s }) => return reset_command(&cfg, timeout_s),
         Some(Cmd::Recover) => return recover_command(&cfg),
+        Some(Cmd::Status { json, timeout_s }) => return status_command(&cfg, json, timeout_s),
         None => {}
     }
     install_termination_handler();
@@ -506,6 +518,78 @@ fn reset_command(cfg: &DaemonConfig, timeout_s: f64) -> Result<i32, Failure> {
     send_reset(&cfg.backend.namespace, timeout_s)
         .map(|()| exit::CLEAN)
         .map_err(with(exit::ERROR))
+}
+
+/// `rt-controller status`: the newest status on shared memory and what the
+/// fault record says (read without its lock: a daemon may hold it).
+fn status_command(cfg: &DaemonConfig, json: bool, timeout_s: f64) -> Result<i32, Failure> {
+    let record = match &cfg.fault_record {
+        Some(p) => match std::fs::read_to_string(p) {
+            Ok(t) => match toml::from_str::<fault_record::RecordEntry>(&t) {
+                Ok(e) => format!("{:?} (code {}: {})", e.state, e.code, e.reason).to_lowercase(),
+                Err(_) => "unreadable".into(),
+            },
+            Err(_) => "none".into(),
+        },
+        None => "not configured".into(),
+    };
+    transport::quiet_logs();
+    let ns = &cfg.backend.namespace;
+    let found = (|| -> Result<Option<ControllerStatus>> {
+        let node = transport::create_node("rt-controller-status")?;
+        let sub = transport::subscriber::<ControllerStatus>(&node, ns)?;
+        let start = std::time::Instant::now();
+        while start.elapsed().as_secs_f64() < timeout_s {
+            let mut last = None;
+            transport::drain(&sub, |s| last = Some(*s))?;
+            if last.is_some() {
+                return Ok(last);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok(None)
+    })()
+    .map_err(with(exit::ERROR))?;
+    let Some(s) = found else {
+        return Err(Failure {
+            code: exit::ERROR,
+            error: anyhow::anyhow!(
+                "no status from an rt-controller in namespace '{ns}' within {timeout_s} s                  (fault record: {record})"
+            ),
+        });
+    };
+    let mode = ControllerMode::from_u32(s.mode).map_or("?", |m| m.name());
+    if json {
+        println!(
+            "{{\"namespace\": {ns:?}, \"mode\": {mode:?}, \"fault_code\": {}, \"fault\": {:?},              \"cycles\": {}, \"overruns\": {}, \"faults\": {}, \"resets\": {},              \"hardware_misses\": {}, \"actions_accepted\": {}, \"actions_rejected\": {},              \"realtime\": {}, \"compute_p99_us\": {}, \"fault_record\": {record:?}}}",
+            s.fault_code,
+            fault_record::fault_name(s.fault_code),
+            s.cycles,
+            s.overruns,
+            s.faults,
+            s.resets,
+            s.hardware_misses,
+            s.actions_accepted,
+            s.actions_rejected,
+            s.realtime != 0,
+            s.compute.quantile_us(0.99),
+        );
+    } else {
+        println!(
+            "rt-controller in '{ns}': mode {mode}, fault code {} ({}); {} cycles, {} overruns, {}              faults, {} resets, {} hardware misses; actions {} accepted, {} rejected; compute p99              {} µs; fault record: {record}",
+            s.fault_code,
+            fault_record::fault_name(s.fault_code),
+            s.cycles,
+            s.overruns,
+            s.faults,
+            s.resets,
+            s.hardware_misses,
+            s.actions_accepted,
+            s.actions_rejected,
+            s.compute.quantile_us(0.99),
+        );
+    }
+    Ok(exit::CLEAN)
 }
 
 /// `rt-controller recover`: the Franka's automatic error recovery, once,
