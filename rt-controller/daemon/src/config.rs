@@ -134,6 +134,18 @@ impl NetFtConfig {
         positive(
             "backend.franka.net_ft.start_timeout_s",
             self.start_timeout_s,
+        )?;
+        // Bounded: a longer silence no longer protects the arm, and huge
+        // values overflow the time conversions.
+        within(
+            "backend.franka.net_ft.timeout_ms",
+            self.timeout_ms,
+            0.0..=5000.0,
+        )?;
+        within(
+            "backend.franka.net_ft.start_timeout_s",
+            self.start_timeout_s,
+            0.0..=60.0,
         )
     }
 }
@@ -197,6 +209,20 @@ impl Default for FrankaConfig {
 impl FrankaConfig {
     fn validate(&self) -> Result<(), FieldError> {
         network_address("backend.franka.address", &self.address)?;
+        // On a robot nothing turns a protection off.
+        ensure(
+            self.rate_limit,
+            "backend.franka.rate_limit",
+            false,
+            "must be true on a robot (the robot's own torque-rate limit)",
+        )?;
+        ensure(
+            self.wrench != WrenchSource::None,
+            "backend.franka.wrench",
+            "\"none\"",
+            "must be \"robot_estimate\" or \"net_ft\" on a robot (\"none\" turns the force \
+             supervision off)",
+        )?;
         within("backend.franka.cutoff_hz", self.cutoff_hz, 0.0..=1000.0)?;
         positive("backend.franka.cutoff_hz", self.cutoff_hz)?;
         for (field, lower, upper) in [
