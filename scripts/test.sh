@@ -25,6 +25,11 @@ export ROBOT_MODEL_REQUIRE_PINOCCHIO=1
 export FRANKY_SIM_PYTHON="$PWD/$FRANKY_SIM_VENV/bin/python"
 export FRANKY_SIM_REQUIRED=1
 
+# TensorBoard, whose own reader checks the learner's event files.
+. scripts/tensorboard-venv.sh
+export TENSORBOARD_PYTHON="$PWD/$TENSORBOARD_VENV/bin/python"
+export TENSORBOARD_REQUIRED=1
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy"

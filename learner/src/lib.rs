@@ -7,7 +7,9 @@
 //! conversion of a trained policy into the node's deployed format ([`rl`]),
 //! the multimodal representation with its baselines and ablations
 //! ([`models`]) and its training and evaluation ([`train`]), the paper's
-//! experiments end to end ([`experiment`]), and the `learner` command line;
+//! experiments end to end ([`experiment`]), what a run writes for other
+//! tools and later readers ([`runlog`]: TensorBoard, provenance), and the
+//! `learner` command line;
 //! see docs/architecture.md.
 //!
 //! What the robot PC runs (observations, the scripted and deployed
@@ -24,6 +26,7 @@ pub mod labels;
 pub mod models;
 pub mod plot;
 pub mod rl;
+pub mod runlog;
 pub mod settings;
 pub mod train;
 

@@ -5,8 +5,8 @@
 use super::env::{RlEnv, RlEnvError};
 use super::gaussian::GaussianPolicy;
 use super::reward::{Outcome, normalised_return};
-use super::run_config::training_observer;
 pub use super::run_config::{TrainConfig, ValidationConfig};
+use super::run_config::{outcome_scalars, training_observer};
 use super::train::Algorithm;
 use super::train::{IterationStats, Trainer, TrainerState};
 use super::value::Baseline;
@@ -461,6 +461,8 @@ pub fn train(
         Some(s) => Trainer::resume(env, cfg.policy.clone(), s)?,
         None => Trainer::new(env, cfg.policy.clone(), cfg.seed)?,
     };
+    crate::runlog::record_start(out, &cfg).map_err(io(out))?;
+    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io(out))?;
     let progress = Progress::new(cfg.env_steps, "steps");
     progress.resume_at(trainer.state.env_steps);
     let started = std::time::Instant::now();
@@ -526,6 +528,18 @@ pub fn train(
                 p.baseline_explained
             ),
         );
+        let extra = [
+            ("mean_return", p.mean_return.unwrap_or(f64::NAN)),
+            ("kl", p.kl),
+            ("mean_std", p.mean_std),
+            ("baseline_explained", p.baseline_explained),
+        ];
+        let m = p.mean_normalised.unwrap_or(f64::NAN);
+        tb.scalars(
+            p.env_steps,
+            &outcome_scalars("train", m, &p.outcomes, &extra),
+        )
+        .map_err(io(out))?;
         history.push(p);
         let v = &cfg.validation;
         if v.every > 0 && s.iteration.is_multiple_of(v.every) {
@@ -551,6 +565,8 @@ pub fn train(
                     policy,
                 });
             }
+            let rows = outcome_scalars("validation", point.mean_normalised, &point.outcomes, &[]);
+            tb.scalars(point.env_steps, &rows).map_err(io(out))?;
             validations.push(point);
             write_validation_csv(out, &validations)?;
         }

@@ -118,3 +118,25 @@ pub(super) fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, R
     let observer: std::sync::Arc<dyn super::observe::Observer> = r.clone();
     Ok((observer, Some(r)))
 }
+
+/// The scalars a run logs to TensorBoard for one row of its curve or
+/// validation CSV: `extra`, then `{prefix}/mean_normalised` and the share
+/// of each outcome (`{prefix}/completed_insertion`, …).
+pub(super) fn outcome_scalars(
+    prefix: &str,
+    mean_normalised: f64,
+    outcomes: &[f64; 4],
+    extra: &[(&str, f64)],
+) -> Vec<(String, f64)> {
+    use super::reward::Outcome;
+    let mut v: Vec<(String, f64)> = extra
+        .iter()
+        .map(|&(t, x)| (format!("{prefix}/{t}"), x))
+        .collect();
+    v.push((format!("{prefix}/mean_normalised"), mean_normalised));
+    for o in Outcome::ALL {
+        let name = o.name().replace(' ', "_");
+        v.push((format!("{prefix}/{name}"), outcomes[o.index()]));
+    }
+    v
+}

@@ -217,6 +217,37 @@ impl Metrics {
 pub const CSV_HEADER: &str = "epoch,split,samples,total,flow_epe_px,mask_bce,contact_bce,contact_acc,pairing_bce,pairing_acc,ee_mse,kl,recon_rgb,recon_wrench,recon_proprio,contact_majority_acc,pairing_majority_acc,zero_flow_epe_px";
 
 impl Row {
+    /// The CSV line's values after `epoch` and `split`, named by the
+    /// header's columns and prefixed with the split (`train/total`, …): the
+    /// TensorBoard scalars of the row.
+    pub fn scalars(&self) -> Vec<(String, f64)> {
+        let l = &self.loss;
+        let values = [
+            self.samples as f64,
+            l.total,
+            l.flow,
+            l.mask,
+            l.contact,
+            self.contact_acc,
+            l.pairing,
+            self.pairing_acc,
+            l.ee,
+            l.kl,
+            l.recon_rgb,
+            l.recon_wrench,
+            l.recon_proprio,
+            self.contact_majority_acc,
+            self.pairing_majority_acc,
+            self.zero_flow_epe,
+        ];
+        CSV_HEADER
+            .split(',')
+            .skip(2)
+            .zip(values)
+            .map(|(name, v)| (format!("{}/{name}", self.split), v))
+            .collect()
+    }
+
     /// One CSV line (no newline).
     pub fn csv(&self) -> String {
         let l = &self.loss;

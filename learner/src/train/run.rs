@@ -242,6 +242,8 @@ pub fn train(
     norm.validate()
         .map_err(|what| TrainError::Mismatch(format!("{}: {what}", data.display())))?;
     let (mut net, mut optim, mut state) = start(cfg, out, opts.resume, &device)?;
+    crate::runlog::record_start(out, cfg).map_err(io_err(out))?;
+    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io_err(out))?;
     let split_path = out.join(files::SPLIT);
     let split = if opts.resume {
         // The run's own split: a dataset grown since must not move
@@ -365,6 +367,10 @@ pub fn train(
         if !split.test.is_empty() {
             let test = evaluate(&net, cfg, &ds, &norm, &split.test, &device, Modalities::ALL)?;
             state.rows.push(test.row(epoch + 1, "test"));
+        }
+        for r in state.rows.iter().filter(|r| r.epoch == epoch + 1) {
+            tb.scalars(u64::from(r.epoch), &r.scalars())
+                .map_err(io_err(out))?;
         }
         state.epoch += 1;
         state.batches_done = 0;

@@ -211,6 +211,12 @@ pub fn distill(
         }
     }
     write_json(&cfg_path, &recorded)?;
+    let io = |source| RunError::Io {
+        path: out.into(),
+        source,
+    };
+    crate::runlog::record_start(out, &cfg).map_err(io)?;
+    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io)?;
     if let (Some(search), Some(p)) = (&cfg.search_teacher, probe_cfg) {
         t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
     }
@@ -411,6 +417,16 @@ pub fn distill(
                 policy: state.policy.clone(),
             });
         }
+        let extra = [
+            ("beta", point.beta),
+            ("samples", point.samples as f64),
+            ("error_before", point.error_before),
+            ("error_after", point.error_after),
+        ];
+        let v = &point.validation;
+        let rows =
+            super::run_config::outcome_scalars("distill", v.mean_normalised, &v.outcomes, &extra);
+        tb.scalars(point.round, &rows).map_err(io)?;
         rounds.push(point);
         save(out, &student_cfg, &state, &rounds, &best)?;
     }
