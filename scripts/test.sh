@@ -25,10 +25,11 @@ export ROBOT_MODEL_REQUIRE_PINOCCHIO=1
 export FRANKY_SIM_PYTHON="$PWD/$FRANKY_SIM_VENV/bin/python"
 export FRANKY_SIM_REQUIRED=1
 
-# TensorBoard, whose own reader checks the learner's event files.
-. scripts/tensorboard-venv.sh
-export TENSORBOARD_PYTHON="$PWD/$TENSORBOARD_VENV/bin/python"
-export TENSORBOARD_REQUIRED=1
+# TensorBoard and safetensors, whose own readers check the learner's event
+# files and exported weights.
+. scripts/interop-venv.sh
+export INTEROP_PYTHON="$PWD/$INTEROP_VENV/bin/python"
+export INTEROP_REQUIRED=1
 
 echo "== cargo fmt --check"
 cargo fmt --all -- --check

@@ -8,7 +8,7 @@
 //! the multimodal representation with its baselines and ablations
 //! ([`models`]) and its training and evaluation ([`train`]), the paper's
 //! experiments end to end ([`experiment`]), what a run writes for other
-//! tools and later readers ([`runlog`]: TensorBoard, provenance), and the
+//! tools and later readers ([`interop`]: TensorBoard, provenance), and the
 //! `learner` command line;
 //! see docs/architecture.md.
 //!
@@ -22,11 +22,11 @@ pub mod collect;
 pub mod dataset;
 pub mod experiment;
 pub mod fast_env;
+pub mod interop;
 pub mod labels;
 pub mod models;
 pub mod plot;
 pub mod rl;
-pub mod runlog;
 pub mod settings;
 pub mod train;
 

@@ -11,7 +11,8 @@ pub enum PolicyCmd {
     /// Writes a checkpoint's policy in the node's deployed format: DIR/policy.json
     /// and, for a representation policy, DIR/encoder.bin (the robot PC's
     /// `policy-node run --policy DIR/policy.json` reads them without the
-    /// training stack).
+    /// training stack); and, for other tools, DIR/policy.safetensors with
+    /// DIR/policy-spec.json (docs/rl.md, "The policy for other tools").
     Export {
         /// The training run's checkpoint.json.
         #[arg(long)]
@@ -139,6 +140,11 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
             let d = crate::rl::export::from_checkpoint(&checkpoint, last)?;
             let path = d.write(&out)?;
             println!("{} written ({})", path.display(), d.policy.source);
+            let [st, spec] =
+                crate::rl::export::write_safetensors(&d.policy, &out).with_context(|| {
+                    format!("writing the safetensors export into {}", out.display())
+                })?;
+            println!("{} and {} written", st.display(), spec.display());
         }
         PolicyCmd::Eval {
             checkpoint,

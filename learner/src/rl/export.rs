@@ -133,6 +133,70 @@ pub fn from_checkpoint(checkpoint: &Path, last: bool) -> Result<Deployment, Expo
     Ok(Deployment { policy, encoder })
 }
 
+/// The safetensors file of an exported policy, beside `policy.json`.
+pub const SAFETENSORS_FILE: &str = "policy.safetensors";
+/// Its observation/action spec, beside it.
+pub const SPEC_FILE: &str = "policy-spec.json";
+
+/// Writes `policy`'s network and normalisation as safetensors
+/// ([`SAFETENSORS_FILE`]: F64 tensors `layers.{i}.weight` (outputs ×
+/// inputs), `layers.{i}.bias`, `obs_norm.shift`, `obs_norm.scale`) and
+/// [`SPEC_FILE`], what a user needs to act with them: the observation, the
+/// normalisation's clip, the activations, the action's scale. Returns both
+/// paths.
+pub fn write_safetensors(policy: &PolicyFile, dir: &Path) -> std::io::Result<[PathBuf; 2]> {
+    use crate::interop::safetensors::{Tensor, write};
+    let mut tensors = Vec::new();
+    for (i, l) in policy.layers.iter().enumerate() {
+        let w = &l.weight;
+        tensors.push(Tensor::f64(
+            format!("layers.{i}.weight"),
+            &[l.outputs, l.inputs],
+            w.clone(),
+        ));
+        tensors.push(Tensor::f64(
+            format!("layers.{i}.bias"),
+            &[l.outputs],
+            l.bias.clone(),
+        ));
+    }
+    if let Some(n) = &policy.obs_norm {
+        tensors.push(Tensor::f64(
+            "obs_norm.shift",
+            &[n.shift.len()],
+            n.shift.clone(),
+        ));
+        tensors.push(Tensor::f64(
+            "obs_norm.scale",
+            &[n.scale.len()],
+            n.scale.clone(),
+        ));
+    }
+    let spec = serde_json::json!({
+        "format": "vision-touch policy, safetensors",
+        "source": policy.source,
+        "observation": policy.observation,
+        "observation_dim": policy.layers.first().map_or(0, |l| l.inputs),
+        "obs_norm_clip": policy.obs_norm.as_ref().map(|n| n.clip),
+        "layers": policy.layers.len(),
+        "activation": "tanh after every layer but the last, which is linear",
+        "act": "o' = clip((o - obs_norm.shift) * obs_norm.scale, -clip, clip) when obs_norm \
+                is present; mean = the MLP of o'; (dx, dy, dz) = clip(mean[0..3], -1, 1) * \
+                action_scale.max_step_m in metres, droll = clip(mean[3], -1, 1) * \
+                action_scale.max_roll_rad in radians",
+        "action_scale": policy.action_scale,
+        "peg": policy.peg,
+        "tensors": tensors.iter().map(|t| (t.name.clone(), t.shape.clone())).collect::<Vec<_>>(),
+    });
+    let metadata = std::collections::BTreeMap::from([("spec".to_string(), spec.to_string())]);
+    let st = dir.join(SAFETENSORS_FILE);
+    write(&st, &tensors, &metadata)?;
+    let sp = dir.join(SPEC_FILE);
+    let text = serde_json::to_string_pretty(&spec).expect("a spec serialises");
+    crate::write_atomic(&sp, text.as_bytes())?;
+    Ok([st, sp])
+}
+
 /// Whether `path` is a deployed policy file (rather than a training
 /// checkpoint).
 pub fn is_deployed(path: &Path) -> Result<bool, ExportError> {

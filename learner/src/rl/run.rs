@@ -461,8 +461,8 @@ pub fn train(
         Some(s) => Trainer::resume(env, cfg.policy.clone(), s)?,
         None => Trainer::new(env, cfg.policy.clone(), cfg.seed)?,
     };
-    crate::runlog::record_start(out, &cfg).map_err(io(out))?;
-    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io(out))?;
+    crate::interop::record_start(out, &cfg).map_err(io(out))?;
+    let mut tb = crate::interop::ScalarLog::create(out).map_err(io(out))?;
     let progress = Progress::new(cfg.env_steps, "steps");
     progress.resume_at(trainer.state.env_steps);
     let started = std::time::Instant::now();

@@ -242,8 +242,8 @@ pub fn train(
     norm.validate()
         .map_err(|what| TrainError::Mismatch(format!("{}: {what}", data.display())))?;
     let (mut net, mut optim, mut state) = start(cfg, out, opts.resume, &device)?;
-    crate::runlog::record_start(out, cfg).map_err(io_err(out))?;
-    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io_err(out))?;
+    crate::interop::record_start(out, cfg).map_err(io_err(out))?;
+    let mut tb = crate::interop::ScalarLog::create(out).map_err(io_err(out))?;
     let split_path = out.join(files::SPLIT);
     let split = if opts.resume {
         // The run's own split: a dataset grown since must not move

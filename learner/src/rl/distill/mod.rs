@@ -215,8 +215,8 @@ pub fn distill(
         path: out.into(),
         source,
     };
-    crate::runlog::record_start(out, &cfg).map_err(io)?;
-    let mut tb = crate::runlog::ScalarLog::create(out).map_err(io)?;
+    crate::interop::record_start(out, &cfg).map_err(io)?;
+    let mut tb = crate::interop::ScalarLog::create(out).map_err(io)?;
     if let (Some(search), Some(p)) = (&cfg.search_teacher, probe_cfg) {
         t_obs = probed_view(search, p, &student_cfg, out, fresh)?;
     }

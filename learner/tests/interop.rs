@@ -1,33 +1,34 @@
-//! What a training run writes for other tools and later readers: its
-//! TensorBoard event file, read back by TensorBoard's own reader
-//! (`event_accumulator`), holds the same rows as its CSV files; `run.json`
-//! records the commit, the host, the start time, the command line and the
-//! resolved configuration, one entry per start (a resumed run adds one).
+//! What the learner writes for other tools and later readers, read by
+//! those tools' own code: a training run's TensorBoard event file, read by
+//! TensorBoard's reader (`event_accumulator`), holds the same rows as its
+//! CSV files; `run.json` records the commit, the host, the start time, the
+//! command line and the resolved configuration, one entry per start (a
+//! resumed run adds one); an exported policy's safetensors, loaded by
+//! `safetensors.numpy` and run in NumPy as its spec says, acts as ours.
 
 use std::process::{Command, Stdio};
 
-/// TensorBoard's interpreter: `$TENSORBOARD_PYTHON`, else the repository's
-/// `.venv-tensorboard` (scripts/tensorboard-venv.sh). None (the test then
-/// skips) when it cannot import tensorboard and `$TENSORBOARD_REQUIRED` is
-/// not 1 (scripts/test.sh sets it) and `$CI` is unset.
-fn tensorboard_python() -> Option<std::path::PathBuf> {
-    let py = std::env::var_os("TENSORBOARD_PYTHON")
+/// The readers' interpreter: `$INTEROP_PYTHON`, else the repository's
+/// `.venv-interop` (scripts/interop-venv.sh). None (the test then skips)
+/// when it cannot import them and `$INTEROP_REQUIRED` is not 1
+/// (scripts/test.sh sets it) and `$CI` is unset.
+fn interop_python() -> Option<std::path::PathBuf> {
+    let py = std::env::var_os("INTEROP_PYTHON")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| {
-            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../.venv-tensorboard/bin/python")
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-interop/bin/python")
         });
     let ok = Command::new(&py)
-        .args(["-c", "import tensorboard"])
+        .args(["-c", "import tensorboard, safetensors.numpy"])
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
-    let required = std::env::var("TENSORBOARD_REQUIRED").is_ok_and(|v| v == "1")
-        || std::env::var("CI").is_ok();
+    let required =
+        std::env::var("INTEROP_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
     assert!(
         ok || !required,
-        "tensorboard is required here but `{} -c 'import tensorboard'` fails; run \
-         scripts/tensorboard-venv.sh",
+        "tensorboard and safetensors are required here but `{} -c 'import tensorboard, \
+         safetensors.numpy'` fails; run scripts/interop-venv.sh",
         py.display()
     );
     if !ok {
@@ -100,7 +101,7 @@ fn a_policy_run_writes_tensorboard_scalars_and_its_provenance() {
         })
         .collect();
     assert_eq!(events.len(), 2, "one event file per start: {events:?}");
-    let Some(py) = tensorboard_python() else {
+    let Some(py) = interop_python() else {
         return;
     };
     let read = Command::new(py)
@@ -142,6 +143,76 @@ fn a_policy_run_writes_tensorboard_scalars_and_its_provenance() {
                 (gv - wv).abs() <= 1e-6 * wv.abs().max(1.0),
                 "{tag}: {gv} vs {wv}"
             );
+        }
+    }
+}
+
+const ACT: &str = r#"
+import json, sys
+import numpy as np
+from safetensors.numpy import load_file
+t = load_file(sys.argv[1] + "/policy.safetensors")
+spec = json.load(open(sys.argv[1] + "/policy-spec.json"))
+out = []
+for o in json.loads(sys.argv[2]):
+    x = np.array(o)
+    if spec["obs_norm_clip"] is not None:
+        c = spec["obs_norm_clip"]
+        x = np.clip((x - t["obs_norm.shift"]) * t["obs_norm.scale"], -c, c)
+    for i in range(spec["layers"]):
+        x = t[f"layers.{i}.weight"] @ x + t[f"layers.{i}.bias"]
+        if i + 1 < spec["layers"]:
+            x = np.tanh(x)
+    out.append(x.tolist())
+print(json.dumps(out))
+"#;
+
+#[test]
+fn an_exported_policy_acts_in_numpy_as_it_does_here() {
+    let dir = test_support::scratch_dir("interop-policy");
+    let out = dir.path().join("run");
+    let text = "num_envs = 1\nenv_steps = 40\n[policy]\nbatch_steps = 20\n\
+                normalise_observations = true\n[env]\nmax_steps = 20\n";
+    let run: learner::rl::run::TrainConfig = toml::from_str(text).unwrap();
+    let c = learner::rl::run::train(run, &out, false, &|| false).unwrap();
+    let policy = &c.state.policy;
+    assert!(
+        policy.obs_norm.is_some(),
+        "the normalisation is exported too"
+    );
+    let d = learner::rl::export::from_checkpoint(&out.join("checkpoint.json"), true).unwrap();
+    let export = dir.path().join("export");
+    std::fs::create_dir_all(&export).unwrap();
+    learner::rl::export::write_safetensors(&d.policy, &export).unwrap();
+    // Observations unlike one another, some far outside the statistics.
+    let dim = policy.sizes[0];
+    let obs: Vec<Vec<f64>> = (0..5)
+        .map(|k| {
+            (0..dim)
+                .map(|i| ((k * 7 + i * 3) % 11) as f64 * 0.3 - 1.5)
+                .collect()
+        })
+        .collect();
+    let Some(py) = interop_python() else {
+        return;
+    };
+    let run = Command::new(py)
+        .args(["-c", ACT])
+        .arg(&export)
+        .arg(serde_json::to_string(&obs).unwrap())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let theirs: Vec<Vec<f64>> = serde_json::from_slice(&run.stdout).unwrap();
+    for (o, t) in obs.iter().zip(&theirs) {
+        let ours = policy.means(o);
+        assert_eq!(ours.len(), t.len());
+        for (a, b) in ours.iter().zip(t) {
+            assert!((a - b).abs() < 1e-9, "ours {ours:?}, NumPy's {t:?}");
         }
     }
 }
