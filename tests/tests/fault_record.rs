@@ -83,6 +83,27 @@ fn a_fault_survives_a_kill_and_restart_until_the_operator_resets_it() {
     .expect("the controller did not fault");
     // The monitor writes the record within its 50 ms period.
     wait_for_record(&record, "fault");
+    // A reset command to the running daemon: counted in the history (it
+    // faults again at once, and the record says so).
+    let (code, log) = run_to_end(
+        &ns,
+        &record,
+        &["reset", "--timeout-s", "10"],
+        &dir.join("cmd"),
+    );
+    assert_eq!(code, Some(0), "{log}");
+    let history = dir.join("rt-controller.fault.history");
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !std::fs::read_to_string(&history).is_ok_and(|h| h.matches("fault 4").count() >= 2) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the second fault is not in the history"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let h = std::fs::read_to_string(&history).unwrap();
+    assert!(h.contains("reset by a reset command"), "{h}");
+    wait_for_record(&record, "fault");
     // A second daemon on the same record: a configuration error.
     let (code, log) = run_to_end(&ns, &record, &[], &dir.join("beside"));
     assert_eq!(code, Some(2), "{log}");
@@ -138,12 +159,15 @@ fn a_fault_survives_a_kill_and_restart_until_the_operator_resets_it() {
         ))
         .output()
         .unwrap();
-    let status_json = text(&out);
-    assert!(out.status.success(), "{status_json}");
+    assert!(out.status.success(), "{}", text(&out));
+    let status: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(status["fault_code"], 0, "{status}");
+    assert_eq!(status["mode"], "idle", "{status}");
     assert!(
-        status_json.contains("\"fault_code\": 0")
-            && status_json.contains("\"fault_record\": \"running"),
-        "{status_json}"
+        status["fault_record"]
+            .as_str()
+            .is_some_and(|r| r.starts_with("running")),
+        "{status}"
     );
     let end = ctl.stop(Duration::from_secs(5)).expect("stopped");
     assert_eq!(end.code(), Some(0), "a clean stop");
@@ -166,7 +190,7 @@ fn a_fault_survives_a_kill_and_restart_until_the_operator_resets_it() {
     assert!(log.contains("without a clean stop"), "{log}");
     let (code, log) = run_to_end(&ns, &record, &["reset"], &dir.join("reset-again"));
     assert_eq!(code, Some(0), "{log}");
-    assert!(log.contains("2 resets on record"), "{log}");
+    assert!(log.contains("3 resets on record"), "{log}");
 }
 
 #[test]
@@ -194,6 +218,23 @@ fn a_bad_configuration_exits_2_and_a_stop_with_a_fault_latched_exits_3() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
     assert!(text(&out).contains("fault_record"), "{}", text(&out));
+
+    // No hardware at start-up: exit 1 (a restart may cure it), nothing on
+    // record.
+    let quick = dir.join("quick.toml");
+    std::fs::write(&quick, "[timing]\nstartup_timeout_s = 0.5\n").unwrap();
+    let record = dir.join("rt.fault");
+    let out = Command::new(tests::stack_bins().join("rt-controller"))
+        .args(["--namespace", &format!("{ns}-nobody"), "--no-realtime"])
+        .args(["--config", quick.to_str().unwrap()])
+        .args(["--fault-record", record.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        !record.exists(),
+        "no record after a start that never held the arm"
+    );
 
     // Without a record a fault still sets the exit status.
     let faulting = dir.join("faulting.toml");

@@ -31,6 +31,9 @@ fn the_controller_unit_never_restarts_after_a_fault_or_a_bad_configuration() {
     ] {
         assert!(prevent.contains(&code.to_string().as_str()), "{prevent:?}");
     }
+    // An error that left no fault (no hardware at start-up) is restarted.
+    let error = rt_controller_daemon::exit::ERROR.to_string();
+    assert!(!prevent.contains(&error.as_str()), "{prevent:?}");
     // The record lives in the unit's state directory, where the shipped
     // configuration points.
     assert_eq!(setting(&text, "StateDirectory"), Some("vision-touch"));

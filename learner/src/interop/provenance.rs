@@ -66,8 +66,9 @@ pub fn utc_rfc3339(unix_s: u64) -> String {
 /// One start of a command in a run directory.
 #[derive(Debug, Serialize)]
 pub struct RunStart {
-    /// The commit of the source the binary's repository holds now (None:
-    /// no git, or not a repository).
+    /// The commit the repository the binary was built from holds at the
+    /// start (None: no git, or not a repository); with `dirty`, what the
+    /// sources were if the binary was built from that tree.
     pub commit: Option<String>,
     /// Whether that tree had uncommitted changes.
     pub dirty: Option<bool>,
@@ -103,8 +104,16 @@ impl RunStart {
 pub fn record_start(dir: &Path, config: &impl Serialize) -> std::io::Result<()> {
     let path = dir.join("run.json");
     let mut starts: Vec<serde_json::Value> = match std::fs::read_to_string(&path) {
-        Ok(t) => serde_json::from_str(&t).unwrap_or_default(),
-        Err(_) => Vec::new(),
+        Ok(t) => match serde_json::from_str(&t) {
+            Ok(v) => v,
+            Err(_) => {
+                // Kept aside, not lost: the earlier starts stay readable.
+                std::fs::rename(&path, dir.join("run.json.unreadable"))?;
+                Vec::new()
+            }
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e),
     };
     starts.push(serde_json::to_value(RunStart::now(config)).unwrap_or_default());
     let text = serde_json::to_string_pretty(&starts).map_err(std::io::Error::other)?;

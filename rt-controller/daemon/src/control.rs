@@ -73,6 +73,14 @@ pub struct Daemon<H: Hardware> {
     hardware_lost: bool,
     /// A robot error's fault code (0: none); it ends the run.
     robot_fault: u32,
+    /// The fault code after the last cycle (0: none).
+    last_fault_code: u32,
+    /// Faults latched so far.
+    faults_latched: u64,
+    /// The highest sequence number of an action applied in any episode.
+    top_seq: u64,
+    /// Resets counted at the last [`Self::count_latch`].
+    resets_seen: u64,
     last_command: TorqueCommand,
     sensor: SensorFrame,
     status_seq: u64,
@@ -116,6 +124,10 @@ impl<H: Hardware> Daemon<H> {
             last_state_ns: 0,
             hardware_lost: false,
             robot_fault: 0,
+            last_fault_code: 0,
+            faults_latched: 0,
+            top_seq: 0,
+            resets_seen: 0,
             last_command: TorqueCommand::empty(0),
             sensor: *SensorFrame::boxed_zeroed(),
             status_seq: 0,
@@ -186,10 +198,21 @@ impl<H: Hardware> Daemon<H> {
         }
         // While the hardware is counted lost any state is read (a restarted
         // hardware counts from its own start; a reset needs it live).
+        let same_episode = Some(s.header.episode) == self.control.episode();
+        if self.have_state
+            && self.hardware_lost
+            && same_episode
+            && s.step == self.state.step
+            && s.header.t_hw_ns == self.state.header.t_hw_ns
+        {
+            // Lost, and still frozen: not a live hardware a reset may trust.
+            self.stats.hardware_states_stale += 1;
+            return Ok(false);
+        }
         if self.have_state
             && !self.hardware_lost
-            && Some(s.header.episode) == self.control.episode()
-            && (s.step <= self.state.step || s.header.t_hw_ns < self.state.header.t_hw_ns)
+            && same_episode
+            && (s.step <= self.state.step || s.header.t_hw_ns <= self.state.header.t_hw_ns)
         {
             let repeat = s.step == self.state.step
                 && s.header.t_hw_ns == self.state.header.t_hw_ns
@@ -337,9 +360,17 @@ impl<H: Hardware> Daemon<H> {
             &mut s.actions_too_old
         } else if a.header.seq <= self.control.last_action_seq() {
             &mut s.actions_replayed
-        } else if self.control.last_action_seq() > 0
-            && a.header.seq - self.control.last_action_seq() > MAX_SEQ_JUMP
+        } else if a
+            .header
+            .seq
+            .saturating_sub(self.control.last_action_seq().max(self.top_seq))
+            > MAX_SEQ_JUMP
+            && (self.control.last_action_seq() > 0 || self.top_seq > 0)
         {
+            // Past the newest applied this episode, or, for an episode's
+            // first, past the newest applied in any (the policy numbers its
+            // actions across episodes; a restarted one counts from 1 again,
+            // which stays below).
             &mut s.actions_seq_jump
         } else {
             return Some(a);
@@ -398,9 +429,9 @@ impl<H: Hardware> Daemon<H> {
         }
         let mode = self.mode() as u32;
         self.shared.mode.store(mode, Ordering::Relaxed);
-        self.shared
-            .fault_code
-            .store(self.fault_code(), Ordering::Relaxed);
+        let code = self.fault_code();
+        self.shared.fault_code.store(code, Ordering::Relaxed);
+        self.count_latch(code);
         self.shared
             .garbage_actions
             .store(self.garbage(), Ordering::Relaxed);
@@ -472,6 +503,7 @@ impl<H: Hardware> Daemon<H> {
             &mut self.last_command,
             &mut self.sensor,
         );
+        self.top_seq = self.top_seq.max(self.control.last_action_seq());
         // Stamped at sending: the action latency includes the step.
         let sent = mono_now_ns();
         self.last_command.header.t_mono_ns = sent;
@@ -545,10 +577,29 @@ impl<H: Hardware> Daemon<H> {
         }
     }
 
+    /// Counts a fault latched since the last cycle for the monitor (the
+    /// code before the count, so that a monitor that sees the count sees
+    /// its code).
+    fn count_latch(&mut self, code: u32) {
+        // A reset and a fault again in one cycle is a latch too.
+        let resets = self.control.resets();
+        let reset_since = resets != self.resets_seen;
+        self.resets_seen = resets;
+        if code != 0 && (self.last_fault_code == 0 || reset_since) {
+            self.faults_latched += 1;
+            self.shared.latched_code.store(code, Ordering::Release);
+            self.shared
+                .faults_latched
+                .store(self.faults_latched, Ordering::Release);
+        }
+        self.last_fault_code = code;
+    }
+
     /// Latches a robot error's fault (`HardwareError::Robot`): published
     /// at once in the status and the shared atomics.
     pub fn latch_robot_fault(&mut self, code: u32, now_ns: u64) {
         self.robot_fault = code;
+        self.count_latch(code);
         self.shared
             .mode
             .store(ControllerMode::Fault as u32, Ordering::Relaxed);

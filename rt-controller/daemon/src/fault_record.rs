@@ -117,6 +117,21 @@ fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
 }
 
 impl FaultRecord {
+    /// [`FaultRecord::lock`], retried for up to `wait`: a `reset` or
+    /// `status` that holds the lock for a moment does not turn a start into
+    /// "another daemon holds it".
+    pub fn lock_within(path: &Path, wait: std::time::Duration) -> Result<Self, RecordError> {
+        let start = std::time::Instant::now();
+        loop {
+            match Self::lock(path) {
+                Err(RecordError::Held(_)) if start.elapsed() < wait => {
+                    std::thread::sleep(std::time::Duration::from_millis(100));
+                }
+                r => return r,
+            }
+        }
+    }
+
     /// Takes the record at `path`: its lock, held until drop, so that no
     /// second daemon (or a `reset` while one runs) uses it.
     pub fn lock(path: &Path) -> Result<Self, RecordError> {
@@ -125,12 +140,18 @@ impl FaultRecord {
             source,
         };
         let lock_path = with_suffix(path, ".lock");
-        let lock = OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(&lock_path)
-            .map_err(io)?;
+        // Read-only when it exists (flock needs no write access): a lock
+        // file another user created does not lock the daemon out.
+        let lock = match File::open(&lock_path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => OpenOptions::new()
+                .create(true)
+                .truncate(false)
+                .write(true)
+                .open(&lock_path)
+                .map_err(io)?,
+            Err(e) => return Err(io(e)),
+        };
         // SAFETY: flock on a descriptor this function owns.
         let r = unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
         if r != 0 {
@@ -218,14 +239,6 @@ impl FaultRecord {
         self.append_history(&format!("fault {code} ({})", fault_name(code)))
     }
 
-    /// A running daemon's latched fault was cleared by a reset command:
-    /// the record says running again, and the history counts the reset.
-    pub fn note_reset_command(&self) -> Result<u64, RecordError> {
-        self.mark_running()?;
-        self.append_history("reset by a reset command to the running daemon")?;
-        self.resets()
-    }
-
     /// The daemon stopped cleanly, no fault latched: no record.
     pub fn clear_clean(&self) -> Result<(), RecordError> {
         match std::fs::remove_file(&self.path) {
@@ -282,6 +295,61 @@ impl FaultRecord {
     }
 }
 
+/// What changed since the monitor's last look, for the record's writer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordUpdate {
+    /// Faults latched since (each gets a history line).
+    pub new_faults: u64,
+    /// The code of the last of them.
+    pub latched_code: u32,
+    /// Resets by command since (each gets a history line).
+    pub new_resets: u64,
+    /// The fault latched now (0: none): the record's final state.
+    pub fault_now: u32,
+}
+
+impl FaultRecord {
+    /// Appends the update's faults and resets to the history, then leaves
+    /// the record as the daemon is now: `fault` with the code latched now,
+    /// else `running`.
+    pub fn apply(&self, u: &RecordUpdate) -> Result<(), RecordError> {
+        for _ in 0..u.new_faults {
+            let c = u.latched_code;
+            self.append_history(&format!("fault {c} ({})", fault_name(c)))?;
+        }
+        for _ in 0..u.new_resets {
+            self.append_history("reset by a reset command to the running daemon")?;
+        }
+        if u.fault_now != 0 {
+            self.write(RecordState::Fault, u.fault_now, fault_name(u.fault_now))
+        } else {
+            self.mark_running()
+        }
+    }
+
+    /// Starts the thread that writes the record (fsync can take long on a
+    /// busy disk: never on the thread that feeds the watchdog); it ends
+    /// when the sender is dropped.
+    pub fn spawn_writer(
+        self: std::sync::Arc<Self>,
+    ) -> std::io::Result<(
+        std::sync::mpsc::Sender<RecordUpdate>,
+        std::thread::JoinHandle<()>,
+    )> {
+        let (tx, rx) = std::sync::mpsc::channel::<RecordUpdate>();
+        let handle = std::thread::Builder::new()
+            .name("rt-record".into())
+            .spawn(move || {
+                for u in rx {
+                    if let Err(e) = self.apply(&u) {
+                        tracing::error!("rt-controller: {e}");
+                    }
+                }
+            })?;
+        Ok((tx, handle))
+    }
+}
+
 /// Why a start-up is refused: the record's entry in words, or None when a
 /// daemon may start.
 pub fn refusal(entry: &Option<RecordEntry>) -> Option<String> {
@@ -324,8 +392,27 @@ mod tests {
         r.record_fault(4).unwrap();
         let e = r.read().unwrap().unwrap();
         assert_eq!((e.state, e.code), (RecordState::Fault, 4));
-        assert_eq!(r.note_reset_command().unwrap(), 1);
-        assert_eq!(r.operator_reset("a test").unwrap(), 2);
+        // The monitor's update: two faults and a reset between its looks,
+        // none latched now.
+        let u = RecordUpdate {
+            new_faults: 2,
+            latched_code: 5,
+            new_resets: 1,
+            fault_now: 0,
+        };
+        r.apply(&u).unwrap();
+        assert_eq!(r.read().unwrap().unwrap().state, RecordState::Running);
+        let history = std::fs::read_to_string(r.history_path()).unwrap();
+        assert_eq!(history.matches("fault 5").count(), 2, "{history}");
+        assert_eq!(r.resets().unwrap(), 1);
+        r.apply(&RecordUpdate {
+            fault_now: 100,
+            ..u
+        })
+        .unwrap();
+        let e = r.read().unwrap().unwrap();
+        assert_eq!((e.state, e.code), (RecordState::Fault, 100));
+        assert_eq!(r.operator_reset("a test").unwrap(), 3);
         assert_eq!(r.read().unwrap(), None);
         // A record that is no record is refused by name, and a reset
         // clears it.

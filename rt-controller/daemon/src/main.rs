@@ -1,10 +1,10 @@
 //! `rt-controller`: the 1 kHz control daemon (see docs/rt-controller.md and
 //! docs/operation.md).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller_daemon::config::{BackendKind, Clock, DaemonConfig, WrenchSource};
-use rt_controller_daemon::fault_record::{self, FaultRecord, RecordError, RecordState};
+use rt_controller_daemon::fault_record::{self, FaultRecord, RecordState, RecordUpdate};
 use rt_controller_daemon::rt::{self, Notifier};
 use rt_controller_daemon::rt_alloc::{self, RtAllocator};
 use rt_controller_daemon::{
@@ -16,12 +16,16 @@ use shared_mem_schema::process::{
     install_termination_handler, termination_requested, termination_signal,
 };
 use shared_mem_schema::transport;
-use shared_mem_schema::{ControllerCommand, ControllerMode, ControllerStatus};
+use shared_mem_schema::{ControllerCommand, ControllerMode};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tracing::{error, info, warn};
+
+mod operator;
+
+use operator::{Failure, with};
 
 // The control loop's few dependency allocations come from static pools.
 #[global_allocator]
@@ -94,18 +98,6 @@ enum Cmd {
     Recover,
 }
 
-/// An error and the exit status it ends the process with
-/// ([`rt_controller_daemon::exit`]).
-struct Failure {
-    code: i32,
-    error: anyhow::Error,
-}
-
-/// Wraps an error in the exit status `code`.
-fn with(code: i32) -> impl FnOnce(anyhow::Error) -> Failure {
-    move |error| Failure { code, error }
-}
-
 fn main() {
     init_logging();
     let code = match run(Args::parse()) {
@@ -166,9 +158,11 @@ fn run(args: Args) -> Result<i32, Failure> {
         return Ok(exit::CLEAN);
     }
     match args.command {
-        Some(Cmd::Reset { timeout_s }) => return reset_command(&cfg, timeout_s),
-        Some(Cmd::Recover) => return recover_command(&cfg),
-        Some(Cmd::Status { json, timeout_s }) => return status_command(&cfg, json, timeout_s),
+        Some(Cmd::Reset { timeout_s }) => return operator::reset_command(&cfg, timeout_s),
+        Some(Cmd::Recover) => return operator::recover_command(&cfg),
+        Some(Cmd::Status { json, timeout_s }) => {
+            return operator::status_command(&cfg, json, timeout_s);
+        }
         None => {}
     }
     install_termination_handler();
@@ -177,7 +171,8 @@ fn run(args: Args) -> Result<i32, Failure> {
     // past a fault on record.
     let record = match &cfg.fault_record {
         Some(p) => Some(Arc::new(
-            FaultRecord::lock(p).map_err(|e| with(exit::CONFIG)(e.into()))?,
+            FaultRecord::lock_within(p, Duration::from_secs(5))
+                .map_err(|e| with(exit::CONFIG)(e.into()))?,
         )),
         None => None,
     };
@@ -204,7 +199,7 @@ fn run(args: Args) -> Result<i32, Failure> {
         .validate(&model)
         .map_err(|e| with(exit::CONFIG)(anyhow::anyhow!("{e}")))?;
     if let Some(r) = &record {
-        r.mark_running().map_err(|e| with(exit::CONFIG)(e.into()))?;
+        r.mark_running().map_err(|e| with(exit::ERROR)(e.into()))?;
     }
     let ending = start_and_drive(&cfg, model, record.clone());
     conclude(ending, record.as_deref())
@@ -226,9 +221,10 @@ struct Ending {
 /// [`exit::FAULT`]; an error before the arm was held [`exit::ERROR`].
 fn conclude(end: Ending, record: Option<&FaultRecord>) -> Result<i32, Failure> {
     let fault = match &end.error {
+        _ if end.latched != 0 => end.latched,
         Some((_, code)) if *code != 0 => *code,
         Some(_) if end.ready => FAULT_DAEMON_ERROR,
-        _ => end.latched,
+        _ => 0,
     };
     if let Some(r) = record {
         let written = if fault != 0 {
@@ -289,12 +285,12 @@ fn start_and_drive(
                 "rt-controller: connecting to the Franka at {} ({:?})",
                 f.address, f.generation
             );
+            // Before the arm is held nothing is recorded: a robot not yet
+            // reachable, or one that refuses the motion (its reflex is its
+            // own to report), exits 1 and the unit tries again.
             let robot = match franka::connect(f, cfg.timing.startup_timeout_s) {
                 Ok(r) => r,
-                Err(e) => {
-                    let code = robot_code(&e);
-                    return early(e.into(), code);
-                }
+                Err(e) => return early(e.into(), 0),
             };
             info!(
                 "rt-controller: connected, robot server version {}",
@@ -315,10 +311,7 @@ fn start_and_drive(
                         hw.min_success_rate
                     );
                 }),
-                Err(e) => {
-                    let code = robot_code(&e);
-                    early(e.into(), code)
-                }
+                Err(e) => early(e.into(), 0),
             }
         }
     }
@@ -358,6 +351,17 @@ fn drive<H: Hardware>(
     // keeps the fault record.
     let notifier = Arc::new(Notifier::from_env());
     let monitor_stop = Arc::new(AtomicBool::new(false));
+    let writer = match record.map(FaultRecord::spawn_writer).transpose() {
+        Ok(w) => w,
+        Err(e) => {
+            return Ending {
+                ready: false,
+                latched: 0,
+                error: Some((e.into(), 0)),
+            };
+        }
+    };
+    let (updates, writer) = writer.unzip();
     let monitor = {
         let (shared, stop, notifier) = (
             daemon.shared.clone(),
@@ -366,7 +370,7 @@ fn drive<H: Hardware>(
         );
         std::thread::Builder::new()
             .name("rt-monitor".into())
-            .spawn(move || monitor_loop(&shared, &stop, &notifier, record.as_deref()))
+            .spawn(move || monitor_loop(&shared, &stop, &notifier, updates))
     };
     let monitor = match monitor {
         Ok(m) => m,
@@ -411,6 +415,10 @@ fn drive<H: Hardware>(
     notifier.notify("STOPPING=1");
     monitor_stop.store(true, Ordering::Relaxed);
     let _ = monitor.join();
+    // The monitor's end drops the sender: the writer finishes its queue.
+    if let Some(w) = writer {
+        let _ = w.join();
+    }
     report_backend(daemon.hardware());
     let a = rt_alloc::stats();
     log_allocations(&a);
@@ -479,200 +487,12 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
     );
 }
 
-/// `rt-controller reset`. With a fault record and no daemon running on
-/// it: clears the record (a fault, or an unclean end), counted in its
-/// history. Otherwise: a reset command to the running daemon.
-fn reset_command(cfg: &DaemonConfig, timeout_s: f64) -> Result<i32, Failure> {
-    if let Some(path) = &cfg.fault_record {
-        match FaultRecord::lock(path) {
-            Ok(r) => {
-                let cleared = match r.read() {
-                    Ok(entry) => fault_record::refusal(&entry),
-                    Err(e @ RecordError::Malformed { .. }) => Some(e.to_string()),
-                    Err(e) => return Err(with(exit::CONFIG)(e.into())),
-                };
-                let Some(why) = cleared else {
-                    println!(
-                        "rt-controller reset: no fault on record in {}, and no daemon runs on it",
-                        path.display()
-                    );
-                    return Ok(exit::CLEAN);
-                };
-                let n = r
-                    .operator_reset(&why)
-                    .map_err(|e| with(exit::ERROR)(e.into()))?;
-                warn!("rt-controller reset: cleared the fault record: {why}");
-                println!(
-                    "rt-controller reset: cleared the fault record {}: {why}; {n} resets on \
-                     record ({})",
-                    path.display(),
-                    r.history_path().display()
-                );
-                return Ok(exit::CLEAN);
-            }
-            // A daemon runs on it: it clears its own latch.
-            Err(RecordError::Held(_)) => {}
-            Err(e) => return Err(with(exit::CONFIG)(e.into())),
-        }
-    }
-    send_reset(&cfg.backend.namespace, timeout_s)
-        .map(|()| exit::CLEAN)
-        .map_err(with(exit::ERROR))
-}
-
-/// `rt-controller status`: the newest status on shared memory and what the
-/// fault record says (read without its lock: a daemon may hold it).
-fn status_command(cfg: &DaemonConfig, json: bool, timeout_s: f64) -> Result<i32, Failure> {
-    let record = match &cfg.fault_record {
-        Some(p) => match std::fs::read_to_string(p) {
-            Ok(t) => match toml::from_str::<fault_record::RecordEntry>(&t) {
-                Ok(e) => format!("{:?} (code {}: {})", e.state, e.code, e.reason).to_lowercase(),
-                Err(_) => "unreadable".into(),
-            },
-            Err(_) => "none".into(),
-        },
-        None => "not configured".into(),
-    };
-    transport::quiet_logs();
-    let ns = &cfg.backend.namespace;
-    let found = (|| -> Result<Option<ControllerStatus>> {
-        let node = transport::create_node("rt-controller-status")?;
-        let sub = transport::subscriber::<ControllerStatus>(&node, ns)?;
-        let start = std::time::Instant::now();
-        while start.elapsed().as_secs_f64() < timeout_s {
-            let mut last = None;
-            transport::drain(&sub, |s| last = Some(*s))?;
-            if last.is_some() {
-                return Ok(last);
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        Ok(None)
-    })()
-    .map_err(with(exit::ERROR))?;
-    let Some(s) = found else {
-        return Err(Failure {
-            code: exit::ERROR,
-            error: anyhow::anyhow!(
-                "no status from an rt-controller in namespace '{ns}' within {timeout_s} s                  (fault record: {record})"
-            ),
-        });
-    };
-    let mode = ControllerMode::from_u32(s.mode).map_or("?", |m| m.name());
-    if json {
-        println!(
-            "{{\"namespace\": {ns:?}, \"mode\": {mode:?}, \"fault_code\": {}, \"fault\": {:?},              \"cycles\": {}, \"overruns\": {}, \"faults\": {}, \"resets\": {},              \"hardware_misses\": {}, \"actions_accepted\": {}, \"actions_rejected\": {},              \"realtime\": {}, \"compute_p99_us\": {}, \"fault_record\": {record:?}}}",
-            s.fault_code,
-            fault_record::fault_name(s.fault_code),
-            s.cycles,
-            s.overruns,
-            s.faults,
-            s.resets,
-            s.hardware_misses,
-            s.actions_accepted,
-            s.actions_rejected,
-            s.realtime != 0,
-            s.compute.quantile_us(0.99),
-        );
-    } else {
-        println!(
-            "rt-controller in '{ns}': mode {mode}, fault code {} ({}); {} cycles, {} overruns, {}              faults, {} resets, {} hardware misses; actions {} accepted, {} rejected; compute p99              {} µs; fault record: {record}",
-            s.fault_code,
-            fault_record::fault_name(s.fault_code),
-            s.cycles,
-            s.overruns,
-            s.faults,
-            s.resets,
-            s.hardware_misses,
-            s.actions_accepted,
-            s.actions_rejected,
-            s.compute.quantile_us(0.99),
-        );
-    }
-    Ok(exit::CLEAN)
-}
-
-/// `rt-controller recover`: the Franka's automatic error recovery, once,
-/// with no daemon running on the record.
-fn recover_command(cfg: &DaemonConfig) -> Result<i32, Failure> {
-    if cfg.backend.kind != BackendKind::Franka {
-        return Err(Failure {
-            code: exit::CONFIG,
-            error: anyhow::anyhow!(
-                "`recover` runs the Franka's error recovery: needs backend.kind = \"franka\""
-            ),
-        });
-    }
-    let _record = match &cfg.fault_record {
-        Some(p) => Some(FaultRecord::lock(p).map_err(|e| with(exit::CONFIG)(e.into()))?),
-        None => None,
-    };
-    franka::recover(&cfg.backend.franka, cfg.timing.startup_timeout_s)
-        .map_err(|e| with(exit::ERROR)(e.into()))?;
-    println!(
-        "rt-controller recover: the robot's error recovery ran; a fault on record still needs \
-         `rt-controller reset`"
-    );
-    Ok(exit::CLEAN)
-}
-
 fn log_allocations(a: &rt_alloc::RtAllocStats) {
     info!(
         "rt-controller: control-loop allocations: {} from the real-time pools, {} from the heap; \
          {} frees to the heap",
         a.pool_allocs, a.system_allocs_on_rt_thread, a.system_frees_on_rt_thread
     );
-}
-
-/// `rt-controller reset`: one reset command to the daemon of `namespace`,
-/// and its answer from the status.
-fn send_reset(namespace: &str, timeout_s: f64) -> Result<()> {
-    transport::quiet_logs();
-    let node = transport::create_node("rt-controller-reset")?;
-    let commands = transport::publisher::<ControllerCommand>(&node, namespace)?;
-    let status = transport::subscriber::<ControllerStatus>(&node, namespace)?;
-    // Unique across senders: this process's id and the time.
-    let seq = (u64::from(std::process::id()) << 32) | (mono_now_ns() & 0xffff_ffff);
-    let start = std::time::Instant::now();
-    let mut next_send = start;
-    let mut before: Option<ControllerStatus> = None;
-    while start.elapsed().as_secs_f64() < timeout_s {
-        if std::time::Instant::now() >= next_send {
-            // Resent until answered: a daemon starting may miss the first.
-            let episode = before.map_or(0, |s| s.header.episode);
-            transport::send(
-                &commands,
-                &ControllerCommand::reset(seq, mono_now_ns(), episode),
-            )?;
-            next_send += Duration::from_millis(500);
-        }
-        let mut answer = None;
-        transport::drain(&status, |s| {
-            if s.command_seq == seq {
-                answer = Some(*s);
-            } else if before.is_none() {
-                before = Some(*s);
-            }
-        })?;
-        if let Some(s) = answer {
-            let mode = ControllerMode::from_u32(s.mode).map_or("?", |m| m.name());
-            println!(
-                "rt-controller reset: {}; mode {mode}, fault code {}, {} resets in all",
-                ControllerCommand::result_name(s.command_result),
-                s.fault_code,
-                s.resets
-            );
-            return match s.command_result {
-                ControllerCommand::RESULT_CLEARED | ControllerCommand::RESULT_NO_FAULT => Ok(()),
-                r => bail!(
-                    "the daemon refused the reset: {}",
-                    ControllerCommand::result_name(r)
-                ),
-            };
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    bail!("no answer from an rt-controller in namespace '{namespace}' within {timeout_s} s")
 }
 
 /// Fault or HardwareLost.
@@ -684,8 +504,10 @@ fn monitor_loop(
     shared: &Shared,
     stop: &AtomicBool,
     notifier: &Notifier,
-    record: Option<&FaultRecord>,
+    record: Option<std::sync::mpsc::Sender<RecordUpdate>>,
 ) {
+    let mut seen_faults = 0;
+    let mut seen_resets = 0;
     let mut last_beat = 0;
     let mut last_mode = u32::MAX;
     let mut last_command = 0;
@@ -722,21 +544,28 @@ fn monitor_loop(
             }
             // systemd shows it in `systemctl status`.
             notifier.notify(&format!("STATUS={name} (fault code {code})"));
-            if let Some(r) = record {
-                let kept = if faulted(mode) {
-                    r.record_fault(code)
-                } else if last_mode != u32::MAX && faulted(last_mode) {
-                    r.note_reset_command().map(|n| {
-                        warn!("rt-controller: the fault record says running again ({n} resets)");
-                    })
-                } else {
-                    Ok(())
-                };
-                if let Err(e) = kept {
-                    error!("rt-controller: {e}");
-                }
-            }
             last_mode = mode;
+        }
+        // The loop's counters, not the mode: a fault latched and reset
+        // between two looks is recorded too.
+        let faults = shared.faults_latched.load(Ordering::Acquire);
+        let resets = shared.resets.load(Ordering::Relaxed);
+        if let Some(tx) = &record
+            && (faults != seen_faults || resets != seen_resets)
+        {
+            let fault_now = if faulted(mode) {
+                shared.fault_code.load(Ordering::Relaxed)
+            } else {
+                0
+            };
+            let _ = tx.send(RecordUpdate {
+                new_faults: faults - seen_faults,
+                latched_code: shared.latched_code.load(Ordering::Acquire),
+                new_resets: resets - seen_resets,
+                fault_now,
+            });
+            seen_faults = faults;
+            seen_resets = resets;
         }
         let command = shared.command_seq.load(Ordering::Relaxed);
         if command != last_command {

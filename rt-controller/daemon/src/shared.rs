@@ -47,6 +47,11 @@ pub struct Shared {
     pub learner_io_errors: AtomicU64,
     /// Stale actions dropped so far (every reason).
     pub stale_actions: AtomicU64,
+    /// Faults latched so far (Fault or hardware-lost entered), counted by
+    /// the loop so that the monitor misses none between its looks.
+    pub faults_latched: AtomicU64,
+    /// The fault code of the last one latched (stored before the count).
+    pub latched_code: AtomicU32,
     /// Faults cleared by a reset command so far.
     pub resets: AtomicU64,
     /// Reset commands refused so far.

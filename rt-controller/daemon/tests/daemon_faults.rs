@@ -293,4 +293,14 @@ fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
     transport::send(&rig.actions, &rig.action(2, [0.001, 0.0, 0.0, 0.0])).unwrap();
     run(&mut rig, 1, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 2);
+    // A new episode: a forged first action is bounded by the newest of any
+    // episode, and the policy's own (numbered on) is applied.
+    rig.state.header.episode = 2;
+    run(&mut rig, 5, &mut k);
+    transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
+    run(&mut rig, 1, &mut k);
+    assert_eq!(rig.daemon.stats.actions_seq_jump, 2);
+    transport::send(&rig.actions, &rig.action(3, [0.001, 0.0, 0.0, 0.0])).unwrap();
+    run(&mut rig, 1, &mut k);
+    assert_eq!(rig.daemon.control.last_action_seq(), 3);
 }

@@ -244,6 +244,10 @@ pub fn distill(
         Arc::new(Pair::new(t_obs, s_obs)),
         student_cfg.threads,
     )?;
+    // A training overload ramp is over by the time there is a policy to
+    // distil: DAgger collects under the limits it ends at.
+    let ramp_end = student_cfg.env.training.overload_share(u64::MAX);
+    env.overload_share().set(ramp_end);
     let ad = env.act_dim();
 
     let (mut state, mut rounds, mut best) = if !fresh {
