@@ -201,11 +201,14 @@ impl<H: Hardware> Daemon<H> {
         let same_episode = Some(s.header.episode) == self.control.episode();
         if self.have_state
             && self.hardware_lost
+            && !self.cfg.timing.lockstep_actions
             && same_episode
             && s.step == self.state.step
             && s.header.t_hw_ns == self.state.header.t_hw_ns
         {
-            // Lost, and still frozen: not a live hardware a reset may trust.
+            // Lost, and still frozen: not a live hardware a reset may trust
+            // (in lockstep the simulator re-publishes while it waits for a
+            // command, which a lost daemon does not send: that is live).
             self.stats.hardware_states_stale += 1;
             return Ok(false);
         }

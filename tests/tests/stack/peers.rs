@@ -77,9 +77,10 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
         gap_s > 0.1 - 1e-6 && gap_s < 0.2,
         "held {gap_s:.4} s after the last action (timeout 0.1 s)"
     );
-    // The policy comes back: actions resume the run.
+    // The policy comes back, numbering on from its last action (a jump of
+    // more than 1000 would be refused as forged): actions resume the run.
     let back = transport::publisher::<PolicyAction>(&node, &ns).unwrap();
-    let mut seq = 1_000_000;
+    let mut seq = last_action.0;
     let resumed = {
         let start = Instant::now();
         let mut hit = None;
@@ -98,7 +99,7 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     // applied once; its repetitions are replays (and soon too old): the
     // controller holds.
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
-    let frozen = action(2_000_000, 0.0, SCHEMA_VERSION, &latest(&frames));
+    let frozen = action(seq + 1, 0.0, SCHEMA_VERSION, &latest(&frames));
     let held = {
         let start = Instant::now();
         let mut hit = None;
