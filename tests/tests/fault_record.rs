@@ -94,7 +94,9 @@ fn a_fault_survives_a_kill_and_restart_until_the_operator_resets_it() {
     assert_eq!(code, Some(0), "{log}");
     let history = dir.join("rt-controller.fault.history");
     let deadline = std::time::Instant::now() + Duration::from_secs(10);
-    while !std::fs::read_to_string(&history).is_ok_and(|h| h.matches("fault 4").count() >= 2) {
+    while !std::fs::read_to_string(&history)
+        .is_ok_and(|h| h.matches("fault 4").count() >= 2 && h.contains("reset by a reset command"))
+    {
         assert!(
             std::time::Instant::now() < deadline,
             "the second fault is not in the history"

@@ -588,6 +588,9 @@ impl<H: Hardware> Daemon<H> {
         let resets = self.control.resets();
         let reset_since = resets != self.resets_seen;
         self.resets_seen = resets;
+        // Before the fault count: a monitor that sees a fault sees the
+        // resets before it.
+        self.shared.resets.store(resets, Ordering::Release);
         if code != 0 && (self.last_fault_code == 0 || reset_since) {
             self.faults_latched += 1;
             self.shared.latched_code.store(code, Ordering::Release);

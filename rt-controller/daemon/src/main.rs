@@ -549,7 +549,7 @@ fn monitor_loop(
         // The loop's counters, not the mode: a fault latched and reset
         // between two looks is recorded too.
         let faults = shared.faults_latched.load(Ordering::Acquire);
-        let resets = shared.resets.load(Ordering::Relaxed);
+        let resets = shared.resets.load(Ordering::Acquire);
         if let Some(tx) = &record
             && (faults != seen_faults || resets != seen_resets)
         {
