@@ -452,9 +452,6 @@ impl<H: Hardware> Daemon<H> {
             .stale_actions
             .store(self.stats.actions_stale(), Ordering::Relaxed);
         self.shared
-            .resets
-            .store(self.control.resets(), Ordering::Relaxed);
-        self.shared
             .commands_refused
             .store(self.stats.commands_refused, Ordering::Relaxed);
         Ok(outcome)

@@ -216,6 +216,17 @@ struct Ending {
     error: Option<(anyhow::Error, u32)>,
 }
 
+impl Ending {
+    /// An error before the arm was held: nothing latched, nothing to record.
+    fn before_ready(e: anyhow::Error) -> Self {
+        Self {
+            ready: false,
+            latched: 0,
+            error: Some((e, 0)),
+        }
+    }
+}
+
 /// The record and the exit status of an ending: a fault (latched, a robot
 /// error, or an error while the arm was held) is recorded and exits
 /// [`exit::FAULT`]; an error before the arm was held [`exit::ERROR`].
@@ -265,19 +276,14 @@ fn start_and_drive(
     model: robot_model::Model,
     record: Option<Arc<FaultRecord>>,
 ) -> Ending {
-    let early = |e: anyhow::Error, code: u32| Ending {
-        ready: false,
-        latched: 0,
-        error: Some((e, code)),
-    };
     let node = match transport::create_node("rt-controller") {
         Ok(n) => n,
-        Err(e) => return early(e.into(), 0),
+        Err(e) => return Ending::before_ready(e.into()),
     };
     match cfg.backend.kind {
         BackendKind::Sim => match SimBackend::open(&node, &cfg.backend.namespace) {
             Ok(hw) => drive(cfg, model, hw, &node, record, |_| {}),
-            Err(e) => early(e.into(), 0),
+            Err(e) => Ending::before_ready(e.into()),
         },
         BackendKind::Franka => {
             let f = &cfg.backend.franka;
@@ -290,7 +296,7 @@ fn start_and_drive(
             // own to report), exits 1 and the unit tries again.
             let robot = match franka::connect(f, cfg.timing.startup_timeout_s) {
                 Ok(r) => r,
-                Err(e) => return early(e.into(), 0),
+                Err(e) => return Ending::before_ready(e.into()),
             };
             info!(
                 "rt-controller: connected, robot server version {}",
@@ -300,7 +306,7 @@ fn start_and_drive(
             let wrench_sensor = match f.wrench {
                 WrenchSource::NetFt => match NetFt::connect(&f.net_ft, mono_now_ns()) {
                     Ok(s) => Some(s),
-                    Err(e) => return early(e.into(), 0),
+                    Err(e) => return Ending::before_ready(e.into()),
                 },
                 WrenchSource::RobotEstimate | WrenchSource::None => None,
             };
@@ -311,7 +317,7 @@ fn start_and_drive(
                         hw.min_success_rate
                     );
                 }),
-                Err(e) => early(e.into(), 0),
+                Err(e) => Ending::before_ready(e.into()),
             }
         }
     }
@@ -338,11 +344,7 @@ fn drive<H: Hardware>(
     let mut daemon = match Daemon::new(cfg.clone(), model, hw, node) {
         Ok(d) => d,
         Err(e) => {
-            return Ending {
-                ready: false,
-                latched: 0,
-                error: Some((anyhow::anyhow!("{e}").context("building the controller"), 0)),
-            };
+            return Ending::before_ready(anyhow::anyhow!("{e}").context("building the controller"));
         }
     };
 
@@ -354,11 +356,7 @@ fn drive<H: Hardware>(
     let writer = match record.map(FaultRecord::spawn_writer).transpose() {
         Ok(w) => w,
         Err(e) => {
-            return Ending {
-                ready: false,
-                latched: 0,
-                error: Some((e.into(), 0)),
-            };
+            return Ending::before_ready(e.into());
         }
     };
     let (updates, writer) = writer.unzip();
@@ -375,11 +373,7 @@ fn drive<H: Hardware>(
     let monitor = match monitor {
         Ok(m) => m,
         Err(e) => {
-            return Ending {
-                ready: false,
-                latched: 0,
-                error: Some((e.into(), 0)),
-            };
+            return Ending::before_ready(e.into());
         }
     };
 
