@@ -6,7 +6,6 @@
 
 pub use learner_node::observe::{GROUND_TRUTH_DIM, GroundTruth, HoleError, ObsView, Observer};
 use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Refuses a world camera (`camera`, the world's `[camera]`) that is not
 /// the one `observer` was trained for.
@@ -101,8 +100,8 @@ impl ObservationKind {
 pub struct RampedHoleError {
     /// The full standard deviation per horizontal axis, m.
     pub std_m: f64,
-    /// The share of `std_m` in use, an `f64`'s bits.
-    share: AtomicU64,
+    /// The share of `std_m` in use.
+    share: super::env::Share,
 }
 
 impl RampedHoleError {
@@ -110,23 +109,19 @@ impl RampedHoleError {
     pub fn new(std_m: f64) -> Self {
         Self {
             std_m,
-            share: AtomicU64::new(0f64.to_bits()),
+            share: super::env::Share::default(),
         }
     }
 
-    /// Uses `share` (clamped to 0..1) of the full deviation from now on.
+    /// Uses `share` (clamped to 0..1; not finite: 1) of the full deviation
+    /// from now on.
     pub fn set_share(&self, share: f64) {
-        let s = if share.is_finite() {
-            share.clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
-        self.share.store(s.to_bits(), Ordering::Relaxed);
+        self.share.set(share);
     }
 
     /// The deviation in use, m.
     pub fn current_std_m(&self) -> f64 {
-        self.std_m * f64::from_bits(self.share.load(Ordering::Relaxed))
+        self.std_m * self.share.get()
     }
 }
 
