@@ -217,12 +217,11 @@ impl Metrics {
 pub const CSV_HEADER: &str = "epoch,split,samples,total,flow_epe_px,mask_bce,contact_bce,contact_acc,pairing_bce,pairing_acc,ee_mse,kl,recon_rgb,recon_wrench,recon_proprio,contact_majority_acc,pairing_majority_acc,zero_flow_epe_px";
 
 impl Row {
-    /// The CSV line's values after `epoch` and `split`, named by the
-    /// header's columns and prefixed with the split (`train/total`, …): the
-    /// TensorBoard scalars of the row.
-    pub fn scalars(&self) -> Vec<(String, f64)> {
+    /// The values after `epoch` and `split`, in [`CSV_HEADER`]'s order
+    /// (the one list the CSV line and the TensorBoard scalars share).
+    fn values(&self) -> [f64; 16] {
         let l = &self.loss;
-        let values = [
+        [
             self.samples as f64,
             l.total,
             l.flow,
@@ -239,39 +238,51 @@ impl Row {
             self.contact_majority_acc,
             self.pairing_majority_acc,
             self.zero_flow_epe,
-        ];
+        ]
+    }
+
+    /// The CSV line's values after `epoch` and `split`, named by the
+    /// header's columns and prefixed with the split (`train/total`, …): the
+    /// TensorBoard scalars of the row.
+    pub fn scalars(&self) -> Vec<(String, f64)> {
         CSV_HEADER
             .split(',')
             .skip(2)
-            .zip(values)
+            .zip(self.values())
             .map(|(name, v)| (format!("{}/{name}", self.split), v))
             .collect()
     }
 
     /// One CSV line (no newline).
     pub fn csv(&self) -> String {
-        let l = &self.loss;
-        format!(
-            "{},{},{},{:.6},{:.6},{:.6},{:.6},{:.5},{:.6},{:.5},{:.6e},{:.4},{:.6},{:.6},{:.6},{:.5},{:.5},{:.6}",
-            self.epoch,
-            self.split,
-            self.samples,
-            l.total,
-            l.flow,
-            l.mask,
-            l.contact,
-            self.contact_acc,
-            l.pairing,
-            self.pairing_acc,
-            l.ee,
-            l.kl,
-            l.recon_rgb,
-            l.recon_wrench,
-            l.recon_proprio,
-            self.contact_majority_acc,
-            self.pairing_majority_acc,
-            self.zero_flow_epe
-        )
+        use std::fmt::Write;
+        // Digits after the point of each column after `samples` (None: the
+        // end-effector MSE, in scientific notation with 6).
+        const DIGITS: [Option<usize>; 15] = [
+            Some(6),
+            Some(6),
+            Some(6),
+            Some(6),
+            Some(5),
+            Some(6),
+            Some(5),
+            None,
+            Some(4),
+            Some(6),
+            Some(6),
+            Some(6),
+            Some(5),
+            Some(5),
+            Some(6),
+        ];
+        let mut line = format!("{},{},{}", self.epoch, self.split, self.samples);
+        for (x, digits) in self.values()[1..].iter().zip(DIGITS) {
+            let _ = match digits {
+                Some(d) => write!(line, ",{x:.d$}"),
+                None => write!(line, ",{x:.6e}"),
+            };
+        }
+        line
     }
 }
 
@@ -321,6 +332,44 @@ pub fn write_curves(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The CSV line keeps its columns' formats, and the scalars name the
+    /// same values by the header's columns.
+    #[test]
+    fn the_csv_line_and_the_scalars_carry_the_same_values() {
+        let row = Row {
+            epoch: 2,
+            split: "test".into(),
+            samples: 64,
+            loss: Terms {
+                total: 1.234_567_89,
+                flow: 2.5,
+                mask: 0.1,
+                contact: 0.2,
+                pairing: 0.3,
+                ee: 0.000_123_456_78,
+                kl: 12.345_67,
+                recon_rgb: f64::NAN,
+                recon_wrench: 0.4,
+                recon_proprio: 0.5,
+            },
+            contact_acc: 0.912_345_6,
+            pairing_acc: 0.7,
+            contact_majority_acc: 0.6,
+            pairing_majority_acc: 0.5,
+            zero_flow_epe: 3.25,
+        };
+        assert_eq!(
+            row.csv(),
+            "2,test,64,1.234568,2.500000,0.100000,0.200000,0.91235,0.300000,0.70000,\
+             1.234568e-4,12.3457,NaN,0.400000,0.500000,0.60000,0.50000,3.250000"
+        );
+        let s = row.scalars();
+        assert_eq!(s.len(), CSV_HEADER.split(',').count() - 2);
+        assert_eq!(s[0], ("test/samples".to_string(), 64.0));
+        assert_eq!(s[8], ("test/ee_mse".to_string(), 0.000_123_456_78));
+        assert_eq!(s[15], ("test/zero_flow_epe_px".to_string(), 3.25));
+    }
 
     /// A variant without a pairing head (No-Pairing) has NaN accuracies;
     /// serde_json writes them as null, and a mid-epoch checkpoint must
