@@ -6,12 +6,5 @@
 # run the daemon against it through scripts/franky_sim_server.py.
 FRANKY_SIM_VERSION=1.0.4
 FRANKY_SIM_VENV=.venv-franky-sim
-if ! "$FRANKY_SIM_VENV/bin/python" -c "import franky_sim" >/dev/null 2>&1; then
-    echo "== installing franky-sim $FRANKY_SIM_VERSION into $FRANKY_SIM_VENV"
-    if ! python3 -m venv "$FRANKY_SIM_VENV" >/dev/null 2>&1; then
-        apt-get update -qq && apt-get install -y -qq python3-venv
-        python3 -m venv "$FRANKY_SIM_VENV"
-    fi
-    "$FRANKY_SIM_VENV/bin/pip" install --quiet --disable-pip-version-check \
-        "franky-sim==$FRANKY_SIM_VERSION"
-fi
+. "$(dirname "${BASH_SOURCE[0]}")/python-venv.sh"
+python_venv "$FRANKY_SIM_VENV" "import franky_sim" "franky-sim==$FRANKY_SIM_VERSION"

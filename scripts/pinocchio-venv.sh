@@ -6,11 +6,5 @@
 # Debian, the python3-venv package.
 PIN_VERSION=4.1.0
 PINOCCHIO_VENV=.venv-pinocchio
-if ! "$PINOCCHIO_VENV/bin/python" -c "import pinocchio" >/dev/null 2>&1; then
-    echo "== installing Pinocchio $PIN_VERSION into $PINOCCHIO_VENV"
-    if ! python3 -m venv "$PINOCCHIO_VENV" >/dev/null 2>&1; then
-        apt-get update -qq && apt-get install -y -qq python3-venv
-        python3 -m venv "$PINOCCHIO_VENV"
-    fi
-    "$PINOCCHIO_VENV/bin/pip" install --quiet --disable-pip-version-check "pin==$PIN_VERSION"
-fi
+. "$(dirname "${BASH_SOURCE[0]}")/python-venv.sh"
+python_venv "$PINOCCHIO_VENV" "import pinocchio" "pin==$PIN_VERSION"
