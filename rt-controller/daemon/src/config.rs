@@ -294,8 +294,14 @@ pub struct TimingConfig {
     /// with the learner in the loop). Off in deployment: the controller
     /// never waits for the learner.
     pub lockstep_actions: bool,
-    /// Hardware steps per policy action (50 at 1 kHz = 20 Hz).
+    /// Hardware steps per policy action (50 at 1 kHz = 20 Hz). Also the
+    /// speed bound's period: an action's step is cut to its share of the
+    /// largest for the steps since the last applied action (`admission.rs`).
     pub action_period_steps: u64,
+    /// An action is applied at most once per this many hardware steps; a
+    /// sooner one waits at the queue's front (half a policy period: a 20 Hz
+    /// policy's jitter never waits, a flooding peer gets at most 40 Hz).
+    pub min_action_interval_steps: u64,
     /// Lockstep only: how long to wait for an addressed action, s.
     pub lockstep_action_timeout_s: f64,
     /// On SIGTERM/SIGINT: hold the pose this long before exiting, s.
@@ -316,6 +322,7 @@ impl Default for TimingConfig {
             status_period_ms: 100.0,
             lockstep_actions: false,
             action_period_steps: shared_mem_schema::rates::ACTION_PERIOD_STEPS,
+            min_action_interval_steps: shared_mem_schema::rates::ACTION_PERIOD_STEPS / 2,
             lockstep_action_timeout_s: 5.0,
             shutdown_hold_s: 0.3,
             max_action_age_ms: 2.0 * shared_mem_schema::rates::ACTION_PERIOD_S * 1e3,
@@ -481,6 +488,11 @@ impl DaemonConfig {
             0.0..=1000.0,
         )?;
         at_least("timing.action_period_steps", t.action_period_steps, 1)?;
+        within(
+            "timing.min_action_interval_steps",
+            t.min_action_interval_steps,
+            1..=t.action_period_steps,
+        )?;
         // SCHED_FIFO priorities are 1 to 99.
         within("realtime.priority", self.realtime.priority, 1..=99)?;
         // The loop runs on the main thread (8 MiB of stack by default); the

@@ -1,6 +1,7 @@
 //! The daemon: the control cycle ([`rt_controller::cycle`]) between a hardware
 //! backend and the learner-facing services, one cycle per call.
 
+use crate::admission::RateGate;
 use crate::backend::{Hardware, HardwareError};
 use crate::config::{Clock, DaemonConfig};
 use crate::queue::{ActionQueue, for_episode};
@@ -9,6 +10,7 @@ use crate::shared::{FAULT_HARDWARE_SILENT, Shared};
 use crate::stats::Stats;
 use robot_model::Model;
 use rt_controller::cycle::ControlCycle;
+use rt_controller::supervisor::Supervisor;
 use rt_controller::{ActionStatus, ConfigError};
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport::{self, Pub, StackNode, Sub, TransportError};
@@ -79,6 +81,8 @@ pub struct Daemon<H: Hardware> {
     faults_latched: u64,
     /// The highest sequence number of an action applied in any episode.
     top_seq: u64,
+    /// Where the last action was applied: the rate and speed bounds.
+    rate: RateGate,
     /// Resets counted at the last [`Self::count_latch`].
     resets_seen: u64,
     last_command: TorqueCommand,
@@ -127,6 +131,7 @@ impl<H: Hardware> Daemon<H> {
             last_fault_code: 0,
             faults_latched: 0,
             top_seq: 0,
+            rate: RateGate::default(),
             resets_seen: 0,
             last_command: TorqueCommand::empty(0),
             sensor: *SensorFrame::boxed_zeroed(),
@@ -262,11 +267,17 @@ impl<H: Hardware> Daemon<H> {
     fn take_actions(&mut self) {
         let (queue, stats) = (&mut self.queue, &mut self.stats);
         let episode = self.control.episode();
+        let t = &self.cfg.timing;
+        let lockstep = t.clock == Clock::Hardware && t.lockstep_actions;
+        let period = t.action_period_steps;
         let drained = transport::try_drain_at_most(&self.actions, MAX_ACTIONS_PER_CYCLE, |a| {
             stats.actions_received += 1;
+            let at = a.apply_at_step;
             if a.header.schema_version != SCHEMA_VERSION {
                 // Another schema's bytes.
                 stats.actions_garbage += 1;
+            } else if at != 0 && !(lockstep && at.is_multiple_of(period)) {
+                stats.actions_misaddressed += 1;
             } else if !for_episode(a, episode) {
                 // Sent for the episode before a reset, arriving after it: in
                 // lockstep it would sit at the queue's front, addressed to a
@@ -458,7 +469,9 @@ impl<H: Hardware> Daemon<H> {
     }
 
     fn garbage(&self) -> u64 {
-        self.stats.actions_garbage + self.control.data.supervisor.counters.actions_rejected
+        self.stats.actions_garbage
+            + self.stats.actions_misaddressed
+            + self.control.data.supervisor.counters.actions_rejected
     }
 
     fn control(&mut self, now_ns: u64, fresh: bool) -> Result<CycleOutcome, HardwareError> {
@@ -494,7 +507,28 @@ impl<H: Hardware> Daemon<H> {
         } else {
             self.take_actions();
         }
-        let action = self.queue.next_for(step).and_then(|a| self.admit(a));
+        let episode = self.state.header.episode;
+        let min_interval = self.cfg.timing.min_action_interval_steps;
+        let action = if self.rate.due(episode, step, min_interval) {
+            self.queue.next_for(step).and_then(|a| self.admit(a))
+        } else {
+            None
+        };
+        let action = action.map(|mut a| {
+            let traj = &self.cfg.controller.trajectory;
+            let (m, r) = (traj.max_step_m, traj.max_step_rad);
+            let period = self.cfg.timing.action_period_steps;
+            let [x, y, z] = a.delta_pos_m;
+            let mut d = [x, y, z, a.delta_roll_rad];
+            // An invalid action is left whole, for the supervisor to refuse.
+            let valid = Supervisor::check_action(&self.cfg.controller.safety, &d).is_ok();
+            if valid && self.rate.bound(&mut d, (episode, step), period, m, r) {
+                self.stats.actions_speed_cut += 1;
+                a.delta_pos_m = [d[0], d[1], d[2]];
+                a.delta_roll_rad = d[3];
+            }
+            a
+        });
         let info = self.control.cycle(
             &self.model,
             &self.state,
@@ -504,6 +538,9 @@ impl<H: Hardware> Daemon<H> {
             &mut self.sensor,
         );
         self.top_seq = self.top_seq.max(self.control.last_action_seq());
+        if matches!(info.action, ActionStatus::Applied | ActionStatus::Clamped) {
+            self.rate.applied(episode, step);
+        }
         // Stamped at sending: the action latency includes the step.
         let sent = mono_now_ns();
         self.last_command.header.t_mono_ns = sent;

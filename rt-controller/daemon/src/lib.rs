@@ -36,6 +36,7 @@
 //! hardware-clocked mode a spin-then-yield poll reacts in microseconds.
 //! Outputs are plain publications, which never wait for subscribers.
 
+mod admission;
 pub mod backend;
 pub mod config;
 pub mod control;

@@ -463,11 +463,14 @@ fn log_summary<H: Hardware>(daemon: &Daemon<H>, summary: &RunSummary) {
         s.compute.max_ns as f64 / 1e3,
     );
     info!(
-        "rt-controller: actions: {} garbage, {} dropped from the full queue, {} stale ({} too old, \
+        "rt-controller: actions: {} garbage ({} misaddressed), {} dropped from the full queue, \
+         {} with their step cut by the speed bound, {} stale ({} too old, \
          {} from the future, {} of another episode, {} replayed, {} jumped); {} resets, {} refused commands, \
          {} failed publications, {} failed action receives",
         daemon.shared.garbage_actions.load(Ordering::Relaxed),
+        s.actions_misaddressed,
         s.actions_overflow,
+        s.actions_speed_cut,
         s.actions_stale(),
         s.actions_too_old,
         s.actions_from_future,

@@ -23,6 +23,14 @@ pub struct Stats {
     /// Actions refused before the control law saw them (another schema
     /// version).
     pub actions_garbage: u64,
+    /// Actions refused for their address: outside lockstep any
+    /// `apply_at_step` (it would hold the queue's front), in lockstep one
+    /// that is not a policy-period boundary (the only steps the loop waits
+    /// for an action at).
+    pub actions_misaddressed: u64,
+    /// Actions applied with their step cut by the speed bound (sooner than
+    /// a policy period after the last applied one; `admission.rs`).
+    pub actions_speed_cut: u64,
     /// Actions dropped from the full action queue (the oldest goes).
     pub actions_overflow: u64,
     /// Actions dropped as answers to another episode than the hardware's.
@@ -77,6 +85,8 @@ impl Stats {
         hardware_states_stale: 0,
         actions_received: 0,
         actions_garbage: 0,
+        actions_misaddressed: 0,
+        actions_speed_cut: 0,
         actions_overflow: 0,
         actions_other_episode: 0,
         actions_too_old: 0,

@@ -51,7 +51,9 @@ fn queue_overflow_is_counted_apart_from_rejections() {
         s.actions_rejected, 0,
         "valid actions counted as garbage: {s:?}"
     );
-    assert_eq!(s.actions_accepted + s.actions_ignored, 2, "{s:?}");
+    // One applied: the second cycle is too soon after it for another
+    // (the rate admission holds it at the queue's front).
+    assert_eq!(s.actions_accepted + s.actions_ignored, 1, "{s:?}");
 }
 
 #[test]

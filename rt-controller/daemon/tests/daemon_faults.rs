@@ -192,7 +192,7 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     type Edit<'a> = &'a dyn Fn(&mut PolicyAction);
     let edits: [(u64, Edit); 4] = [
         (2, &|a| a.header.t_hw_ns = t - age_ns - 1_000_000),
-        (3, &|a| a.header.t_hw_ns = t + 5_000_000),
+        (3, &|a| a.header.t_hw_ns = t + 1_000_000_000),
         (4, &|a| a.header.episode = 7),
         (1, &|_| {}),
     ];
@@ -200,7 +200,8 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
         let mut a = rig.action(seq, [0.001, 0.0, 0.0, 0.0]);
         edit(&mut a);
         transport::send(&rig.actions, &a).unwrap();
-        run(&mut rig, 1, &mut k);
+        // Half a policy period: the rate admission's interval.
+        run(&mut rig, 25, &mut k);
         assert_eq!(rig.daemon.control.last_action_seq(), 1, "seq {seq} applied");
     }
     assert_eq!(stale(&rig), (1, 1, 1, 1));
@@ -278,11 +279,11 @@ fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
     let mut k = 0;
     run(&mut rig, 50, &mut k);
     transport::send(&rig.actions, &rig.action(1, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 1, &mut k);
+    run(&mut rig, 25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 1);
     // A peer copies the newest frame's stamps with seq = u64::MAX.
     transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 1, &mut k);
+    run(&mut rig, 25, &mut k);
     assert_eq!(
         rig.daemon.control.last_action_seq(),
         1,
@@ -291,16 +292,16 @@ fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
     assert_eq!(rig.daemon.stats.actions_seq_jump, 1);
     // The policy's next action still counts.
     transport::send(&rig.actions, &rig.action(2, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 1, &mut k);
+    run(&mut rig, 25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 2);
     // A new episode: a forged first action is bounded by the newest of any
     // episode, and the policy's own (numbered on) is applied.
     rig.state.header.episode = 2;
     run(&mut rig, 5, &mut k);
     transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 1, &mut k);
+    run(&mut rig, 25, &mut k);
     assert_eq!(rig.daemon.stats.actions_seq_jump, 2);
     transport::send(&rig.actions, &rig.action(3, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 1, &mut k);
+    run(&mut rig, 25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 3);
 }

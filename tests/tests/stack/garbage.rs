@@ -15,7 +15,13 @@ fn garbage_actions_never_produce_torques_beyond_limits() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("garbage");
     let dir = test_support::scratch_dir("garbage");
-    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    // An action every two cycles, each to reach the control law: the rate
+    // admission (an action at most every 25 steps, tested in
+    // rt-controller-daemon's daemon_admission.rs) would queue and age most
+    // of them. The speed bound still cuts valid steps (counted as accepted).
+    let config = dir.join("every-cycle.toml");
+    std::fs::write(&config, "[timing]\nmin_action_interval_steps = 1\n").unwrap();
+    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir, &["--config", config.to_str().unwrap()]);
     let model = robot_model::descriptions::builtin("iiwa14").unwrap();
     let limits = model.effort_limits();
     let cfg = rt_controller::ControllerConfig::default();

@@ -18,9 +18,12 @@ use tests::wait_for;
 pub(crate) fn start_sim_and_controller(
     ns: &str,
     dir: &std::path::Path,
+    controller_args: &[&str],
 ) -> (learner_node::stack::Managed, learner_node::stack::Managed) {
     let sim = tests::start("hw-sim", &["--namespace", ns, "--no-camera"], dir);
-    let ctl = tests::start("rt-controller", &["--namespace", ns, "--no-realtime"], dir);
+    let mut args = vec!["--namespace", ns, "--no-realtime"];
+    args.extend_from_slice(controller_args);
+    let ctl = tests::start("rt-controller", &args, dir);
     (sim, ctl)
 }
 

@@ -15,7 +15,7 @@ fn losing_the_policy_holds_within_100ms_and_its_return_resumes() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("policy-loss");
     let dir = test_support::scratch_dir("policy-loss");
-    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    let (_sim, _ctl) = start_sim_and_controller(&ns, &dir, &[]);
     let node = transport::create_node("e2e-observer").unwrap();
     let frames = transport::subscriber::<SensorFrame>(&node, &ns).unwrap();
     let mut policy = tests::start(
@@ -130,7 +130,7 @@ fn silent_hardware_is_a_fault_with_no_further_torques() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("hw-loss");
     let dir = test_support::scratch_dir("hw-loss");
-    let (mut sim, _ctl) = start_sim_and_controller(&ns, &dir);
+    let (mut sim, _ctl) = start_sim_and_controller(&ns, &dir, &[]);
     let node = transport::create_node("e2e-observer").unwrap();
     let status = transport::subscriber::<ControllerStatus>(&node, &ns).unwrap();
     let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
@@ -170,7 +170,7 @@ fn a_killed_peer_costs_the_others_no_long_log_lines() {
     let _g = tests::exclusive();
     let ns = tests::unique_namespace("quiet");
     let dir = test_support::scratch_dir("quiet");
-    let (_sim, mut ctl) = start_sim_and_controller(&ns, &dir.join("first"));
+    let (_sim, mut ctl) = start_sim_and_controller(&ns, &dir.join("first"), &[]);
     let node = transport::create_node("e2e-observer").unwrap();
     let torques = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
     assert!(
