@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # Sourced by scripts/test.sh: makes sure the other tools' own readers
 # (PyPI `tensorboard` for event files, `safetensors` with NumPy for exported
-# weights) are installed in the repository's own virtual environment, and
-# sets INTEROP_VENV to it. learner/tests/interop.rs reads the learner's
+# weights, `mcap` with `mcap-ros2-support` for logs) are installed in the
+# repository's own virtual environment, and sets INTEROP_VENV to it. learner/tests/interop.rs reads the learner's
 # files with them.
 TENSORBOARD_VERSION=2.18.0
 SAFETENSORS_VERSION=0.4.5
+MCAP_VERSION=1.6.0
+MCAP_ROS2_VERSION=0.6.0
 INTEROP_VENV=.venv-interop
 . "$(dirname "${BASH_SOURCE[0]}")/python-venv.sh"
-python_venv "$INTEROP_VENV" "import tensorboard, safetensors.numpy" "tensorboard==$TENSORBOARD_VERSION" "safetensors==$SAFETENSORS_VERSION" numpy
+python_venv "$INTEROP_VENV" "import tensorboard, safetensors.numpy, mcap_ros2.decoder" \
+    "tensorboard==$TENSORBOARD_VERSION" "safetensors==$SAFETENSORS_VERSION" numpy \
+    "mcap==$MCAP_VERSION" "mcap-ros2-support==$MCAP_ROS2_VERSION"

@@ -4,7 +4,9 @@
 //! CSV files; `run.json` records the commit, the host, the start time, the
 //! command line and the resolved configuration, one entry per start (a
 //! resumed run adds one); an exported policy's safetensors, loaded by
-//! `safetensors.numpy` and run in NumPy as its spec says, acts as ours.
+//! `safetensors.numpy` and run in NumPy as its spec says, acts as ours; every
+//! channel of a fresh MCAP log is decoded by the official `mcap` reader with
+//! `mcap-ros2-support`, each message by its own schema, to the values written.
 
 use std::process::{Command, Stdio};
 
@@ -19,7 +21,10 @@ fn interop_python() -> Option<std::path::PathBuf> {
             std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-interop/bin/python")
         });
     let ok = Command::new(&py)
-        .args(["-c", "import tensorboard, safetensors.numpy"])
+        .args([
+            "-c",
+            "import tensorboard, safetensors.numpy, mcap_ros2.decoder",
+        ])
         .stderr(Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
@@ -27,13 +32,13 @@ fn interop_python() -> Option<std::path::PathBuf> {
         std::env::var("INTEROP_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
     assert!(
         ok || !required,
-        "tensorboard and safetensors are required here but `{} -c 'import tensorboard, \
-         safetensors.numpy'` fails; run scripts/interop-venv.sh",
+        "tensorboard, safetensors and mcap-ros2-support are required here but `{} -c 'import \
+         tensorboard, safetensors.numpy, mcap_ros2.decoder'` fails; run scripts/interop-venv.sh",
         py.display()
     );
     if !ok {
         eprintln!(
-            "\n*** SKIPPED: tensorboard is not importable by {} ***\n",
+            "\n*** SKIPPED: the readers are not importable by {} ***\n",
             py.display()
         );
     }
@@ -215,4 +220,191 @@ fn an_exported_policy_acts_in_numpy_as_it_does_here() {
             assert!((a - b).abs() < 1e-9, "ours {ours:?}, NumPy's {t:?}");
         }
     }
+}
+
+/// Every message of a log decoded by the official reader: CDR channels by
+/// `mcap-ros2-support` from their `ros2msg` schema, JSON channels as JSON
+/// (their schema encoding `jsonschema`); anything else fails. Prints
+/// {topic: [message as plain JSON, ...]}.
+const DECODE_LOG: &str = r#"
+import json, sys
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+def plain(v):
+    if hasattr(v, "__slots__"):
+        return {k: plain(getattr(v, k)) for k in v.__slots__}
+    if isinstance(v, (bytes, bytearray)):
+        return list(v)
+    if isinstance(v, (list, tuple)):
+        return [plain(x) for x in v]
+    if hasattr(v, "tolist"):
+        return v.tolist()
+    return v
+
+factory = DecoderFactory()
+out = {}
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    for schema, channel, message in reader.iter_messages():
+        if channel.message_encoding == "cdr":
+            decode = factory.decoder_for(channel.message_encoding, schema)
+            assert decode is not None, channel.topic
+            value = plain(decode(message.data))
+        elif channel.message_encoding == "json" and schema.encoding == "jsonschema":
+            json.loads(schema.data)
+            value = json.loads(message.data)
+        else:
+            sys.exit(f"{channel.topic}: no decoder for {channel.message_encoding!r} / "
+                     f"{schema.encoding if schema else None!r}")
+        out.setdefault(channel.topic, []).append(value)
+print(json.dumps(out))
+"#;
+
+#[test]
+fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
+    use learner_node::log::{LogWriter, topics};
+    use shared_mem_schema::{
+        CameraFrame, ControllerStatus, EpisodeReport, Header, Message, PolicyAction, SensorFrame,
+    };
+    let dir = test_support::scratch_dir("interop-log");
+    let path = dir.path().join("run.mcap");
+    let mut w = LogWriter::create(&path).unwrap();
+    let mut frames = Vec::new();
+    for k in 0..120u64 {
+        let mut f = *SensorFrame::boxed_zeroed();
+        f.header = Header::new(k + 1, 7 + k, k * 1_000_000, 2);
+        f.step = k;
+        f.n_joints = 7;
+        f.mode = 2;
+        f.fault_code = (k % 5) as u32;
+        for i in 0..7 {
+            f.q[i] = 0.1 * i as f64 + 1e-3 * k as f64;
+            f.tau_cmd[i] = -(i as f64) - 0.5;
+        }
+        f.ee_pos_m = [0.5, -0.25, 0.125 + 1e-4 * k as f64];
+        f.ee_quat_xyzw = [1.0, 0.0, 0.0, 0.0];
+        f.wrench = [1.5, -2.0, 30.0 + k as f64, 0.25, -0.125, 1e-9];
+        w.sensor(&f).unwrap();
+        frames.push(f);
+    }
+    let mut a = PolicyAction::new(5, 99, [0.001, -0.002, 0.0015, 0.04]);
+    a.header.episode = 2;
+    a.apply_at_step = 50;
+    w.action(&a).unwrap();
+    let mut s = *ControllerStatus::boxed_zeroed();
+    s.header = Header::new(3, 4, 5_000_000, 2);
+    s.cycles = 1234;
+    s.mode = 3;
+    s.fault_code = 2;
+    s.command_result = 1;
+    s.wakeup_latency.bins[7] = 42;
+    s.action_latency.max_ns = 987_654;
+    w.status(&s).unwrap();
+    let mut e = *EpisodeReport::boxed_zeroed();
+    e.header = Header::new(1, 2, 0, 2);
+    e.seed = 77;
+    e.s_m = [0.01, -0.02, 0.03];
+    e.hole_quat_xyzw = [0.0, 0.0, 0.5f64.sqrt(), 0.5f64.sqrt()];
+    e.message_len = shared_mem_schema::write_text(&mut e.message, "reset ok");
+    w.episode(&e).unwrap();
+    let (cw, ch) = (5u32, 3u32);
+    let mut c = CameraFrame::boxed_zeroed();
+    c.header = Header::new(1, 5, 50_000_000, 2);
+    c.index = 9;
+    c.calibration.width = cw;
+    c.calibration.height = ch;
+    c.calibration.focal_px = 154.5;
+    c.calibration.principal_px = [2.5, 1.5];
+    c.calibration.pose_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
+    for k in 0..(cw * ch) as usize {
+        c.rgb[3 * k..3 * k + 3].copy_from_slice(&[k as u8, 100 + k as u8, 255 - k as u8]);
+        c.depth_m[k] = 0.5 + k as f32 * 0.25;
+    }
+    w.camera(&c).unwrap();
+    w.finish().unwrap();
+
+    let Some(py) = interop_python() else {
+        return;
+    };
+    let run = Command::new(py)
+        .args(["-c", DECODE_LOG])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let log: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let f64s = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap_or_else(|| panic!("not an array: {v}"))
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let sensor = log[topics::SENSOR].as_array().expect("sensor frames");
+    assert_eq!(sensor.len(), frames.len());
+    for (m, f) in sensor.iter().zip(&frames) {
+        assert_eq!(m["header"]["seq"], f.header.seq);
+        assert_eq!(m["header"]["t_hw_ns"], f.header.t_hw_ns);
+        assert_eq!(m["header"]["schema_version"], f.header.schema_version);
+        assert_eq!(m["step"], f.step);
+        assert_eq!(m["fault_code"], f.fault_code);
+        assert_eq!(f64s(&m["q"]), f.q);
+        assert_eq!(f64s(&m["tau_cmd"]), f.tau_cmd);
+        assert_eq!(f64s(&m["ee_pos_m"]), f.ee_pos_m);
+        assert_eq!(f64s(&m["wrench"]), f.wrench, "the last field too");
+    }
+    let action = &log[topics::ACTION][0];
+    assert_eq!(action["header"]["seq"], 5);
+    assert_eq!(action["apply_at_step"], 50);
+    assert_eq!(f64s(&action["delta_pos_m"]), a.delta_pos_m);
+    assert_eq!(action["delta_roll_rad"], a.delta_roll_rad);
+    let status = &log[topics::STATUS][0];
+    assert_eq!(status["cycles"], 1234);
+    assert_eq!(status["mode"], 3);
+    assert_eq!(status["fault_code"], 2);
+    assert_eq!(status["command_result"], 1);
+    assert_eq!(status["wakeup_latency"]["bins"][7], 42);
+    assert_eq!(status["action_latency"]["max_ns"], 987_654);
+    let report = &log[topics::EPISODE][0];
+    assert_eq!(report["seed"], 77);
+    assert_eq!(f64s(&report["s_m"]), e.s_m);
+    assert_eq!(f64s(&report["hole_quat_xyzw"]), e.hole_quat_xyzw);
+    let text: Vec<u8> = report["message"].as_array().unwrap()[..8]
+        .iter()
+        .map(|b| b.as_u64().unwrap() as u8)
+        .collect();
+    assert_eq!(text, b"reset ok");
+    let camera = &log[topics::CAMERA][0];
+    assert_eq!(camera["index"], 9);
+    assert_eq!(camera["calibration"]["width"], cw);
+    assert_eq!(f64s(&camera["calibration"]["principal_px"]), [2.5, 1.5]);
+    let n = (cw * ch) as usize;
+    let rgb: Vec<u8> = camera["rgb"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b.as_u64().unwrap() as u8)
+        .collect();
+    assert_eq!(rgb, c.rgb[..3 * n]);
+    let depth: Vec<f32> = f64s(&camera["depth_m"]).iter().map(|&d| d as f32).collect();
+    assert_eq!(depth, c.depth_m[..n]);
+    // The views and the JSON channels decode too (their contents are
+    // learner/tests/log.rs's).
+    for topic in [topics::VIEW_RGB, topics::VIEW_TF, topics::VIEW_WRENCH] {
+        assert!(
+            log[topic].as_array().is_some_and(|m| !m.is_empty()),
+            "{topic}"
+        );
+    }
+    let ours = learner_node::log::LogReader::open(&path).unwrap();
+    assert_eq!(
+        ours.read_raw::<SensorFrame>(topics::SENSOR, None).unwrap(),
+        frames
+    );
+    assert_eq!(ours.read_camera(None).unwrap()[0].depth_m, c.depth_m[..n]);
 }

@@ -170,7 +170,7 @@ pub fn sensor_gaps(frames: &[SensorFrame]) -> ChannelGaps {
 pub fn log_gaps(r: &LogReader) -> Result<Vec<ChannelGaps>, ReadError> {
     let mut out = Vec::new();
     for t in r.topics() {
-        if t.topic == topics::SENSOR && t.schema.starts_with(SensorFrame::NAME) {
+        if t.topic == topics::SENSOR {
             // Frames of another schema version cannot be read: fall back to
             // their log times below.
             if let Ok(frames) = r.read_raw::<SensorFrame>(topics::SENSOR, None) {

@@ -2,10 +2,11 @@
 //!
 //! Every stream has its own channel. The raw channels carry each message as
 //! the shared-mem-schema struct's bytes (`#[repr(C)]`, native little-endian,
-//! no padding), so a log is lossless; the schema record names the struct and
-//! the schema version, and the reader refuses another version. Camera frames
-//! are stored compactly: the struct's fixed fields, then the `width × height`
-//! RGB bytes, then the `width × height` depth floats. Episode events (reset,
+//! no padding) behind a CDR encapsulation header, so a log is lossless and
+//! self-describing: the schema is the struct's ROS 2 message definition
+//! ([`ros2`]), which Foxglove and the official readers decode, and the reader
+//! refuses another schema version. Camera frames carry the struct's fixed
+//! fields, then the image's RGB bytes and depth floats as CDR sequences. Episode events (reset,
 //! stage reached, outcome; [`Event`]) and the configuration ([`RunConfig`])
 //! are JSON. Beside them, the [`foxglove`] view channels show the images,
 //! the transforms, the end-effector pose and the wrench in Foxglove.
@@ -21,6 +22,7 @@ pub mod events;
 pub mod foxglove;
 pub mod gaps;
 mod read;
+pub mod ros2;
 mod walk;
 
 pub use config::{RunConfig, RunMode};
@@ -33,17 +35,17 @@ pub use walk::ScanReport;
 
 use mcap::records::MessageHeader;
 use shared_mem_schema::{
-    CameraFrame, ControllerStatus, EpisodeReport, Message, PolicyAction, SCHEMA_VERSION,
-    SensorFrame,
+    CameraFrame, ControllerStatus, EpisodeReport, Message, PolicyAction, SensorFrame,
 };
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-/// Message encoding of the raw struct channels.
+/// Message encoding of the raw struct channels in logs written before
+/// they were CDR ([`ros2`]); still read.
 pub const RAW_ENCODING: &str = "vision_touch/repr-c";
-/// Message encoding of the compact camera channel.
+/// Message encoding of the compact camera channel of such older logs.
 pub const CAMERA_ENCODING: &str = "vision_touch/camera-compact";
 /// The log profile written in the MCAP header.
 pub const PROFILE: &str = "vision_touch";
@@ -159,19 +161,10 @@ pub struct LogWriter {
     buf: Vec<u8>,
 }
 
-fn schema_text<T: Message>() -> String {
-    format!(
-        "shared_mem_schema::{} (schema version {SCHEMA_VERSION}, {} bytes, #[repr(C)], \
-         little-endian)",
-        T::NAME,
-        size_of::<T>()
-    )
-}
-
 /// One channel of a log: its stream, schema and encodings.
 struct ChannelSpec {
     stream: Stream,
-    schema_name: &'static str,
+    schema_name: String,
     schema_encoding: &'static str,
     schema: String,
     topic: &'static str,
@@ -182,17 +175,17 @@ struct ChannelSpec {
 /// compact camera frames, the JSON events and configuration, and (unless
 /// turned off) the Foxglove views.
 fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
-    let raw = |stream, schema_name, schema, topic| ChannelSpec {
+    let raw = |stream, def: &ros2::MsgDef, topic| ChannelSpec {
         stream,
-        schema_name,
-        schema_encoding: RAW_ENCODING,
-        schema,
+        schema_name: def.schema_name(),
+        schema_encoding: ros2::SCHEMA_ENCODING,
+        schema: def.schema_text(),
         topic,
-        message_encoding: RAW_ENCODING,
+        message_encoding: ros2::MESSAGE_ENCODING,
     };
-    let json = |stream, schema_name, schema: &str, topic| ChannelSpec {
+    let json = |stream, schema_name: &str, schema: &str, topic| ChannelSpec {
         stream,
-        schema_name,
+        schema_name: schema_name.to_string(),
         schema_encoding: "jsonschema",
         schema: schema.to_string(),
         topic,
@@ -200,42 +193,11 @@ fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
     };
     let object = r#"{"type":"object"}"#;
     let mut specs = vec![
-        raw(
-            Stream::Sensor,
-            "SensorFrame",
-            schema_text::<SensorFrame>(),
-            topics::SENSOR,
-        ),
-        raw(
-            Stream::Action,
-            "PolicyAction",
-            schema_text::<PolicyAction>(),
-            topics::ACTION,
-        ),
-        raw(
-            Stream::Status,
-            "ControllerStatus",
-            schema_text::<ControllerStatus>(),
-            topics::STATUS,
-        ),
-        raw(
-            Stream::Episode,
-            "EpisodeReport",
-            schema_text::<EpisodeReport>(),
-            topics::EPISODE,
-        ),
-        ChannelSpec {
-            stream: Stream::Camera,
-            schema_name: "CameraFrameCompact",
-            schema_encoding: CAMERA_ENCODING,
-            schema: format!(
-                "shared_mem_schema::CameraFrame (schema version {SCHEMA_VERSION}): its first {} \
-                 bytes, then width*height*3 RGB bytes, then width*height f32 depths",
-                std::mem::offset_of!(CameraFrame, rgb)
-            ),
-            topic: topics::CAMERA,
-            message_encoding: CAMERA_ENCODING,
-        },
+        raw(Stream::Sensor, &ros2::SENSOR_FRAME, topics::SENSOR),
+        raw(Stream::Action, &ros2::POLICY_ACTION, topics::ACTION),
+        raw(Stream::Status, &ros2::CONTROLLER_STATUS, topics::STATUS),
+        raw(Stream::Episode, &ros2::EPISODE_REPORT, topics::EPISODE),
+        raw(Stream::Camera, &ros2::CAMERA_FRAME, topics::CAMERA),
         json(Stream::Events, "vision_touch.Event", object, topics::EVENTS),
         json(
             Stream::Config,
@@ -314,7 +276,7 @@ impl LogWriter {
         let mut ids = [0u16; STREAMS];
         for c in channel_specs(&opts) {
             let sid = w
-                .add_schema(c.schema_name, c.schema_encoding, c.schema.as_bytes())
+                .add_schema(&c.schema_name, c.schema_encoding, c.schema.as_bytes())
                 .map_err(err)?;
             ids[c.stream as usize] = w
                 .add_channel(sid, c.topic, c.message_encoding, &meta)
@@ -376,10 +338,17 @@ impl LogWriter {
         r
     }
 
-    /// A raw struct message, stamped with its own header's times.
+    /// A raw struct message (CDR: the encapsulation header, then the
+    /// struct's bytes; `ros2`), stamped with its own header's times.
     fn raw<T: Message>(&mut self, s: Stream, m: &T) -> Result<(), LogError> {
         let h = m.header();
-        self.write(s, h.t_hw_ns, h.t_mono_ns, m.as_bytes())
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        buf.extend_from_slice(&ros2::CDR_LE);
+        buf.extend_from_slice(m.as_bytes());
+        let r = self.write(s, h.t_hw_ns, h.t_mono_ns, &buf);
+        self.buf = buf;
+        r
     }
 
     /// Logs a sensor frame (and its view messages when one is due).
@@ -457,15 +426,22 @@ impl LogWriter {
         let head = &m.as_bytes()[..std::mem::offset_of!(CameraFrame, rgb)];
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
+        // CDR (`ros2::CAMERA_FRAME`): the head, then the pixels as
+        // sequences; offsets count from after the encapsulation header.
+        buf.extend_from_slice(&ros2::CDR_LE);
         buf.extend_from_slice(head);
+        buf.extend_from_slice(&(3 * n as u32).to_le_bytes());
         buf.extend_from_slice(&m.rgb[..n * 3]);
+        buf.resize(4 + (buf.len() - 4).next_multiple_of(4), 0);
+        buf.extend_from_slice(&(n as u32).to_le_bytes());
+        let depth_at = buf.len();
         for d in &m.depth_m[..n] {
             buf.extend_from_slice(&d.to_le_bytes());
         }
         let (t, p) = (m.header.t_hw_ns, m.header.t_mono_ns);
         let r = self.write(Stream::Camera, t, p, &buf);
         if r.is_ok() && self.opts.foxglove {
-            let depth = &buf[head.len() + n * 3..];
+            let depth = &buf[depth_at..];
             let rgb = &m.rgb[..n * 3];
             foxglove::raw_image(
                 &mut self.json,

@@ -7,7 +7,7 @@
 //! decompresses chunks.
 
 use super::walk::{OP_CHUNK, Salvage, ScanReport, check_summary_crc, chunk_records, walk_all};
-use super::{CAMERA_ENCODING, RAW_ENCODING, topics};
+use super::{CAMERA_ENCODING, RAW_ENCODING, ros2, topics};
 use mcap::records::Record;
 use shared_mem_schema::{CameraCalibration, CameraFrame, Header, Message, SCHEMA_VERSION};
 use std::collections::HashMap;
@@ -116,8 +116,63 @@ pub struct CameraImage {
 }
 
 impl CameraImage {
-    /// Decodes a compact camera message.
+    /// Decodes a camera message of the `cdr` channel (docs/data.md): the
+    /// encapsulation header, the frame's head, then the RGB bytes and the
+    /// depths as CDR sequences.
+    pub fn decode_cdr(data: &[u8]) -> Result<Self, String> {
+        let Some(body) = data.strip_prefix(&super::ros2::CDR_LE) else {
+            return Err("camera message without a little-endian plain-CDR header".into());
+        };
+        let (mut image, n) = Self::decode_head(body)?;
+        let head_len = std::mem::offset_of!(CameraFrame, rgb);
+        let u32_at = |o: usize| {
+            body.get(o..o + 4)
+                .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")) as usize)
+        };
+        let rgb_at = head_len + 4;
+        let depth_len_at = (rgb_at + 3 * n).next_multiple_of(4);
+        let depth_at = depth_len_at + 4;
+        let expected = depth_at + 4 * n;
+        if u32_at(head_len) != Some(3 * n)
+            || u32_at(depth_len_at) != Some(n)
+            || body.len() != expected
+        {
+            return Err(format!(
+                "camera message of {} bytes does not hold a {}×{} image ({} expected, with \
+                 sequences of {} and {n})",
+                data.len(),
+                image.calibration.width,
+                image.calibration.height,
+                expected + 4,
+                3 * n
+            ));
+        }
+        image.rgb = body[rgb_at..rgb_at + 3 * n].to_vec();
+        image.depth_m = f32s(&body[depth_at..]);
+        Ok(image)
+    }
+
+    /// Decodes a message of the compact camera channel older logs have.
     pub fn decode(data: &[u8]) -> Result<Self, String> {
+        let (mut image, n) = Self::decode_head(data)?;
+        let head_len = std::mem::offset_of!(CameraFrame, rgb);
+        if data.len() != head_len + 7 * n {
+            return Err(format!(
+                "camera message of {} bytes does not hold a {}×{} image ({} expected)",
+                data.len(),
+                image.calibration.width,
+                image.calibration.height,
+                head_len + 7 * n
+            ));
+        }
+        image.rgb = data[head_len..head_len + 3 * n].to_vec();
+        image.depth_m = f32s(&data[head_len + 3 * n..]);
+        Ok(image)
+    }
+
+    /// The frame's head (up to its pixels; no pixels yet) and its pixel
+    /// count, the image's size checked against the largest a frame holds.
+    fn decode_head(data: &[u8]) -> Result<(Self, usize), String> {
         let head_len = std::mem::offset_of!(CameraFrame, rgb);
         if data.len() < head_len {
             return Err(format!(
@@ -161,28 +216,32 @@ impl CameraImage {
             &mut calibration.pose_quat_xyzw,
         );
         let (width, height) = (calibration.width, calibration.height);
-        let n = width as usize * height as usize;
         if width as usize > shared_mem_schema::MAX_IMAGE_WIDTH
             || height as usize > shared_mem_schema::MAX_IMAGE_HEIGHT
-            || data.len() != head_len + 7 * n
         {
             return Err(format!(
-                "camera message of {} bytes does not hold a {width}×{height} image ({} expected)",
-                data.len(),
-                head_len + 7 * n
+                "camera frame claims a {width}×{height} image, larger than the {}×{} a frame holds",
+                shared_mem_schema::MAX_IMAGE_WIDTH,
+                shared_mem_schema::MAX_IMAGE_HEIGHT
             ));
         }
-        Ok(Self {
+        let image = Self {
             header,
             index: u64_at(offset_of!(CameraFrame, index)),
             calibration,
-            rgb: data[head_len..head_len + 3 * n].to_vec(),
-            depth_m: data[head_len + 3 * n..]
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
-                .collect(),
-        })
+            rgb: Vec::new(),
+            depth_m: Vec::new(),
+        };
+        Ok((image, width as usize * height as usize))
     }
+}
+
+/// Little-endian `f32`s.
+fn f32s(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect()
 }
 
 /// Scans a whole file: every record parsed, every chunk decompressed.
@@ -472,11 +531,21 @@ impl LogReader {
     }
 
     fn check_encoding(&self, topic: &str, encoding: &str) -> Result<(), ReadError> {
+        self.channel_encoding(topic, &[encoding]).map(|_| ())
+    }
+
+    /// The message encoding of `topic`'s channel, one of `accepted`.
+    fn channel_encoding(&self, topic: &str, accepted: &[&str]) -> Result<String, ReadError> {
         match self.summary.channels.values().find(|c| c.topic == topic) {
-            Some(c) if c.message_encoding == encoding => Ok(()),
+            Some(c) if accepted.contains(&c.message_encoding.as_str()) => {
+                Ok(c.message_encoding.clone())
+            }
             Some(c) => Err(self.content_err(
                 topic,
-                format!("encoding {:?}, expected {encoding:?}", c.message_encoding),
+                format!(
+                    "encoding {:?}, expected one of {accepted:?}",
+                    c.message_encoding
+                ),
             )),
             None => Err(self.content_err(topic, "no such channel in this log".into())),
         }
@@ -489,17 +558,31 @@ impl LogReader {
         topic: &str,
         range: Option<(u64, u64)>,
     ) -> Result<Vec<T>, ReadError> {
-        self.check_encoding(topic, RAW_ENCODING)?;
+        let cdr = self.channel_encoding(topic, &[RAW_ENCODING, ros2::MESSAGE_ENCODING])?
+            == ros2::MESSAGE_ENCODING;
         let mut out = Vec::new();
         for m in self.read(&[topic], range)? {
-            let v = T::read_from(&m.data).ok_or_else(|| {
+            let bytes = if cdr {
+                m.data.strip_prefix(&ros2::CDR_LE).ok_or_else(|| {
+                    self.content_err(
+                        topic,
+                        format!(
+                            "message {} has no little-endian plain-CDR header",
+                            m.sequence
+                        ),
+                    )
+                })?
+            } else {
+                &m.data[..]
+            };
+            let v = T::read_from(bytes).ok_or_else(|| {
                 self.content_err(
                     topic,
                     format!(
                         "message {} has {} bytes; {} is {} bytes in schema version \
                          {SCHEMA_VERSION}",
                         m.sequence,
-                        m.data.len(),
+                        bytes.len(),
                         T::NAME,
                         size_of::<T>()
                     ),
@@ -523,11 +606,18 @@ impl LogReader {
 
     /// The camera frames in `range`.
     pub fn read_camera(&self, range: Option<(u64, u64)>) -> Result<Vec<CameraImage>, ReadError> {
-        self.check_encoding(topics::CAMERA, CAMERA_ENCODING)?;
+        let cdr = self
+            .channel_encoding(topics::CAMERA, &[CAMERA_ENCODING, ros2::MESSAGE_ENCODING])?
+            == ros2::MESSAGE_ENCODING;
         self.read(&[topics::CAMERA], range)?
             .iter()
             .map(|m| {
-                CameraImage::decode(&m.data).map_err(|what| {
+                let image = if cdr {
+                    CameraImage::decode_cdr(&m.data)
+                } else {
+                    CameraImage::decode(&m.data)
+                };
+                image.map_err(|what| {
                     self.content_err(topics::CAMERA, format!("message {}: {what}", m.sequence))
                 })
             })
