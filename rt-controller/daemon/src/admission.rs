@@ -22,7 +22,8 @@ impl RateGate {
     /// the last applied (a held action waits at the queue's front).
     pub(crate) fn due(&self, episode: u64, step: u64, min_interval: u64) -> bool {
         match self.last {
-            Some((e, s)) if e == episode => step.saturating_sub(s) >= min_interval,
+            // A step behind the last is a restarted stream: due.
+            Some((e, s)) if e == episode && step >= s => step - s >= min_interval,
             _ => true,
         }
     }
@@ -41,8 +42,8 @@ impl RateGate {
         max_step_rad: f64,
     ) -> bool {
         let share = match self.last {
-            Some((e, s)) if e == at.0 && at.1.saturating_sub(s) < period => {
-                at.1.saturating_sub(s) as f64 / period as f64
+            Some((e, s)) if e == at.0 && at.1 >= s && at.1 - s < period => {
+                (at.1 - s) as f64 / period as f64
             }
             _ => return false,
         };
@@ -76,8 +77,11 @@ mod tests {
         assert!(!g.due(1, 31, 25));
         assert!(g.due(1, 32, 25));
         assert!(g.due(2, 8, 25), "another episode's first");
-        // A step behind the last (a restarted stream) is not due either.
-        assert!(!g.due(1, 3, 25));
+        // A step behind the last is a restarted stream (hw-sim after a
+        // hardware loss counts from its start): due, and not cut.
+        assert!(g.due(1, 3, 25));
+        let mut d = [0.01, 0.0, 0.0, 0.0];
+        assert!(!g.bound(&mut d, (1, 3), 50, 0.01, 0.05));
     }
 
     #[test]

@@ -298,9 +298,10 @@ pub struct TimingConfig {
     /// speed bound's period: an action's step is cut to its share of the
     /// largest for the steps since the last applied action (`admission.rs`).
     pub action_period_steps: u64,
-    /// An action is applied at most once per this many hardware steps; a
-    /// sooner one waits at the queue's front (half a policy period: a 20 Hz
-    /// policy's jitter never waits, a flooding peer gets at most 40 Hz).
+    /// An action is applied at most once per this many hardware steps (at
+    /// most `action_period_steps`); a sooner one waits at the queue's front
+    /// (half a policy period: a 20 Hz policy's jitter never waits, a
+    /// flooding peer gets at most 40 Hz).
     pub min_action_interval_steps: u64,
     /// Lockstep only: how long to wait for an addressed action, s.
     pub lockstep_action_timeout_s: f64,
@@ -488,10 +489,12 @@ impl DaemonConfig {
             0.0..=1000.0,
         )?;
         at_least("timing.action_period_steps", t.action_period_steps, 1)?;
-        within(
+        // Above `action_period_steps` it acts as the period (a shorter
+        // period than the default 25 needs no second setting).
+        at_least(
             "timing.min_action_interval_steps",
             t.min_action_interval_steps,
-            1..=t.action_period_steps,
+            1,
         )?;
         // SCHED_FIFO priorities are 1 to 99.
         within("realtime.priority", self.realtime.priority, 1..=99)?;

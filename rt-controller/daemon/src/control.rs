@@ -254,6 +254,7 @@ impl<H: Hardware> Daemon<H> {
         self.last_state_ns = now_ns;
         if self.control.observe_episode(&self.state) {
             self.queue.clear();
+            self.rate = RateGate::default();
         }
         self.have_state = true;
         Ok(true)
@@ -270,13 +271,16 @@ impl<H: Hardware> Daemon<H> {
         let t = &self.cfg.timing;
         let lockstep = t.clock == Clock::Hardware && t.lockstep_actions;
         let period = t.action_period_steps;
+        // In lockstep the policy addresses the next boundary; one further
+        // out would wait at the queue's front through every boundary.
+        let horizon = self.state.step + 2 * period;
         let drained = transport::try_drain_at_most(&self.actions, MAX_ACTIONS_PER_CYCLE, |a| {
             stats.actions_received += 1;
             let at = a.apply_at_step;
             if a.header.schema_version != SCHEMA_VERSION {
                 // Another schema's bytes.
                 stats.actions_garbage += 1;
-            } else if at != 0 && !(lockstep && at.is_multiple_of(period)) {
+            } else if at != 0 && !(lockstep && at.is_multiple_of(period) && at <= horizon) {
                 stats.actions_misaddressed += 1;
             } else if !for_episode(a, episode) {
                 // Sent for the episode before a reset, arriving after it: in
@@ -331,11 +335,13 @@ impl<H: Hardware> Daemon<H> {
                 } else {
                     self.hardware_lost = false;
                     self.queue.clear();
+                    self.rate = RateGate::default();
                     self.control.restart(t_hw);
                     ControllerCommand::RESULT_CLEARED
                 }
             } else if self.control.reset(t_hw) {
                 self.queue.clear();
+                self.rate = RateGate::default();
                 ControllerCommand::RESULT_CLEARED
             } else {
                 ControllerCommand::RESULT_NO_FAULT
@@ -508,7 +514,10 @@ impl<H: Hardware> Daemon<H> {
             self.take_actions();
         }
         let episode = self.state.header.episode;
-        let min_interval = self.cfg.timing.min_action_interval_steps;
+        let timing = &self.cfg.timing;
+        let min_interval = timing
+            .min_action_interval_steps
+            .min(timing.action_period_steps);
         let action = if self.rate.due(episode, step, min_interval) {
             self.queue.next_for(step).and_then(|a| self.admit(a))
         } else {

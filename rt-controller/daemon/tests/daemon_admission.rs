@@ -8,15 +8,10 @@ mod daemon_rig;
 
 use daemon_rig::DaemonRig;
 use rt_controller_daemon::CycleOutcome;
-use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::transport;
 
 fn step(rig: &mut DaemonRig, k: u64) -> CycleOutcome {
-    rig.publish_state(k);
-    let now = mono_now_ns();
-    let fresh = rig.daemon.poll_hardware(now).unwrap();
-    assert!(fresh, "step {k}");
-    rig.daemon.cycle(now, fresh).unwrap()
+    rig.step(k)
 }
 
 fn target_x(rig: &DaemonRig) -> f64 {
@@ -116,4 +111,32 @@ fn an_address_outside_lockstep_is_refused_and_holds_nothing() {
     step(&mut rig, k);
     assert_eq!(rig.daemon.control.last_action_seq(), 2);
     assert_eq!(accepted(&rig), 1);
+}
+
+#[test]
+fn in_lockstep_only_the_next_boundaries_may_be_addressed() {
+    let mut rig = DaemonRig::new("addressed-lockstep", |c| c.timing.lockstep_actions = true);
+    for k in 0..10 {
+        step(&mut rig, k);
+    }
+    // A boundary far ahead would wait at the queue's front through every
+    // boundary before it; one between boundaries is never waited for.
+    for at in [10_000, 75] {
+        let mut a = rig.action(1, [0.001, 0.0, 0.0, 0.0]);
+        a.apply_at_step = at;
+        transport::send(&rig.actions, &a).unwrap();
+    }
+    let mut a = rig.action(2, [0.001, 0.0, 0.0, 0.0]);
+    a.apply_at_step = 50;
+    transport::send(&rig.actions, &a).unwrap();
+    step(&mut rig, 10);
+    assert_eq!(rig.daemon.stats.actions_misaddressed, 2);
+    for k in 11..=50 {
+        step(&mut rig, k);
+    }
+    assert_eq!(
+        rig.daemon.control.last_action_seq(),
+        2,
+        "the next boundary's action"
+    );
 }

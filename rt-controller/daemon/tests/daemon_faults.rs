@@ -50,11 +50,7 @@ impl Operator {
 
 /// Publishes the state of step `k` and runs one cycle on it.
 fn step(rig: &mut DaemonRig, k: u64) -> CycleOutcome {
-    rig.publish_state(k);
-    let now = mono_now_ns();
-    let fresh = rig.daemon.poll_hardware(now).unwrap();
-    assert!(fresh, "step {k}");
-    rig.daemon.cycle(now, fresh).unwrap()
+    rig.step(k)
 }
 
 #[test]

@@ -13,8 +13,8 @@
 //! published that the log did not record.
 
 use super::{LogReader, ReadError, topics};
+use shared_mem_schema::SensorFrame;
 use shared_mem_schema::rates::CONTROL_PERIOD_NS;
-use shared_mem_schema::{Message, SensorFrame};
 
 /// The gaps of one 1 kHz channel.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -241,6 +241,7 @@ fn first_step(g: &ChannelGaps) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shared_mem_schema::Message;
 
     fn frame(step: u64, seq: u64) -> SensorFrame {
         let mut f = *SensorFrame::boxed_zeroed();

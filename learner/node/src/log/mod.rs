@@ -60,7 +60,7 @@ pub mod topics {
     pub const STATUS: &str = "/controller/status";
     /// Simulator episode reports ([`shared_mem_schema::EpisodeReport`]).
     pub const EPISODE: &str = "/sim/episode";
-    /// Camera frames, compact ([`super::CAMERA_ENCODING`]).
+    /// Camera frames (CDR, `ros2::CAMERA_FRAME`).
     pub const CAMERA: &str = "/camera/rgbd";
     /// Episode events, JSON.
     pub const EVENTS: &str = "/events";
@@ -172,7 +172,7 @@ struct ChannelSpec {
 }
 
 /// The channels a log with `opts` has: the raw streams (struct bytes), the
-/// compact camera frames, the JSON events and configuration, and (unless
+/// camera frames, the JSON events and configuration, and (unless
 /// turned off) the Foxglove views.
 fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
     let raw = |stream, def: &ros2::MsgDef, topic| ChannelSpec {
@@ -404,7 +404,7 @@ impl LogWriter {
         self.raw(Stream::Episode, m)
     }
 
-    /// Logs a camera frame: compact raw, and the view images and calibration.
+    /// Logs a camera frame: raw (CDR), and the view images and calibration.
     /// A frame claiming a larger image than a message holds is refused
     /// (nothing written): stored, its size would disagree with its pixels
     /// and the reader would refuse the whole camera channel.

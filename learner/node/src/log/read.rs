@@ -100,7 +100,7 @@ pub struct TopicInfo {
     pub messages: u64,
 }
 
-/// A camera frame decoded from the compact raw channel.
+/// A camera frame decoded from the raw camera channel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraImage {
     /// The message header.

@@ -69,6 +69,16 @@ impl DaemonRig {
         a
     }
 
+    /// Publishes the state of step `k` and runs one cycle on it (the state
+    /// must be fresh).
+    pub fn step(&mut self, k: u64) -> rt_controller_daemon::CycleOutcome {
+        self.publish_state(k);
+        let now = shared_mem_schema::process::mono_now_ns();
+        let fresh = self.daemon.poll_hardware(now).unwrap();
+        assert!(fresh, "step {k}");
+        self.daemon.cycle(now, fresh).unwrap()
+    }
+
     /// Publishes the state of hardware step `k` (1 ms apart).
     pub fn publish_state(&mut self, k: u64) {
         self.state.header.seq = k + 1;
