@@ -45,6 +45,26 @@ fn interop_python() -> Option<std::path::PathBuf> {
     ok.then_some(py)
 }
 
+/// Runs `script` with `args` under `py`; its stdout, parsed as JSON (its
+/// stderr in the panic when it fails).
+fn run_python<T: serde::de::DeserializeOwned>(
+    py: &std::path::Path,
+    script: &str,
+    args: &[&std::ffi::OsStr],
+) -> T {
+    let run = Command::new(py)
+        .args(["-c", script])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&run.stdout).unwrap()
+}
+
 const READ: &str = r#"
 import json, sys
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -109,17 +129,7 @@ fn a_policy_run_writes_tensorboard_scalars_and_its_provenance() {
     let Some(py) = interop_python() else {
         return;
     };
-    let read = Command::new(py)
-        .args(["-c", READ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        read.status.success(),
-        "{}",
-        String::from_utf8_lossy(&read.stderr)
-    );
-    let scalars: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    let scalars: serde_json::Value = run_python(&py, READ, &[out.as_os_str()]);
     for (csv, tag, col) in [
         ("curve.csv", "train/mean_normalised", "mean_normalised"),
         ("curve.csv", "train/kl", "kl"),
@@ -201,18 +211,8 @@ fn an_exported_policy_acts_in_numpy_as_it_does_here() {
     let Some(py) = interop_python() else {
         return;
     };
-    let run = Command::new(py)
-        .args(["-c", ACT])
-        .arg(&export)
-        .arg(serde_json::to_string(&obs).unwrap())
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let theirs: Vec<Vec<f64>> = serde_json::from_slice(&run.stdout).unwrap();
+    let obs_json = serde_json::to_string(&obs).unwrap();
+    let theirs: Vec<Vec<f64>> = run_python(&py, ACT, &[export.as_os_str(), obs_json.as_ref()]);
     for (o, t) in obs.iter().zip(&theirs) {
         let ours = policy.means(o);
         assert_eq!(ours.len(), t.len());
@@ -327,17 +327,7 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
     let Some(py) = interop_python() else {
         return;
     };
-    let run = Command::new(py)
-        .args(["-c", DECODE_LOG])
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let log: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let log: serde_json::Value = run_python(&py, DECODE_LOG, &[path.as_os_str()]);
     let f64s = |v: &serde_json::Value| -> Vec<f64> {
         v.as_array()
             .unwrap_or_else(|| panic!("not an array: {v}"))

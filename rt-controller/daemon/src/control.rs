@@ -253,8 +253,7 @@ impl<H: Hardware> Daemon<H> {
         self.state = *s;
         self.last_state_ns = now_ns;
         if self.control.observe_episode(&self.state) {
-            self.queue.clear();
-            self.rate = RateGate::default();
+            self.restart_admission();
         }
         self.have_state = true;
         Ok(true)
@@ -334,14 +333,12 @@ impl<H: Hardware> Daemon<H> {
                     ControllerCommand::RESULT_HARDWARE_SILENT
                 } else {
                     self.hardware_lost = false;
-                    self.queue.clear();
-                    self.rate = RateGate::default();
+                    self.restart_admission();
                     self.control.restart(t_hw);
                     ControllerCommand::RESULT_CLEARED
                 }
             } else if self.control.reset(t_hw) {
-                self.queue.clear();
-                self.rate = RateGate::default();
+                self.restart_admission();
                 ControllerCommand::RESULT_CLEARED
             } else {
                 ControllerCommand::RESULT_NO_FAULT
@@ -474,6 +471,13 @@ impl<H: Hardware> Daemon<H> {
         Ok(outcome)
     }
 
+    /// Forgets the queued actions and the last applied one's place: a new
+    /// episode, a reset or a restarted hardware starts admission afresh.
+    fn restart_admission(&mut self) {
+        self.queue.clear();
+        self.rate = RateGate::default();
+    }
+
     fn garbage(&self) -> u64 {
         self.stats.actions_garbage
             + self.stats.actions_misaddressed
@@ -527,8 +531,7 @@ impl<H: Hardware> Daemon<H> {
             let traj = &self.cfg.controller.trajectory;
             let (m, r) = (traj.max_step_m, traj.max_step_rad);
             let period = self.cfg.timing.action_period_steps;
-            let [x, y, z] = a.delta_pos_m;
-            let mut d = [x, y, z, a.delta_roll_rad];
+            let mut d = a.delta();
             // An invalid action is left whole, for the supervisor to refuse.
             let valid = Supervisor::check_action(&self.cfg.controller.safety, &d).is_ok();
             if valid && self.rate.bound(&mut d, (episode, step), period, m, r) {

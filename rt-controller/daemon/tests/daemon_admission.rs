@@ -7,12 +7,7 @@
 mod daemon_rig;
 
 use daemon_rig::DaemonRig;
-use rt_controller_daemon::CycleOutcome;
 use shared_mem_schema::transport;
-
-fn step(rig: &mut DaemonRig, k: u64) -> CycleOutcome {
-    rig.step(k)
-}
 
 fn target_x(rig: &DaemonRig) -> f64 {
     rig.daemon.control.data.trajectory.target()[0]
@@ -27,21 +22,16 @@ fn a_peer_at_1_khz_moves_the_target_one_largest_step_per_policy_period() {
     let mut rig = DaemonRig::new("flood", |_| {});
     let max_step = rig.daemon.config().controller.trajectory.max_step_m;
     let mut k = 0;
-    for _ in 0..50 {
-        step(&mut rig, k);
-        k += 1;
-    }
+    rig.run(50, &mut k);
     // The policy's action, then a flood of the largest step every cycle
     // for two policy periods, each stamped as the policy stamps its own.
     transport::send(&rig.actions, &rig.action(1, [0.0; 4])).unwrap();
-    step(&mut rig, k);
-    k += 1;
+    rig.run(1, &mut k);
     assert_eq!(accepted(&rig), 1);
     let x0 = target_x(&rig);
     for seq in 2..102 {
         transport::send(&rig.actions, &rig.action(seq, [max_step, 0.0, 0.0, 0.0])).unwrap();
-        step(&mut rig, k);
-        k += 1;
+        rig.run(1, &mut k);
     }
     // 100 cycles: an action at most every 25 (4 of them), each cut to half
     // the largest step; without the bounds the target would lead by the
@@ -68,24 +58,17 @@ fn a_policy_at_its_rate_is_neither_held_nor_cut() {
     let mut rig = DaemonRig::new("at-rate", |_| {});
     let max_step = rig.daemon.config().controller.trajectory.max_step_m;
     let mut k = 0;
-    for _ in 0..10 {
-        step(&mut rig, k);
-        k += 1;
-    }
+    rig.run(10, &mut k);
     let x0 = target_x(&rig);
     // Jitter: 48 to 52 steps apart.
     for (seq, gap) in [(1u64, 1u64), (2, 50), (3, 48), (4, 52)] {
-        for _ in 0..gap - 1 {
-            step(&mut rig, k);
-            k += 1;
-        }
+        rig.run(gap - 1, &mut k);
         transport::send(
             &rig.actions,
             &rig.action(seq, [max_step / 5.0, 0.0, 0.0, 0.0]),
         )
         .unwrap();
-        step(&mut rig, k);
-        k += 1;
+        rig.run(1, &mut k);
         assert_eq!(accepted(&rig), seq, "action {seq} was held");
     }
     assert_eq!(rig.daemon.stats.actions_speed_cut, 0);
@@ -96,19 +79,15 @@ fn a_policy_at_its_rate_is_neither_held_nor_cut() {
 fn an_address_outside_lockstep_is_refused_and_holds_nothing() {
     let mut rig = DaemonRig::new("addressed", |_| {});
     let mut k = 0;
-    for _ in 0..10 {
-        step(&mut rig, k);
-        k += 1;
-    }
+    rig.run(10, &mut k);
     let mut a = rig.action(1, [0.001, 0.0, 0.0, 0.0]);
     a.apply_at_step = k + 1_000_000;
     transport::send(&rig.actions, &a).unwrap();
-    step(&mut rig, k);
-    k += 1;
+    rig.run(1, &mut k);
     assert_eq!(rig.daemon.stats.actions_misaddressed, 1);
     // The next action is applied at once: nothing waits at the front.
     transport::send(&rig.actions, &rig.action(2, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    step(&mut rig, k);
+    rig.step(k);
     assert_eq!(rig.daemon.control.last_action_seq(), 2);
     assert_eq!(accepted(&rig), 1);
 }
@@ -117,7 +96,7 @@ fn an_address_outside_lockstep_is_refused_and_holds_nothing() {
 fn in_lockstep_only_the_next_boundaries_may_be_addressed() {
     let mut rig = DaemonRig::new("addressed-lockstep", |c| c.timing.lockstep_actions = true);
     for k in 0..10 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     // A boundary far ahead would wait at the queue's front through every
     // boundary before it; one between boundaries is never waited for.
@@ -129,10 +108,10 @@ fn in_lockstep_only_the_next_boundaries_may_be_addressed() {
     let mut a = rig.action(2, [0.001, 0.0, 0.0, 0.0]);
     a.apply_at_step = 50;
     transport::send(&rig.actions, &a).unwrap();
-    step(&mut rig, 10);
+    rig.step(10);
     assert_eq!(rig.daemon.stats.actions_misaddressed, 2);
     for k in 11..=50 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     assert_eq!(
         rig.daemon.control.last_action_seq(),

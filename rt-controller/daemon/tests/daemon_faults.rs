@@ -48,31 +48,26 @@ impl Operator {
     }
 }
 
-/// Publishes the state of step `k` and runs one cycle on it.
-fn step(rig: &mut DaemonRig, k: u64) -> CycleOutcome {
-    rig.step(k)
-}
-
 #[test]
 fn a_fault_outlives_the_episode_and_only_a_reset_clears_it() {
     let mut rig = DaemonRig::new("fault-latch", |_| {});
     let op = Operator::open(&rig);
     for k in 0..5 {
-        assert_eq!(step(&mut rig, k), CycleOutcome::Sent);
+        assert_eq!(rig.step(k), CycleOutcome::Sent);
     }
     assert_eq!(rig.daemon.mode(), ControllerMode::Idle);
     // A force overload for one cycle.
     rig.state.wrench[2] = 500.0;
-    step(&mut rig, 5);
+    rig.step(5);
     rig.state.wrench[2] = 0.0;
     assert_eq!(rig.daemon.mode(), ControllerMode::Fault);
     for k in 6..20 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     // The simulator resets: a new episode, the arm back at its start.
     rig.state.header.episode = 2;
     for k in 20..40 {
-        assert_eq!(step(&mut rig, k), CycleOutcome::Sent, "torques go on");
+        assert_eq!(rig.step(k), CycleOutcome::Sent, "torques go on");
         assert_eq!(
             rig.daemon.mode(),
             ControllerMode::Fault,
@@ -82,7 +77,7 @@ fn a_fault_outlives_the_episode_and_only_a_reset_clears_it() {
     assert_eq!(rig.daemon.control.fault_code(), 4, "force overload kept");
     // The reset: Idle at the next cycle, counted and answered.
     op.reset(77);
-    step(&mut rig, 40);
+    rig.step(40);
     assert_eq!(rig.daemon.mode(), ControllerMode::Idle);
     let s = op.answer(77).expect("the status answers the reset at once");
     assert_eq!(s.command_result, ControllerCommand::RESULT_CLEARED);
@@ -91,12 +86,12 @@ fn a_fault_outlives_the_episode_and_only_a_reset_clears_it() {
         (1, 1, ControllerMode::Idle as u32)
     );
     for k in 41..60 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     assert_eq!(rig.daemon.mode(), ControllerMode::Idle, "it stays cleared");
     // A reset with nothing latched changes nothing.
     op.reset(78);
-    step(&mut rig, 60);
+    rig.step(60);
     let s = op.answer(78).unwrap();
     assert_eq!(s.command_result, ControllerCommand::RESULT_NO_FAULT);
     assert_eq!(s.resets, 1);
@@ -107,7 +102,7 @@ fn a_restarted_hardware_stays_lost_until_a_reset_once_it_streams() {
     let mut rig = DaemonRig::new("hw-restart", |c| c.timing.hardware_timeout_ms = 20.0);
     let op = Operator::open(&rig);
     for k in 0..10 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     transport::drain(&rig.torques, |_| {}).unwrap();
     // The hardware dies: silent past the timeout (a sleep can only be
@@ -135,7 +130,7 @@ fn a_restarted_hardware_stays_lost_until_a_reset_once_it_streams() {
         if k == 15 {
             rig.state.header.episode = 1;
         }
-        assert_eq!(step(&mut rig, k), CycleOutcome::HardwareLost, "step {k}");
+        assert_eq!(rig.step(k), CycleOutcome::HardwareLost, "step {k}");
     }
     let sent = transport::drain(&rig.torques, |_| {}).unwrap();
     assert_eq!(
@@ -144,20 +139,12 @@ fn a_restarted_hardware_stays_lost_until_a_reset_once_it_streams() {
     );
     // Now the reset clears it: torques again, from Idle.
     op.reset(6);
-    assert_eq!(step(&mut rig, 30), CycleOutcome::Sent);
+    assert_eq!(rig.step(30), CycleOutcome::Sent);
     assert_eq!(rig.daemon.mode(), ControllerMode::Idle);
     let s = op.answer(6).expect("answered");
     assert_eq!(s.command_result, ControllerCommand::RESULT_CLEARED);
     assert_eq!(s.resets, 1);
     assert_eq!(transport::drain(&rig.torques, |_| {}).unwrap(), 1);
-}
-
-/// `n` cycles on the states of steps `*k`, `*k + 1`, ...
-fn run(rig: &mut DaemonRig, n: u64, k: &mut u64) {
-    for _ in 0..n {
-        step(rig, *k);
-        *k += 1;
-    }
 }
 
 /// Stale actions counted so far: too old, from the future, of another
@@ -177,11 +164,11 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     let mut rig = DaemonRig::new("stale", |_| {});
     let age_ns = 100_000_000; // timing.max_action_age_ms by default
     let mut k = 0;
-    run(&mut rig, 200, &mut k);
+    rig.run(200, &mut k);
     // A fresh one (answering the state just published) is applied.
     let fresh = rig.action(1, [0.001, 0.0, 0.0, 0.0]);
     transport::send(&rig.actions, &fresh).unwrap();
-    run(&mut rig, 1, &mut k);
+    rig.run(1, &mut k);
     assert_eq!(rig.daemon.mode(), ControllerMode::Running);
     assert_eq!(rig.daemon.control.last_action_seq(), 1);
     let t = rig.state.header.t_hw_ns;
@@ -197,7 +184,7 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
         edit(&mut a);
         transport::send(&rig.actions, &a).unwrap();
         // Half a policy period: the rate admission's interval.
-        run(&mut rig, 25, &mut k);
+        rig.run(25, &mut k);
         assert_eq!(rig.daemon.control.last_action_seq(), 1, "seq {seq} applied");
     }
     assert_eq!(stale(&rig), (1, 1, 1, 1));
@@ -206,7 +193,7 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     let frozen = rig.action(10, [0.001, 0.0, 0.0, 0.0]);
     for _ in 0..20 {
         transport::send(&rig.actions, &frozen).unwrap();
-        run(&mut rig, 50, &mut k);
+        rig.run(50, &mut k);
     }
     assert_eq!(
         rig.daemon.mode(),
@@ -224,7 +211,7 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
     for n in 0..10u64 {
         renumbered.header.seq = 100 + n;
         transport::send(&rig.actions, &renumbered).unwrap();
-        run(&mut rig, 50, &mut k);
+        rig.run(50, &mut k);
     }
     assert_eq!(rig.daemon.mode(), ControllerMode::Holding);
     assert_eq!(stale(&rig).0, too_old + 10);
@@ -234,7 +221,7 @@ fn stale_actions_are_dropped_by_reason_and_a_frozen_policy_ends_in_holding() {
 fn a_hardware_that_republishes_one_state_ends_hardware_lost() {
     let mut rig = DaemonRig::new("hw-frozen", |c| c.timing.hardware_timeout_ms = 20.0);
     for k in 0..10 {
-        assert_eq!(step(&mut rig, k), CycleOutcome::Sent);
+        assert_eq!(rig.step(k), CycleOutcome::Sent);
     }
     // Frozen: the same state (step 9) again and again, then an older one,
     // for longer than the timeout. Outside lockstep none is fresh, and the
@@ -260,26 +247,26 @@ fn a_hardware_that_republishes_one_state_ends_hardware_lost() {
 fn a_state_behind_the_last_one_is_dropped() {
     let mut rig = DaemonRig::new("hw-behind", |_| {});
     for k in 0..10 {
-        step(&mut rig, k);
+        rig.step(k);
     }
     rig.publish_state(5);
     assert!(!rig.daemon.poll_hardware(mono_now_ns()).unwrap());
     assert_eq!(rig.daemon.stats.hardware_states_stale, 1);
     // The stream goes on from where it was.
-    assert_eq!(step(&mut rig, 10), CycleOutcome::Sent);
+    assert_eq!(rig.step(10), CycleOutcome::Sent);
 }
 
 #[test]
 fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
     let mut rig = DaemonRig::new("seq-jump", |_| {});
     let mut k = 0;
-    run(&mut rig, 50, &mut k);
+    rig.run(50, &mut k);
     transport::send(&rig.actions, &rig.action(1, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 25, &mut k);
+    rig.run(25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 1);
     // A peer copies the newest frame's stamps with seq = u64::MAX.
     transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 25, &mut k);
+    rig.run(25, &mut k);
     assert_eq!(
         rig.daemon.control.last_action_seq(),
         1,
@@ -288,16 +275,16 @@ fn a_forged_sequence_number_jump_cannot_starve_the_policy() {
     assert_eq!(rig.daemon.stats.actions_seq_jump, 1);
     // The policy's next action still counts.
     transport::send(&rig.actions, &rig.action(2, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 25, &mut k);
+    rig.run(25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 2);
     // A new episode: a forged first action is bounded by the newest of any
     // episode, and the policy's own (numbered on) is applied.
     rig.state.header.episode = 2;
-    run(&mut rig, 5, &mut k);
+    rig.run(5, &mut k);
     transport::send(&rig.actions, &rig.action(u64::MAX, [0.01, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 25, &mut k);
+    rig.run(25, &mut k);
     assert_eq!(rig.daemon.stats.actions_seq_jump, 2);
     transport::send(&rig.actions, &rig.action(3, [0.001, 0.0, 0.0, 0.0])).unwrap();
-    run(&mut rig, 25, &mut k);
+    rig.run(25, &mut k);
     assert_eq!(rig.daemon.control.last_action_seq(), 3);
 }

@@ -6,9 +6,9 @@
 //! self-describing: the schema is the struct's ROS 2 message definition
 //! ([`ros2`]), which Foxglove and the official readers decode, and the reader
 //! refuses another schema version. Camera frames carry the struct's fixed
-//! fields, then the image's RGB bytes and depth floats as CDR sequences. Episode events (reset,
-//! stage reached, outcome; [`Event`]) and the configuration ([`RunConfig`])
-//! are JSON. Beside them, the [`foxglove`] view channels show the images,
+//! fields, then the image's RGB bytes and depth floats as CDR sequences.
+//! Episode events (reset, stage reached, outcome; [`Event`]) and the
+//! configuration ([`RunConfig`]) are JSON. Beside them, the [`foxglove`] view channels show the images,
 //! the transforms, the end-effector pose and the wrench in Foxglove.
 //!
 //! Log time is the hardware time, publish time the monotonic clock. Files

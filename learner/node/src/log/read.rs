@@ -120,7 +120,7 @@ impl CameraImage {
     /// encapsulation header, the frame's head, then the RGB bytes and the
     /// depths as CDR sequences.
     pub fn decode_cdr(data: &[u8]) -> Result<Self, String> {
-        let Some(body) = data.strip_prefix(&super::ros2::CDR_LE) else {
+        let Some(body) = data.strip_prefix(&ros2::CDR_LE) else {
             return Err("camera message without a little-endian plain-CDR header".into());
         };
         let (mut image, n) = Self::decode_head(body)?;

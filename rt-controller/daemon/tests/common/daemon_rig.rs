@@ -79,6 +79,14 @@ impl DaemonRig {
         self.daemon.cycle(now, fresh).unwrap()
     }
 
+    /// `n` cycles on the states of steps `*k`, `*k + 1`, ... (`*k` moves on).
+    pub fn run(&mut self, n: u64, k: &mut u64) {
+        for _ in 0..n {
+            self.step(*k);
+            *k += 1;
+        }
+    }
+
     /// Publishes the state of hardware step `k` (1 ms apart).
     pub fn publish_state(&mut self, k: u64) {
         self.state.header.seq = k + 1;
