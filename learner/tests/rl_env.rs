@@ -375,6 +375,60 @@ fn training_aids_apply_to_training_environments_only() {
     );
 }
 
+/// Steps sideways (+x of the base) at the action's full scale: the
+/// training reward with lateral shaping minus the evaluated reward, per
+/// step, and the tip's true horizontal distance from the hole's axis, mm,
+/// before each step.
+fn shaping_of_a_sideways_walk(cfg: &RlEnvConfig, dir: f64) -> (Vec<f64>, Vec<f64>) {
+    let mut train = RlEnv::for_training(cfg).unwrap();
+    let mut eval = RlEnv::new(cfg).unwrap();
+    train.reset(7, false).unwrap();
+    eval.reset(7, false).unwrap();
+    let (mut extra, mut dist) = (Vec::new(), Vec::new());
+    for _ in 0..40 {
+        let s = train.task().s_m;
+        dist.push(s.x.hypot(s.y) * 1e3);
+        let a = [dir, 0.0, 0.0, 0.0];
+        extra.push(train.step(&a, false).unwrap().reward - eval.step(&a, false).unwrap().reward);
+    }
+    let s = train.task().s_m;
+    dist.push(s.x.hypot(s.y) * 1e3);
+    (extra, dist)
+}
+
+#[test]
+fn lateral_shaping_pays_each_millimetre_towards_the_axis_and_telescopes() {
+    let mut cfg = config(PegShape::Square, 150);
+    cfg.training.lateral_shaping_per_mm = 0.25;
+    for dir in [1.0, -1.0] {
+        let (extra, dist) = shaping_of_a_sideways_walk(&cfg, dir);
+        for (i, e) in extra.iter().enumerate() {
+            let want = 0.25 * (dist[i] - dist[i + 1]);
+            assert!((e - want).abs() < 1e-9, "step {i}: {e} against {want}");
+        }
+        // It telescopes: the episode's sum is the potential's change alone.
+        let sum: f64 = extra.iter().sum();
+        let change = 0.25 * (dist[0] - dist[dist.len() - 1]);
+        assert!((sum - change).abs() < 1e-9, "{sum} against {change}");
+        let paid: f64 = extra.iter().map(|e| e.abs()).sum();
+        assert!(paid > 1.0, "the walk moved the tip: {dist:?}");
+    }
+    // Evaluation never sees it: without shaping the two agree exactly.
+    cfg.training.lateral_shaping_per_mm = 0.0;
+    assert!(
+        shaping_of_a_sideways_walk(&cfg, 1.0)
+            .0
+            .iter()
+            .all(|&e| e == 0.0)
+    );
+    cfg.training.lateral_shaping_per_mm = f64::NAN;
+    let err = RlEnv::for_training(&cfg).err().expect("NaN is refused");
+    assert!(
+        err.to_string().contains("training.lateral_shaping_per_mm"),
+        "{err}"
+    );
+}
+
 #[test]
 fn the_overload_ramp_brings_the_training_limits_to_the_evaluated_fault() {
     let mut cfg = config(PegShape::Square, 150);

@@ -110,6 +110,13 @@ pub struct TrainingAids {
     /// controller's own, the evaluated fault: from `to` on a training
     /// episode ends where an evaluated one would. `[0, 0]`: no ramp.
     pub overload_ramp_steps: [u64; 2],
+    /// Potential-based shaping (Ng, Harada and Russell 1999) of lateral
+    /// progress: each step earns this much per millimetre by which it
+    /// brought the tip's true horizontal distance from the hole's axis
+    /// closer, and loses as much per millimetre it moved away (0: none).
+    /// It telescopes over an episode, so it cannot change which policy is
+    /// best; it only says sooner which way the opening lies.
+    pub lateral_shaping_per_mm: f64,
 }
 
 impl Default for TrainingAids {
@@ -122,6 +129,7 @@ impl Default for TrainingAids {
             overload_penalty: 0.0,
             hole_error_ramp_steps: 0,
             overload_ramp_steps: [0, 0],
+            lateral_shaping_per_mm: 0.0,
         }
     }
 }
@@ -143,6 +151,10 @@ impl TrainingAids {
             ("training.force_penalty_from_n", self.force_penalty_from_n),
             ("training.force_penalty_per_n", self.force_penalty_per_n),
             ("training.overload_penalty", self.overload_penalty),
+            (
+                "training.lateral_shaping_per_mm",
+                self.lateral_shaping_per_mm,
+            ),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(FieldError::new(name, v, "must be finite and >= 0"));
@@ -186,6 +198,14 @@ impl TrainingAids {
             0.0
         };
         over + self.force_penalty_per_n * (peak_force_n - self.force_penalty_from_n).max(0.0)
+    }
+
+    /// The shaping a step from `before` to `after` (tip positions in the
+    /// hole frame, m) earns: the potential −k·‖s_xy‖ (k per mm) after
+    /// minus before.
+    pub fn lateral_shaping(&self, before: &TaskState, after: &TaskState) -> f64 {
+        let d = |t: &TaskState| t.s_m.x.hypot(t.s_m.y) * 1e3;
+        self.lateral_shaping_per_mm * (d(before) - d(after))
     }
 }
 
@@ -394,6 +414,7 @@ impl RlEnv {
             return Err(RlEnvError::NotRunning(0));
         }
         let delta = self.action.to_delta(a);
+        let before = *self.task();
         let obs = self.fast.step(Some(&delta))?;
         self.obs = Some(obs);
         self.steps += 1;
@@ -401,6 +422,7 @@ impl RlEnv {
         let (mut r, stage) = reward(&self.reward, &self.geom, &task);
         if let Some(a) = &self.aids {
             r -= a.force_penalty(self.fast.peak_force_n(), self.eval_max_force_n);
+            r += a.lateral_shaping(&before, &task);
         }
         self.episode_reward += r;
         let terminated = self.fast.sensor_frame().fault_code != 0 || self.ramped_overload();
