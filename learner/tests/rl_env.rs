@@ -375,10 +375,10 @@ fn training_aids_apply_to_training_environments_only() {
     );
 }
 
-/// Steps sideways (+x of the base) at the action's full scale: the
+/// Steps along the base's x (`dir` ±1) at the action's full scale: the
 /// training reward with lateral shaping minus the evaluated reward, per
 /// step, and the tip's true horizontal distance from the hole's axis, mm,
-/// before each step.
+/// before each step and after the last.
 fn shaping_of_a_sideways_walk(cfg: &RlEnvConfig, dir: f64) -> (Vec<f64>, Vec<f64>) {
     let mut train = RlEnv::for_training(cfg).unwrap();
     let mut eval = RlEnv::new(cfg).unwrap();

@@ -114,8 +114,10 @@ pub struct TrainingAids {
     /// progress: each step earns this much per millimetre by which it
     /// brought the tip's true horizontal distance from the hole's axis
     /// closer, and loses as much per millimetre it moved away (0: none).
-    /// It telescopes over an episode, so it cannot change which policy is
-    /// best; it only says sooner which way the opening lies.
+    /// Its undiscounted sum over an episode is the potential's change
+    /// alone; under the discount γ it departs from the policy-invariant
+    /// form γΦ(s') − Φ(s) by (1 − γ)·Φ(s'), a small extra pull towards the
+    /// axis. It mostly says sooner which way the opening lies.
     pub lateral_shaping_per_mm: f64,
 }
 
