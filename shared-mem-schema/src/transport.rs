@@ -73,6 +73,9 @@ pub enum TransportError {
         /// What [`ServiceSettings::of`] asks for.
         expected: usize,
     },
+    /// `VISION_TOUCH_IPC_ROOT` does not name a directory iceoryx2 can use.
+    #[error("{0}")]
+    IpcRoot(String),
     /// Any other iceoryx2 failure.
     #[error("iceoryx2: {what} '{service}': {detail}")]
     Ipc {
@@ -205,13 +208,64 @@ pub fn quiet_logs() {
     });
 }
 
-/// Creates a node named `name`. Signal handling is left to the process
-/// (iceoryx2's own handler is disabled), and stale resources of dead nodes
-/// are removed first, so a previous `kill -9` never breaks a start.
+/// The environment variable that moves iceoryx2's root directory (its
+/// node and service records; `/tmp/iceoryx2/` by default) for every
+/// process of the stack, e.g. into a systemd `RuntimeDirectory` of mode
+/// 0700 that no other local user can create first (deploy/*.service).
+pub const IPC_ROOT_ENV: &str = "VISION_TOUCH_IPC_ROOT";
+
+/// iceoryx2's configuration (its own files or defaults) with the root
+/// directory `root` (an absolute path; `None`: iceoryx2's). Every process
+/// of the stack must use the same root to see the others.
+pub fn ipc_config_for(root: Option<&std::ffi::OsStr>) -> Result<Config, TransportError> {
+    let mut cfg = Config::global_config().clone();
+    let Some(root) = root else {
+        return Ok(cfg);
+    };
+    let bad = |why: &str| {
+        TransportError::IpcRoot(format!(
+            "{IPC_ROOT_ENV} = {root:?} {why} (the stack's processes keep their shared-memory              records there)"
+        ))
+    };
+    let s = root.to_str().ok_or_else(|| bad("is not UTF-8"))?;
+    if !s.starts_with('/') || s.contains("/../") || s.ends_with("/..") {
+        return Err(bad("must be an absolute directory without `..`"));
+    }
+    // iceoryx2 joins names onto the root as it is: it must end with `/`.
+    let dir = if s.ends_with('/') {
+        s.to_owned()
+    } else {
+        format!("{s}/")
+    };
+    let path =
+        Path::new(dir.as_bytes()).map_err(|e| bad(&format!("is refused by iceoryx2 ({e:?})")))?;
+    cfg.global.set_root_path(&path);
+    Ok(cfg)
+}
+
+/// The configuration every node of this process uses: [`ipc_config_for`]
+/// of `$VISION_TOUCH_IPC_ROOT`, read once.
+pub fn stack_config() -> Result<&'static Config, TransportError> {
+    static CONFIG: std::sync::OnceLock<Result<Config, String>> = std::sync::OnceLock::new();
+    CONFIG
+        .get_or_init(|| {
+            quiet_logs();
+            ipc_config_for(std::env::var_os(IPC_ROOT_ENV).as_deref()).map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .map_err(|e| TransportError::IpcRoot(e.clone()))
+}
+
+/// Creates a node named `name` under [`stack_config`]. Signal handling is
+/// left to the process (iceoryx2's own handler is disabled), and stale
+/// resources of dead nodes are removed first, so a previous `kill -9` never
+/// breaks a start.
 pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
+    let config = stack_config()?;
     cleanup_dead_nodes();
     let node_name = NodeName::new(name).map_err(|e| ipc_err(name, "node name", e))?;
     NodeBuilder::new()
+        .config(config)
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
@@ -222,8 +276,11 @@ pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
 /// how many dead nodes were found.
 pub fn cleanup_dead_nodes() -> usize {
     quiet_logs();
+    let Ok(config) = stack_config() else {
+        return 0;
+    };
     let mut dead = Vec::new();
-    let _ = StackNode::list(Config::global_config(), |state| {
+    let _ = StackNode::list(config, |state| {
         if let NodeState::Dead(view) = state {
             dead.push(view);
         }
@@ -251,7 +308,7 @@ pub fn service_schema_version(name: &str) -> Option<String> {
     let sn = ServiceName::new(name).ok()?;
     let details = ipc::Service::details(
         &sn,
-        Config::global_config(),
+        stack_config().ok()?,
         MessagingPattern::PublishSubscribe,
     )
     .ok()??;
@@ -556,6 +613,31 @@ mod tests {
         assert_eq!(
             log_line(LogLevel::Warn, "short  one\n"),
             "iceoryx2 warning: short one"
+        );
+    }
+
+    #[test]
+    fn the_ipc_root_must_be_an_absolute_directory() {
+        use std::ffi::OsStr;
+        let root = |s: &str| {
+            ipc_config_for(Some(OsStr::new(s))).map(|c| c.global.root_path().as_str().to_owned())
+        };
+        assert_eq!(
+            root("/run/vision-touch/iceoryx2").unwrap(),
+            "/run/vision-touch/iceoryx2/"
+        );
+        assert_eq!(root("/run/vt/").unwrap(), "/run/vt/");
+        for bad in ["relative/dir", "", "/run/../tmp"] {
+            let e = root(bad).unwrap_err().to_string();
+            assert!(
+                e.contains(IPC_ROOT_ENV) && e.contains("absolute"),
+                "{bad}: {e}"
+            );
+        }
+        let default = ipc_config_for(None).unwrap();
+        assert_eq!(
+            default.global.root_path(),
+            Config::global_config().global.root_path()
         );
     }
 

@@ -50,6 +50,35 @@ fn the_controller_unit_never_restarts_after_a_fault_or_a_bad_configuration() {
 }
 
 #[test]
+fn every_unit_keeps_iceoryx2_in_one_private_runtime_directory() {
+    for name in ["rt-controller.service", "hw-sim.service"] {
+        let text = unit(name);
+        assert_eq!(
+            setting(&text, "RuntimeDirectory"),
+            Some("vision-touch"),
+            "{name}"
+        );
+        assert_eq!(
+            setting(&text, "RuntimeDirectoryMode"),
+            Some("0700"),
+            "{name}"
+        );
+        // Shared by both units: one stopping must not remove the other's.
+        assert_eq!(
+            setting(&text, "RuntimeDirectoryPreserve"),
+            Some("yes"),
+            "{name}"
+        );
+        let env = format!(
+            "{}=/run/vision-touch/iceoryx2",
+            shared_mem_schema::transport::IPC_ROOT_ENV
+        );
+        assert_eq!(setting(&text, "Environment"), Some(env.as_str()), "{name}");
+        assert_eq!(setting(&text, "PrivateTmp"), Some("yes"), "{name}");
+    }
+}
+
+#[test]
 fn systemd_analyze_verifies_the_shipped_units() {
     let bins = tests::stack_bins();
     let dir = test_support::scratch_dir("units");

@@ -24,6 +24,11 @@ pub enum HardwareError {
         /// The service namespace.
         namespace: String,
     },
+    /// The robot is not the one the configuration describes (found at
+    /// start-up, before the arm is held): a setting to correct, not a fault,
+    /// so the daemon exits as for a bad configuration and is not restarted.
+    #[error("the robot does not match the configuration: {0}")]
+    Mismatch(String),
     /// The robot stopped the control session (a reflex, a limit, a
     /// communication constraint violation, a lost connection), or a sensor
     /// of the robot's failed: the daemon's Fault, with the robot's (or the

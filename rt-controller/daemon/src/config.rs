@@ -92,6 +92,10 @@ pub struct NetFtConfig {
     pub timeout_ms: f64,
     /// How long the start-up waits for the sensor's first record, s.
     pub start_timeout_s: f64,
+    /// How long start-up averages the sensor at rest, ms, as the bias the
+    /// loop's readings are taken relative to (tare; 0: the sensor's raw
+    /// values, bias and tool weight in).
+    pub tare_ms: f64,
 }
 
 impl Default for NetFtConfig {
@@ -104,6 +108,7 @@ impl Default for NetFtConfig {
             counts_per_torque: 1_000_000.0,
             timeout_ms: 10.0,
             start_timeout_s: 2.0,
+            tare_ms: 100.0,
         }
     }
 }
@@ -146,7 +151,8 @@ impl NetFtConfig {
             "backend.franka.net_ft.start_timeout_s",
             self.start_timeout_s,
             0.0..=60.0,
-        )
+        )?;
+        within("backend.franka.net_ft.tare_ms", self.tare_ms, 0.0..=2000.0)
     }
 }
 

@@ -185,6 +185,11 @@ impl<'r> FrankaBackend<'r> {
                 ),
             });
         }
+        // Start-up, not real-time: the robot's state outside a motion.
+        let first = robot
+            .read_once()
+            .map_err(|e| robot_error(&e, "reading the robot's state at start-up"))?;
+        check_load(model, cfg.generation, &first)?;
         let mut effort = [0.0; JOINTS];
         effort.copy_from_slice(model.effort_limits().as_slice());
         if (cfg.wrench == WrenchSource::NetFt) != wrench_sensor.is_some() {
@@ -274,6 +279,54 @@ impl<'r> FrankaBackend<'r> {
         }
         Ok(out)
     }
+}
+
+/// Largest difference, N·m on any joint, between the gravity our model
+/// takes off the commands and the gravity the robot adds for its own
+/// end-effector load. 0.2 N·m is about 40 g at the hand of an outstretched
+/// arm: within it the impedance's steady-state error stays under 1 mm.
+pub const LOAD_GRAVITY_TOLERANCE_NM: f64 = 0.2;
+
+/// Refuses a robot whose configured end-effector load (Desk's end-effector
+/// and load settings: `m_total` at `F_x_Ctotal` in its state `s`) is not
+/// the load `model` carries: the backend takes `model`'s gravity off every
+/// command and the robot adds its own, so a difference would push the arm
+/// steadily, unseen by the control law.
+pub fn check_load(
+    model: &Model,
+    generation: FrankaGeneration,
+    s: &RobotState,
+) -> Result<(), HardwareError> {
+    let urdf = match generation {
+        FrankaGeneration::Fr3 => franka::model::FR3_URDF,
+        FrankaGeneration::Panda => franka::model::FER_URDF,
+    };
+    let theirs = franka::Model::from_urdf(urdf)
+        .map_err(|e| robot_error(&e, "building the robot's model"))?
+        .gravity_q(
+            &s.q,
+            s.m_total,
+            &s.F_x_Ctotal,
+            &franka::model::DEFAULT_GRAVITY_EARTH,
+        );
+    let mut data = model.create_data();
+    let ours = robot_model::gravity(model, &mut data, &s.q);
+    // The first joint beyond the tolerance; a NaN (a state the robot
+    // filled badly) is beyond it too.
+    let beyond = (0..JOINTS)
+        .map(|i| (i, (ours[i] - theirs[i]).abs()))
+        .find(|(_, d)| d.is_nan() || *d > LOAD_GRAVITY_TOLERANCE_NM);
+    if let Some((joint, d)) = beyond {
+        return Err(HardwareError::Mismatch(format!(
+            "the robot adds gravity for an end-effector load of {:.3} kg (hand {:.3} kg,              load {:.3} kg) at {:?} m in the flange frame, but the robot model's gravity              differs by {d:.2} N·m at joint {} (more than {LOAD_GRAVITY_TOLERANCE_NM} N·m):              set the end effector and load in Desk to what the model carries, or the              model's load to the robot's",
+            s.m_total,
+            s.m_ee,
+            s.m_load,
+            s.F_x_Ctotal,
+            joint + 1
+        )));
+    }
+    Ok(())
 }
 
 /// The robot's estimated external wrench (`K_F_ext_hat_K`, at and in the
@@ -571,6 +624,32 @@ mod tests {
         for i in 0..6 {
             assert!((w[i] - want[i]).abs() < 1e-12, "{w:?} vs {want:?}");
         }
+    }
+
+    #[test]
+    fn a_robot_whose_load_is_not_the_models_is_refused_at_start_up() {
+        let model = builtin("fr3").unwrap();
+        let mut s = RobotState {
+            q: FR3_READY_Q,
+            m_ee: 0.73,
+            m_total: 0.73,
+            F_x_Ctotal: [-0.01, 0.0, 0.03],
+            ..Default::default()
+        };
+        check_load(&model, FrankaGeneration::Fr3, &s).unwrap();
+        // A 0.5 kg load set in Desk that the model does not carry.
+        s.m_load = 0.5;
+        s.m_total = 1.23;
+        let Err(HardwareError::Mismatch(why)) = check_load(&model, FrankaGeneration::Fr3, &s)
+        else {
+            panic!("a 0.5 kg load was accepted");
+        };
+        assert!(
+            why.contains("1.230 kg") && why.contains("load 0.500 kg"),
+            "{why}"
+        );
+        s.m_total = f64::NAN;
+        assert!(check_load(&model, FrankaGeneration::Fr3, &s).is_err());
     }
 
     #[test]

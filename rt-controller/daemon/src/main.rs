@@ -252,6 +252,9 @@ fn conclude(end: Ending, record: Option<&FaultRecord>) -> Result<i32, Failure> {
         }
     }
     match (end.error, fault) {
+        (Some((e, _)), 0) if matches!(e.downcast_ref(), Some(HardwareError::Mismatch(_))) => {
+            Err(with(exit::CONFIG)(e))
+        }
         (Some((e, _)), 0) => Err(with(exit::ERROR)(e)),
         (Some((e, _)), _) => Err(with(exit::FAULT)(e)),
         (None, 0) => Ok(exit::CLEAN),

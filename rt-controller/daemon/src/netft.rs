@@ -12,13 +12,18 @@
 //! calibration's counts per force and per torque (the sensor's web page and
 //! its `netftapi2.xml` give them).
 //!
-//! In the loop, [`NetFt::read`] takes every record that has arrived from a
-//! non-blocking socket into a stack buffer, keeps the newest, and never
-//! waits or allocates. A sensor silent for longer than `timeout_ms`, or a
-//! record whose status word is not zero (a saturated gauge, a broken
-//! gauge, an internal error), is the daemon's Fault [`FAULT_FT_SENSOR`]
-//! with the reason; the values are the sensor's own, in its frame, as the
-//! robot descriptions' wrist sensor reads them (docs/franka.md).
+//! In the loop, [`NetFt::read`] takes the records that have arrived (at
+//! most [`MAX_RECORDS_PER_READ`]) from a non-blocking socket into a stack
+//! buffer, keeps the newest, and never waits or allocates. A record whose
+//! RDT sequence is not newer than the last one taken (a replay, a
+//! reordered datagram) is dropped and counted: it neither changes the
+//! wrench nor counts as the sensor speaking. A sensor silent for longer
+//! than `timeout_ms`, or a record whose status word is not zero (a
+//! saturated gauge, a broken gauge, an internal error), is the daemon's
+//! Fault [`FAULT_FT_SENSOR`] with the reason. The values are in the
+//! sensor's frame, as the robot descriptions' wrist sensor reads them,
+//! less the mean of the records of the first `tare_ms` at start-up (the
+//! sensor's bias and the tool's weight at rest; docs/franka.md).
 
 use crate::backend::HardwareError;
 use crate::config::NetFtConfig;
@@ -100,11 +105,24 @@ pub struct NetFt {
     socket: UdpSocket,
     cfg: NetFtConfig,
     wrench: [f64; 6],
+    /// What the readings are taken relative to (the tare), N and N·m.
+    bias: [f64; 6],
     /// When the newest record arrived (the loop's clock, ns).
     last_ns: u64,
-    /// Records read, and datagrams that were not one record.
+    /// The RDT sequence of the newest record taken (`None` before the first).
+    last_sequence: Option<u32>,
+    /// Records taken, datagrams that were not one record, and records
+    /// dropped for a sequence not newer than the last.
     records: u64,
     malformed: u64,
+    stale: u64,
+}
+
+/// Whether RDT sequence `next` comes after `last` (the counter wraps: a
+/// step forward of less than half its range is newer).
+pub fn is_newer(next: u32, last: u32) -> bool {
+    let d = next.wrapping_sub(last);
+    d != 0 && d < 1 << 31
 }
 
 fn sensor_error(reason: String) -> HardwareError {
@@ -135,9 +153,12 @@ impl NetFt {
             socket,
             cfg: cfg.clone(),
             wrench: [0.0; 6],
+            bias: [0.0; 6],
             last_ns: now_ns,
+            last_sequence: None,
             records: 0,
             malformed: 0,
+            stale: 0,
         };
         // The start request again every 100 ms until a record comes: UDP
         // may lose the first one.
@@ -155,6 +176,7 @@ impl NetFt {
             match s.socket.recv(&mut buf) {
                 Ok(n) => {
                     if let Some(r) = Record::parse(&buf[..n]) {
+                        // The first record: never stale.
                         s.take(&r, now_ns)?;
                         break;
                     }
@@ -180,13 +202,77 @@ impl NetFt {
                 )));
             }
         }
+        s.tare(now_ns).map_err(|e| match e {
+            HardwareError::Robot { code, reason } => HardwareError::Robot {
+                code,
+                reason: format!("while taring: {reason}"),
+            },
+            e => e,
+        })?;
         s.socket
             .set_nonblocking(true)
             .map_err(|e| io("configuring the socket of", e))?;
         Ok(s)
     }
 
-    fn take(&mut self, r: &Record, now_ns: u64) -> Result<(), HardwareError> {
+    /// Averages the records of the next `tare_ms` (with the first one
+    /// already taken) into the bias later readings are taken relative to.
+    /// Before the loop, with the arm at rest: it blocks for `tare_ms`.
+    fn tare(&mut self, now_ns: u64) -> Result<(), HardwareError> {
+        if self.cfg.tare_ms <= 0.0 {
+            return Ok(());
+        }
+        let mut sum = self.wrench;
+        let mut n = 1u32;
+        let start = Instant::now();
+        let window = Duration::from_secs_f64(self.cfg.tare_ms * 1e-3);
+        let mut buf = [0u8; 64];
+        while start.elapsed() < window {
+            let left = window
+                .saturating_sub(start.elapsed())
+                .max(Duration::from_millis(1));
+            self.socket
+                .set_read_timeout(Some(left))
+                .map_err(|e| sensor_error(format!("configuring the socket: {e}")))?;
+            match self.socket.recv(&mut buf) {
+                Ok(k) => match Record::parse(&buf[..k]) {
+                    Some(r) => {
+                        if self.take(&r, now_ns)? {
+                            n += 1;
+                            for (a, w) in sum.iter_mut().zip(self.wrench) {
+                                *a += w;
+                            }
+                        }
+                    }
+                    None => self.malformed += 1,
+                },
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(e) => return Err(sensor_error(format!("reading the F/T sensor: {e}"))),
+            }
+        }
+        for (b, a) in self.bias.iter_mut().zip(sum) {
+            *b = a / f64::from(n);
+        }
+        for (w, b) in self.wrench.iter_mut().zip(self.bias) {
+            *w -= b;
+        }
+        Ok(())
+    }
+
+    /// Takes `r` unless its sequence is not newer than the last taken
+    /// (then counted as stale and `Ok(false)`); a faulted status is an error.
+    fn take(&mut self, r: &Record, now_ns: u64) -> Result<bool, HardwareError> {
+        if self
+            .last_sequence
+            .is_some_and(|last| !is_newer(r.rdt_sequence, last))
+        {
+            self.stale += 1;
+            return Ok(false);
+        }
         if r.status != 0 {
             return Err(sensor_error(format!(
                 "the F/T sensor reports status {:#010x} (record {}): a gauge saturated or \
@@ -200,11 +286,12 @@ impl NetFt {
             } else {
                 self.cfg.counts_per_torque
             };
-            *w = f64::from(c) / per;
+            *w = f64::from(c) / per - self.bias[j];
         }
         self.last_ns = now_ns;
+        self.last_sequence = Some(r.rdt_sequence);
         self.records += 1;
-        Ok(())
+        Ok(true)
     }
 
     /// The newest wrench (N, N·m, the sensor's frame) after taking the
@@ -218,7 +305,9 @@ impl NetFt {
         for _ in 0..MAX_RECORDS_PER_READ {
             match self.socket.recv(&mut buf) {
                 Ok(n) => match Record::parse(&buf[..n]) {
-                    Some(r) => self.take(&r, now_ns)?,
+                    Some(r) => {
+                        self.take(&r, now_ns)?;
+                    }
                     None => self.malformed += 1,
                 },
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
@@ -256,6 +345,17 @@ impl NetFt {
     pub fn counts(&self) -> (u64, u64) {
         (self.records, self.malformed)
     }
+
+    /// Records dropped because their sequence was not newer than the last
+    /// one taken (replayed or reordered).
+    pub fn stale(&self) -> u64 {
+        self.stale
+    }
+
+    /// The tare: what the readings are taken relative to, N and N·m.
+    pub fn bias(&self) -> [f64; 6] {
+        self.bias
+    }
 }
 
 impl Drop for NetFt {
@@ -280,6 +380,7 @@ mod tests {
             counts_per_torque: 2_000_000.0,
             timeout_ms: 10.0,
             start_timeout_s: 10.0,
+            tare_ms: 0.0,
         }
     }
 
@@ -384,6 +485,116 @@ mod tests {
         assert!(ft.read(55_000_000).is_ok());
         let e = ft.read(61_000_000).unwrap_err();
         assert!(e.to_string().contains("has sent nothing"), "{e}");
+    }
+
+    /// A stand-in that sends `first` after the start request, then `later`
+    /// when told (the returned sender), then stops.
+    fn sensor_in_two(
+        first: Vec<Record>,
+        later: Vec<Record>,
+    ) -> (
+        String,
+        std::sync::mpsc::Sender<()>,
+        std::thread::JoinHandle<()>,
+    ) {
+        let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let addr = s.local_addr().unwrap().to_string();
+        let (tx, rx) = std::sync::mpsc::channel::<()>();
+        let h = std::thread::spawn(move || {
+            let mut buf = [0u8; 16];
+            let (_, from) = s.recv_from(&mut buf).unwrap();
+            for r in first {
+                s.send_to(&r.to_bytes(), from).unwrap();
+            }
+            if rx.recv().is_ok() {
+                for r in later {
+                    s.send_to(&r.to_bytes(), from).unwrap();
+                }
+            }
+        });
+        (addr, tx, h)
+    }
+
+    /// Reads at `now_ns` until `done` holds (bounded: loopback UDP may
+    /// still be in flight).
+    fn read_until(ft: &mut NetFt, now_ns: u64, done: impl Fn(&NetFt) -> bool) -> [f64; 6] {
+        let start = Instant::now();
+        loop {
+            let w = ft.read(now_ns).unwrap();
+            if done(ft) {
+                return w;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "{:?}",
+                ft.counts()
+            );
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    #[test]
+    fn replayed_and_reordered_records_are_dropped_and_do_not_count_as_the_sensor_speaking() {
+        let a = [1_000_000, 0, 0, 0, 0, 0];
+        let (addr, tx, h) = sensor_in_two(
+            vec![record(1, 0, [0; 6]), record(2, 0, a)],
+            // A replay of record 2 with other values, then record 1 again.
+            vec![record(2, 0, [7_000_000; 6]), record(1, 0, [9_000_000; 6])],
+        );
+        let mut ft = NetFt::connect(&cfg(addr), 0).unwrap();
+        let w = read_until(&mut ft, 1_000_000, |f| f.counts().0 == 2);
+        assert_eq!(w[0], 1.0);
+        tx.send(()).unwrap();
+        h.join().unwrap();
+        let w = read_until(&mut ft, 5_000_000, |f| f.stale() == 2);
+        assert_eq!(
+            w,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            "the replays change nothing"
+        );
+        assert_eq!(ft.counts(), (2, 0));
+        // Silent since record 2 (taken at 1 ms), although datagrams came at
+        // 5 ms: the time-out (10 ms) runs from the newest record taken.
+        let e = ft.read(11_500_000).unwrap_err();
+        assert!(e.to_string().contains("has sent nothing"), "{e}");
+    }
+
+    #[test]
+    fn sequences_are_compared_across_the_counters_wrap() {
+        assert!(is_newer(1, 0));
+        assert!(is_newer(0, u32::MAX));
+        assert!(is_newer(3, u32::MAX - 2));
+        assert!(!is_newer(5, 5));
+        assert!(!is_newer(4, 5));
+        assert!(!is_newer(u32::MAX, 0));
+    }
+
+    #[test]
+    fn the_rest_reading_at_start_up_is_taken_off_later_readings() {
+        let rest = [2_000_000, -1_000_000, 30_000_000, 400_000, 0, -200_000];
+        let contact = [
+            2_500_000, -1_000_000, 35_000_000, 400_000, 100_000, -200_000,
+        ];
+        let (addr, tx, h) = sensor_in_two(
+            (1..=5).map(|i| record(i, 0, rest)).collect(),
+            vec![record(6, 0, contact)],
+        );
+        let mut c = cfg(addr);
+        c.tare_ms = 200.0;
+        let mut ft = NetFt::connect(&c, 0).unwrap();
+        // Every rest record arrived within the tare's window.
+        assert_eq!(ft.counts().0, 5, "{:?}", ft.counts());
+        let want_bias = [2.0, -1.0, 30.0, 0.2, 0.0, -0.1];
+        for (b, w) in ft.bias().iter().zip(want_bias) {
+            assert!((b - w).abs() < 1e-12, "{:?}", ft.bias());
+        }
+        tx.send(()).unwrap();
+        h.join().unwrap();
+        let w = read_until(&mut ft, 1_000_000, |f| f.counts().0 == 6);
+        let want = [0.5, 0.0, 5.0, 0.0, 0.05, 0.0];
+        for (a, b) in w.iter().zip(want) {
+            assert!((a - b).abs() < 1e-12, "{w:?}");
+        }
     }
 
     #[test]

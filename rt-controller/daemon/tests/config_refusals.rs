@@ -31,6 +31,10 @@ fn a_robot_configuration_that_removes_a_protection_is_refused() {
             "[backend.franka]\nwrench = \"net_ft\"\n[backend.franka.net_ft]\nstart_timeout_s = 1e300\n",
             "backend.franka.net_ft.start_timeout_s",
         ),
+        (
+            "[backend.franka]\nwrench = \"net_ft\"\n[backend.franka.net_ft]\ntare_ms = -1.0\n",
+            "backend.franka.net_ft.tare_ms",
+        ),
     ] {
         let err = DaemonConfig::from_toml(&franka(extra), "test")
             .err()

@@ -139,6 +139,8 @@ address = "{ft_addr}"
 # A stand-in thread paced by sleeps: generous, so that a busy machine does
 # not fault it.
 timeout_ms = 2000.0
+# The stand-in's one reading is what the frames must carry: no tare.
+tare_ms = 0.0
 [timing]
 clock = "hardware"
 # franky-sim starts (imports MuJoCo) while the daemon retries.
