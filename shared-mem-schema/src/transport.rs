@@ -224,7 +224,8 @@ pub fn ipc_config_for(root: Option<&std::ffi::OsStr>) -> Result<Config, Transpor
     };
     let bad = |why: &str| {
         TransportError::IpcRoot(format!(
-            "{IPC_ROOT_ENV} = {root:?} {why} (the stack's processes keep their shared-memory              records there)"
+            "{IPC_ROOT_ENV} = {root:?} {why} (the stack's processes keep their shared-memory \
+             records there)"
         ))
     };
     let s = root.to_str().ok_or_else(|| bad("is not UTF-8"))?;

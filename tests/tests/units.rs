@@ -73,7 +73,16 @@ fn every_unit_keeps_iceoryx2_in_one_private_runtime_directory() {
             "{}=/run/vision-touch/iceoryx2",
             shared_mem_schema::transport::IPC_ROOT_ENV
         );
-        assert_eq!(setting(&text, "Environment"), Some(env.as_str()), "{name}");
+        assert!(
+            text.lines()
+                .any(|l| l.strip_prefix("Environment=") == Some(env.as_str())),
+            "{name}: no {env}"
+        );
+        let writable = setting(&text, "ReadWritePaths").unwrap_or("");
+        assert!(
+            !writable.split_whitespace().any(|p| p == "/tmp"),
+            "{name}: {writable}"
+        );
         assert_eq!(setting(&text, "PrivateTmp"), Some("yes"), "{name}");
     }
 }

@@ -294,7 +294,7 @@ impl NetFt {
         Ok(true)
     }
 
-    /// The newest wrench (N, N·m, the sensor's frame) after taking the
+    /// The newest wrench (N, N·m, the sensor's frame, less the tare) after taking the
     /// records that have arrived (at most [`MAX_RECORDS_PER_READ`]); an error if the newest is older than
     /// `timeout_ms` at `now_ns` or reports a fault. Never blocks or
     /// allocates.
@@ -321,10 +321,15 @@ impl NetFt {
         }
         let age_ms = now_ns.saturating_sub(self.last_ns) as f64 * 1e-6;
         if age_ms > self.cfg.timeout_ms {
+            // A sensor that restarted its stream counts from 1 again: its
+            // records are stale, and the count says so.
             return Err(sensor_error(format!(
-                "the F/T sensor at {:?} has sent nothing for {age_ms:.1} ms \
-                 (`backend.franka.net_ft.timeout_ms` = {})",
-                self.cfg.address, self.cfg.timeout_ms
+                "the F/T sensor at {:?} has sent nothing newer than record {} for {age_ms:.1} \
+                 ms (`backend.franka.net_ft.timeout_ms` = {}; {} stale records dropped)",
+                self.cfg.address,
+                self.last_sequence.unwrap_or(0),
+                self.cfg.timeout_ms,
+                self.stale
             )));
         }
         Ok(self.wrench)
@@ -575,10 +580,18 @@ mod tests {
         let contact = [
             2_500_000, -1_000_000, 35_000_000, 400_000, 100_000, -200_000,
         ];
+        // Five rest records that differ (Fx 1.6 .. 2.4 N, mean 2 N): the
+        // first, taken while connecting, must count once.
+        let at_rest = |i: u32| {
+            let mut c = rest;
+            c[0] += (i as i32 - 3) * 200_000;
+            c
+        };
         let (addr, tx, h) = sensor_in_two(
-            (1..=5).map(|i| record(i, 0, rest)).collect(),
+            (1..=5).map(|i| record(i, 0, at_rest(i))).collect(),
             vec![record(6, 0, contact)],
         );
+        // Without the first: 2.1 N; with it twice: 1.93 N.
         let mut c = cfg(addr);
         c.tare_ms = 200.0;
         let mut ft = NetFt::connect(&c, 0).unwrap();
