@@ -1,8 +1,9 @@
 //! The dataset builder and reader trust none of their inputs: a log naming
 //! a file as its robot, frames with a wrong joint count or images of
 //! another size are skipped and reported while the rest builds; a tampered
-//! meta.json is refused with the field named; a damaged block fails its
-//! checksum.
+//! meta.json (episodes that do not tile the samples included) is refused
+//! with the field named, as is a split that trains on a test episode; a
+//! damaged block fails its checksum.
 
 use learner::collect::{CollectConfig, collect_fast};
 use learner::dataset::{self, BuildConfig, Dataset, DatasetError, Loader, LoaderConfig};
@@ -202,6 +203,31 @@ fn bad_logs_are_skipped_and_named_and_damaged_datasets_refused() {
     assert!(e.contains("image size"), "{e}");
     let e = tamper(&|v| v["build"]["block_samples"] = 0.into());
     assert!(e.contains("block_samples"), "{e}");
+    // Episodes that do not tile the samples: the rest would count as
+    // episode 0, and with no episodes at all the loader had none to index.
+    let n = ds.meta.samples;
+    let e = tamper(&|v| v["episodes"][0]["samples"] = (n - 1).into());
+    assert!(
+        e.contains(&format!("the episodes hold {} of the {n}", n - 1)),
+        "{e}"
+    );
+    let e = tamper(&|v| v["episodes"] = serde_json::json!([]));
+    assert!(
+        e.contains(&format!("the episodes hold 0 of the {n}")),
+        "{e}"
+    );
+    let e = tamper(&|v| {
+        v["episodes"][0]["first_id"] = 1.into();
+        v["episodes"][0]["samples"] = (n - 1).into();
+    });
+    assert!(e.contains("episodes[0]") && e.contains("tile"), "{e}");
+    // A run's split that holds an episode out and trains on it too.
+    let split = out.join("split.json");
+    std::fs::write(&split, r#"{"train": [0], "test": [0]}"#).unwrap();
+    let e = learner::train::Split::read(&split, &ds.meta)
+        .expect_err("refused")
+        .to_string();
+    assert!(e.contains("episode 0 is in both train and test"), "{e}");
     // A wrench window that matches a shortened table still disagrees with
     // the samples (the loader would copy windows of the wrong length).
     std::fs::write(out.join("wrench.bin"), &wrench[..wrench.len() / 2]).unwrap();

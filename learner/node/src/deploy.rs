@@ -369,6 +369,25 @@ impl DeployedPolicy {
             size("obs_norm.shift".into(), observer.dim(), norm.shift.len())?;
             size("obs_norm.scale".into(), observer.dim(), norm.scale.len())?;
         }
+        // JSON cannot spell NaN, but a deployment built in memory (from a
+        // checkpoint) can hold one: it would turn every action into 0.
+        let mut fields: Vec<(String, &[f64])> = Vec::new();
+        for (i, l) in p.layers.iter().enumerate() {
+            fields.push((format!("layers[{i}].weight"), &l.weight));
+            fields.push((format!("layers[{i}].bias"), &l.bias));
+        }
+        if let Some(norm) = &p.obs_norm {
+            fields.push(("obs_norm.shift".into(), &norm.shift));
+            fields.push(("obs_norm.scale".into(), &norm.scale));
+        }
+        for (field, values) in fields {
+            if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+                return Err(DeployError::Format {
+                    path: path.to_path_buf(),
+                    detail: format!("{field}[{k}] is {}, not a finite number", values[k]),
+                });
+            }
+        }
         Ok(Self {
             layers: p.layers,
             norm: p.obs_norm,
@@ -580,6 +599,21 @@ mod tests {
         );
         let e = DeployedPolicy::load(&extra).unwrap_err().to_string();
         assert!(e.contains("temperature"), "{e}");
+        // A value that is not a number, from a checkpoint in memory.
+        let mut f = ground_truth_policy();
+        f.layers[1].bias[2] = f64::NAN;
+        let d = Deployment {
+            policy: f,
+            encoder: None,
+        };
+        let Err(e) = DeployedPolicy::new(d, Path::new("nan.json")) else {
+            panic!("a NaN bias was accepted");
+        };
+        let e = e.to_string();
+        assert!(
+            e.contains("nan.json") && e.contains("layers[1].bias[2] is NaN"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -271,6 +271,9 @@ fn validate_meta(dir: &Path, meta: &Meta) -> std::result::Result<(), String> {
             meta.samples
         ));
     }
+    // The episodes tile the samples in order: every sample belongs to
+    // exactly one (a gap would count as episode 0, an overlap twice).
+    let mut next_id = 0u64;
     for (i, e) in meta.episodes.iter().enumerate() {
         if e.episode as usize != i {
             return Err(format!("episodes[{i}].episode = {}", e.episode));
@@ -284,6 +287,20 @@ fn validate_meta(dir: &Path, meta: &Meta) -> std::result::Result<(), String> {
                 e.first_id, e.samples, meta.samples
             ));
         }
+        if e.samples == 0 || e.first_id != next_id {
+            return Err(format!(
+                "episodes[{i}]: samples {}..+{}, the episodes before it end at sample {next_id} \
+                 (episodes must tile the samples)",
+                e.first_id, e.samples
+            ));
+        }
+        next_id += e.samples;
+    }
+    if next_id != meta.samples {
+        return Err(format!(
+            "the episodes hold {next_id} of the {} samples (episodes must tile the samples)",
+            meta.samples
+        ));
     }
     Ok(())
 }

@@ -72,6 +72,16 @@ impl Split {
                 "episode {e} is not in the dataset: another dataset than the run's?"
             )));
         }
+        // Held-out accuracy is only held out if no episode is in both.
+        let train: std::collections::HashSet<u32> = split.train.iter().copied().collect();
+        if train.len() != split.train.len() {
+            return Err(bad("an episode is listed twice in train".into()));
+        }
+        if let Some(e) = split.test.iter().find(|e| train.contains(e)) {
+            return Err(bad(format!(
+                "episode {e} is in both train and test: the test split must be held out"
+            )));
+        }
         if let Some(run) = split.camera {
             match meta.camera {
                 Some(now) if now.same_camera(&run) => {}

@@ -406,6 +406,24 @@ impl LogReader {
                 });
             }
         }
+        // Two indexes of one chunk (or of overlapping bytes) would read its
+        // messages twice.
+        let mut spans: Vec<(u64, u64)> = summary
+            .chunk_indexes
+            .iter()
+            .map(|ci| (ci.chunk_start_offset, ci.chunk_length))
+            .collect();
+        spans.sort_unstable();
+        if let Some(w) = spans.windows(2).find(|w| w[0].0 + w[0].1 > w[1].0) {
+            return Err(ReadError::Corrupt {
+                path,
+                offset: w[1].0,
+                what: format!(
+                    "two chunk indexes cover this chunk (the one at {} runs {} bytes)",
+                    w[0].0, w[0].1
+                ),
+            });
+        }
         let topics = summary
             .channels
             .iter()

@@ -16,6 +16,11 @@ const OP_MESSAGE: u8 = 0x05;
 /// Largest chunk the reader will decompress: a corrupted size field must
 /// not make it allocate without bound.
 const MAX_CHUNK_BYTES: u64 = 1 << 30;
+/// Largest ratio of a chunk's uncompressed size to its stored bytes. Our
+/// logs compress 2–30× (camera frames least, the 1 kHz frames most); the
+/// bound keeps what a file can make the reader hold proportional to the
+/// file, so a 100 kB file cannot ask for gigabytes.
+const MAX_CHUNK_RATIO: u64 = 1000;
 
 /// One top-level record, or where the walk stopped.
 enum Walk<'a> {
@@ -117,6 +122,21 @@ pub(super) fn chunk_records(body: &[u8]) -> Result<Vec<Record<'static>>, String>
             header.uncompressed_size
         ));
     }
+    let stored = data.len() as u64;
+    if header.uncompressed_size > stored.max(1).saturating_mul(MAX_CHUNK_RATIO) {
+        return Err(format!(
+            "chunk claims {} bytes uncompressed from {stored} stored (more than \
+             {MAX_CHUNK_RATIO} times)",
+            header.uncompressed_size
+        ));
+    }
+    // Optional in the MCAP specification (0), written by every writer we
+    // read (ours, the Python and C++ libraries): without it a flipped bit
+    // in a chunk would read back as different data, unnoticed. (An empty
+    // chunk's CRC is 0.)
+    if header.uncompressed_crc == 0 && header.uncompressed_size > 0 {
+        return Err("chunk has no CRC (0); this reader requires chunk CRCs".into());
+    }
     let size = header.uncompressed_size as usize;
     let plain: Vec<u8> = match header.compression.as_str() {
         "" => data.into_owned(),
@@ -135,7 +155,7 @@ pub(super) fn chunk_records(body: &[u8]) -> Result<Vec<Record<'static>>, String>
             plain.len()
         ));
     }
-    if header.uncompressed_crc != 0 && crc32fast::hash(&plain) != header.uncompressed_crc {
+    if crc32fast::hash(&plain) != header.uncompressed_crc {
         return Err("chunk CRC mismatch".into());
     }
     let mut out = Vec::new();
@@ -309,8 +329,14 @@ pub(super) fn check_summary_crc(buf: &[u8]) -> Result<(), (u64, String)> {
     if f[0] != OP_FOOTER || u64_at(1) != 20 {
         return Err((at as u64, "the footer record is damaged".into()));
     }
-    if start == 0 || crc == 0 {
-        return Ok(()); // no summary, or no CRC written for it
+    if start == 0 {
+        return Ok(()); // no summary: the caller names that
+    }
+    if crc == 0 {
+        return Err((
+            at as u64,
+            "the summary has no CRC (0); this reader requires one".into(),
+        ));
     }
     if start > at as u64 {
         return Err((
