@@ -616,3 +616,60 @@ fn warn_on_increase(counter: &std::sync::atomic::AtomicU64, last: &mut u64, what
         *last = now;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rt_controller_daemon::shared::FAULT_ROBOT_REFLEX;
+
+    fn end(ready: bool, latched: u32, error: Option<(anyhow::Error, u32)>) -> Ending {
+        Ending {
+            ready,
+            latched,
+            error,
+        }
+    }
+
+    fn code(r: Result<i32, Failure>) -> i32 {
+        r.unwrap_or_else(|f| f.code)
+    }
+
+    #[test]
+    fn each_ending_maps_to_its_exit_status() {
+        let mismatch = || anyhow::Error::new(HardwareError::Mismatch("load".into()));
+        // A robot that is not the configured one: a bad configuration (2),
+        // which the unit never restarts after.
+        assert_eq!(code(conclude(end(false, 0, Some((mismatch(), 0))), None)), exit::CONFIG);
+        // Any other error before the arm was held: a crash (1), restarted.
+        let other = anyhow::anyhow!("no such device");
+        assert_eq!(code(conclude(end(false, 0, Some((other, 0))), None)), exit::ERROR);
+        // A robot error recorded as a fault, a latched fault, an error
+        // after the arm was held: a fault (3), never restarted.
+        let reflex = anyhow::anyhow!("reflex");
+        let e = end(true, 0, Some((reflex, FAULT_ROBOT_REFLEX)));
+        assert_eq!(code(conclude(e, None)), exit::FAULT);
+        assert_eq!(code(conclude(end(true, 102, None), None)), exit::FAULT);
+        let late = anyhow::anyhow!("lost the socket");
+        assert_eq!(code(conclude(end(true, 0, Some((late, 0))), None)), exit::FAULT);
+        // A mismatch found while a fault is latched is still the fault.
+        let e = end(true, 105, Some((mismatch(), 0)));
+        assert_eq!(code(conclude(e, None)), exit::FAULT);
+        assert_eq!(code(conclude(end(true, 0, None), None)), exit::CLEAN);
+    }
+
+    #[test]
+    fn a_fault_is_recorded_and_a_clean_stop_clears_the_record() {
+        let dir = test_support::scratch_dir("conclude");
+        let r = FaultRecord::lock(&dir.path().join("fault.json")).unwrap();
+        r.mark_running().unwrap();
+        assert_eq!(code(conclude(end(true, 102, None), Some(&r))), exit::FAULT);
+        let entry = r.read().unwrap().expect("recorded");
+        assert_eq!((entry.state, entry.code), (RecordState::Fault, 102));
+        // A clean stop removes the running record.
+        let r2_dir = test_support::scratch_dir("conclude-clean");
+        let r2 = FaultRecord::lock(&r2_dir.path().join("fault.json")).unwrap();
+        r2.mark_running().unwrap();
+        assert_eq!(code(conclude(end(true, 0, None), Some(&r2))), exit::CLEAN);
+        assert_eq!(r2.read().unwrap(), None);
+    }
+}
