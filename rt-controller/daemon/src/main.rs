@@ -639,10 +639,16 @@ mod tests {
         let mismatch = || anyhow::Error::new(HardwareError::Mismatch("load".into()));
         // A robot that is not the configured one: a bad configuration (2),
         // which the unit never restarts after.
-        assert_eq!(code(conclude(end(false, 0, Some((mismatch(), 0))), None)), exit::CONFIG);
+        assert_eq!(
+            code(conclude(end(false, 0, Some((mismatch(), 0))), None)),
+            exit::CONFIG
+        );
         // Any other error before the arm was held: a crash (1), restarted.
         let other = anyhow::anyhow!("no such device");
-        assert_eq!(code(conclude(end(false, 0, Some((other, 0))), None)), exit::ERROR);
+        assert_eq!(
+            code(conclude(end(false, 0, Some((other, 0))), None)),
+            exit::ERROR
+        );
         // A robot error recorded as a fault, a latched fault, an error
         // after the arm was held: a fault (3), never restarted.
         let reflex = anyhow::anyhow!("reflex");
@@ -650,7 +656,10 @@ mod tests {
         assert_eq!(code(conclude(e, None)), exit::FAULT);
         assert_eq!(code(conclude(end(true, 102, None), None)), exit::FAULT);
         let late = anyhow::anyhow!("lost the socket");
-        assert_eq!(code(conclude(end(true, 0, Some((late, 0))), None)), exit::FAULT);
+        assert_eq!(
+            code(conclude(end(true, 0, Some((late, 0))), None)),
+            exit::FAULT
+        );
         // A mismatch found while a fault is latched is still the fault.
         let e = end(true, 105, Some((mismatch(), 0)));
         assert_eq!(code(conclude(e, None)), exit::FAULT);
