@@ -380,6 +380,20 @@ impl DeployedPolicy {
             fields.push(("obs_norm.shift".into(), &norm.shift));
             fields.push(("obs_norm.scale".into(), &norm.scale));
         }
+        // `f64::clamp` panics on a negative or NaN bound.
+        let mut positive = vec![
+            ("action_scale.max_step_m", p.action_scale.max_step_m),
+            ("action_scale.max_roll_rad", p.action_scale.max_roll_rad),
+        ];
+        if let Some(norm) = &p.obs_norm {
+            positive.push(("obs_norm.clip", norm.clip));
+        }
+        if let Some((field, v)) = positive.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+            return Err(DeployError::Format {
+                path: path.to_path_buf(),
+                detail: format!("{field} is {v}: must be a positive number"),
+            });
+        }
         for (field, values) in fields {
             if let Some(k) = values.iter().position(|v| !v.is_finite()) {
                 return Err(DeployError::Format {
@@ -612,6 +626,19 @@ mod tests {
         let e = e.to_string();
         assert!(
             e.contains("nan.json") && e.contains("layers[1].bias[2] is NaN"),
+            "{e}"
+        );
+        // A negative clip would make the first action panic in `clamp`.
+        let mut f = ground_truth_policy();
+        f.obs_norm = Some(NormSpec {
+            shift: vec![0.0; 18],
+            scale: vec![1.0; 18],
+            clip: -1.0,
+        });
+        let bad = write(dir.path(), "clip.json", &serde_json::to_string(&f).unwrap());
+        let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("obs_norm.clip is -1: must be a positive number"),
             "{e}"
         );
     }
