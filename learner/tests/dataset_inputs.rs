@@ -5,39 +5,12 @@
 //! with the field named, as is a split that trains on a test episode; a
 //! damaged block fails its checksum.
 
-use learner::collect::{CollectConfig, collect_fast};
+mod one_episode;
+
 use learner::dataset::{self, BuildConfig, Dataset, DatasetError, Loader, LoaderConfig};
 use learner_node::log::{LogOptions, LogReader, LogWriter, topics};
-use learner_node::mix::Mix;
 use shared_mem_schema::{CameraFrame, Message, PolicyAction, SensorFrame};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-
-/// One short heuristic episode; returns its log.
-fn collect_one(dir: &Path) -> PathBuf {
-    let cfg = CollectConfig {
-        out_dir: dir.to_path_buf(),
-        states: u64::MAX,
-        episodes: Some(1),
-        episode_actions: 24,
-        pegs: vec![hw_sim::PegShape::Square],
-        seed: 5,
-        workers: 1,
-        world: hw_sim::WorldConfig::default(),
-        controller: rt_controller::ControllerConfig::default(),
-        mix: Mix {
-            heuristic_fraction: 1.0,
-            ..Mix::default()
-        },
-        log: LogOptions {
-            foxglove: false,
-            ..LogOptions::default()
-        },
-        resume: false,
-    };
-    let summary = collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
-    summary.shards[0].file.clone()
-}
+use std::path::Path;
 
 /// How a copy of a log is altered.
 #[derive(Default)]
@@ -105,7 +78,7 @@ fn rewrite(src: &Path, dst: &Path, edit: &Edit) {
 fn bad_logs_are_skipped_and_named_and_damaged_datasets_refused() {
     let scratch = test_support::scratch_dir("ds-inputs");
     let root = scratch.path();
-    let good = collect_one(&root.join("collect"));
+    let good = one_episode::collect_one(&root.join("collect"), hw_sim::WorldConfig::default(), 5);
     let logs = root.join("logs");
     std::fs::create_dir_all(&logs).unwrap();
     // Names sort the good log first: it sets the dataset's image size.

@@ -5,17 +5,15 @@
 //! fuzz is tests/log.rs's bit flips and truncations, and tests/log_bounds.rs
 //! for the claims a file makes about its sizes.)
 
-use learner::collect::{CollectConfig, collect_fast};
+mod one_episode;
+
 use learner::dataset::{self, BuildConfig, Dataset, Loader, LoaderConfig};
 use learner_node::deploy::{
     ActionScale, DeployedPolicy, Deployment, LayerSpec, ObservationSpec, PolicyFile,
 };
-use learner_node::log::LogOptions;
-use learner_node::mix::Mix;
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
 
 /// A small ground-truth policy file's text.
 fn policy_text() -> String {
@@ -155,34 +153,13 @@ fn dataset_dir() -> &'static Path {
         let mut world = hw_sim::WorldConfig::default();
         world.camera.width = 32;
         world.camera.height = 32;
-        let cfg = CollectConfig {
-            out_dir: root.join("logs"),
-            states: u64::MAX,
-            episodes: Some(1),
-            episode_actions: 24,
-            pegs: vec![hw_sim::PegShape::Square],
-            seed: 9,
-            workers: 1,
-            world,
-            controller: rt_controller::ControllerConfig::default(),
-            mix: Mix {
-                heuristic_fraction: 1.0,
-                ..Mix::default()
-            },
-            log: LogOptions {
-                foxglove: false,
-                ..LogOptions::default()
-            },
-            resume: false,
-        };
-        collect_fast(&cfg, &AtomicBool::new(false)).unwrap();
-        let files = dataset::find_logs(&[root.join("logs")]).unwrap();
+        let log = one_episode::collect_one(&root.join("logs"), world, 9);
         let out = root.join("ds");
         let b = BuildConfig {
             block_samples: 4,
             ..BuildConfig::default()
         };
-        dataset::build(&files, &out, &b, 1, |p, r| {
+        dataset::build(&[log], &out, &b, 1, |p, r| {
             if let Err(e) = r {
                 panic!("{}: {e}", p.display());
             }
@@ -191,6 +168,18 @@ fn dataset_dir() -> &'static Path {
         (root, out)
     })
     .1
+}
+
+/// The dataset's shard and its samples as built, read once.
+fn pristine() -> &'static (String, Vec<Vec<dataset::Sample>>) {
+    static PRISTINE: OnceLock<(String, Vec<Vec<dataset::Sample>>)> = OnceLock::new();
+    PRISTINE.get_or_init(|| {
+        let ds = Dataset::open(dataset_dir()).unwrap();
+        (
+            ds.meta.shards[0].0.clone(),
+            read_all(dataset_dir()).unwrap(),
+        )
+    })
 }
 
 /// A damaged copy of the dataset: `file` replaced by `bytes`.
@@ -244,23 +233,33 @@ proptest! {
         let dir = test_support::scratch_dir("fuzz-policy");
         let path = dir.path().join("policy.json");
         std::fs::write(&path, &bytes).unwrap();
-        match DeployedPolicy::load(&path) {
+        let loaded = DeployedPolicy::load(&path);
+        // The same text through the in-memory path (a checkpoint's
+        // conversion) is accepted or refused alike.
+        let parsed = std::str::from_utf8(&bytes)
+            .map_err(|e| e.to_string())
+            .and_then(PolicyFile::parse);
+        if let Ok(policy) = &parsed {
+            let d = Deployment { policy: policy.clone(), encoder: None };
+            prop_assert_eq!(DeployedPolicy::new(d, &path).is_ok(), loaded.is_ok());
+        }
+        match loaded {
             Err(e) => prop_assert!(e.to_string().contains("policy.json"), "{}", e),
             Ok(p) => {
+                // What the node sends: within the file's own step limits.
+                let scale = &parsed.as_ref().expect("a loaded file parses").action_scale;
                 for x in [0.0, 0.5, -3.0, 1e6] {
                     let means = p.means(&[x; 18]);
                     prop_assert_eq!(means.len(), 4);
-                    let delta = ActionScale::default().to_delta(&means);
-                    prop_assert!(delta.iter().all(|v| v.is_finite()), "{:?}", delta);
+                    let d = scale.to_delta(&means);
+                    prop_assert!(
+                        d[..3].iter().all(|v| v.abs() <= scale.max_step_m)
+                            && d[3].abs() <= scale.max_roll_rad,
+                        "{:?}",
+                        d
+                    );
                 }
             }
-        }
-        // The same text through the in-memory path agrees.
-        if let Ok(policy) = std::str::from_utf8(&bytes)
-            .map_err(|e| e.to_string())
-            .and_then(PolicyFile::parse)
-        {
-            let _ = DeployedPolicy::new(Deployment { policy, encoder: None }, &path);
         }
     }
 
@@ -281,18 +280,16 @@ proptest! {
     fn a_damaged_shard_reads_back_unchanged_or_is_refused(
         flips in prop::collection::vec((0.0..1.0f64, 1u8..=255), 1..5)
     ) {
-        let ds = Dataset::open(dataset_dir()).unwrap();
-        let shard = ds.meta.shards[0].0.clone();
-        let pristine = read_all(dataset_dir()).unwrap();
-        let mut bytes = std::fs::read(dataset_dir().join(&shard)).unwrap();
+        let (shard, pristine) = pristine();
+        let mut bytes = std::fs::read(dataset_dir().join(shard)).unwrap();
         for (f, x) in &flips {
             let at = ((f * bytes.len() as f64) as usize).min(bytes.len() - 1);
             bytes[at] ^= x;
         }
-        let dir = damaged_copy(&shard, &bytes);
+        let dir = damaged_copy(shard, &bytes);
         if let Ok(got) = read_all(dir.path()) {
             // Undetected damage must not change a sample.
-            prop_assert!(got == pristine, "damage changed the samples unnoticed");
+            prop_assert!(&got == pristine, "damage changed the samples unnoticed");
         }
     }
 }

@@ -369,17 +369,6 @@ impl DeployedPolicy {
             size("obs_norm.shift".into(), observer.dim(), norm.shift.len())?;
             size("obs_norm.scale".into(), observer.dim(), norm.scale.len())?;
         }
-        // JSON cannot spell NaN, but a deployment built in memory (from a
-        // checkpoint) can hold one: it would turn every action into 0.
-        let mut fields: Vec<(String, &[f64])> = Vec::new();
-        for (i, l) in p.layers.iter().enumerate() {
-            fields.push((format!("layers[{i}].weight"), &l.weight));
-            fields.push((format!("layers[{i}].bias"), &l.bias));
-        }
-        if let Some(norm) = &p.obs_norm {
-            fields.push(("obs_norm.shift".into(), &norm.shift));
-            fields.push(("obs_norm.scale".into(), &norm.scale));
-        }
         // `f64::clamp` panics on a negative or NaN bound.
         let mut positive = vec![
             ("action_scale.max_step_m", p.action_scale.max_step_m),
@@ -393,6 +382,17 @@ impl DeployedPolicy {
                 path: path.to_path_buf(),
                 detail: format!("{field} is {v}: must be a positive number"),
             });
+        }
+        // JSON cannot spell NaN, but a deployment built in memory (from a
+        // checkpoint) can hold one: it would turn every action into 0.
+        let mut fields: Vec<(String, &[f64])> = Vec::new();
+        for (i, l) in p.layers.iter().enumerate() {
+            fields.push((format!("layers[{i}].weight"), &l.weight));
+            fields.push((format!("layers[{i}].bias"), &l.bias));
+        }
+        if let Some(norm) = &p.obs_norm {
+            fields.push(("obs_norm.shift".into(), &norm.shift));
+            fields.push(("obs_norm.scale".into(), &norm.scale));
         }
         for (field, values) in fields {
             if let Some(k) = values.iter().position(|v| !v.is_finite()) {
