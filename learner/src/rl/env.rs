@@ -105,6 +105,11 @@ pub struct TrainingAids {
     /// this many environment steps ([`super::observe::RampedHoleError`]);
     /// 0: σ from the start.
     pub hole_error_ramp_steps: u64,
+    /// With a ramped hole error: the ramp advances only through updates
+    /// whose training episodes completed the insertion at least this often
+    /// (a share, 0..1), so the error grows only while the policy copes
+    /// with it; 0: the ramp follows the steps alone.
+    pub hole_error_gate: f64,
     /// `[from, to]` environment steps over which the training overload
     /// limits (`max_force_n`, `max_moment_nm`) fall linearly to the
     /// controller's own, the evaluated fault: from `to` on a training
@@ -130,6 +135,7 @@ impl Default for TrainingAids {
             force_penalty_per_n: 0.0,
             overload_penalty: 0.0,
             hole_error_ramp_steps: 0,
+            hole_error_gate: 0.0,
             overload_ramp_steps: [0, 0],
             lateral_shaping_per_mm: 0.0,
         }
@@ -161,6 +167,20 @@ impl TrainingAids {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(FieldError::new(name, v, "must be finite and >= 0"));
             }
+        }
+        if !(0.0..=1.0).contains(&self.hole_error_gate) {
+            return Err(FieldError::new(
+                "training.hole_error_gate",
+                self.hole_error_gate,
+                "must be a share in 0..1",
+            ));
+        }
+        if self.hole_error_gate > 0.0 && self.hole_error_ramp_steps == 0 {
+            return Err(FieldError::new(
+                "training.hole_error_gate",
+                self.hole_error_gate,
+                "gates the hole error's ramp: set training.hole_error_ramp_steps",
+            ));
         }
         let [from, to] = self.overload_ramp_steps;
         if from > to || (to > 0 && from == to) {

@@ -12,6 +12,7 @@
 //! constant and setting with its source or reason.
 
 pub mod adam;
+pub mod curve;
 pub mod distill;
 pub mod env;
 pub mod export;

@@ -2,42 +2,19 @@
 //! the vectorised fast path with checkpoints, learning curves (CSV and PNG)
 //! and a progress bar; the evaluation of a checkpoint over N episodes.
 
+use super::curve::{CurveError, write_validation_csv};
+pub use super::curve::{CurvePoint, ValidationPoint, write_curves};
 use super::env::{RlEnv, RlEnvError};
 use super::gaussian::GaussianPolicy;
 use super::reward::{Outcome, normalised_return};
 pub use super::run_config::{TrainConfig, ValidationConfig};
-use super::run_config::{outcome_scalars, training_observer};
-use super::train::Algorithm;
-use super::train::{IterationStats, Trainer, TrainerState};
+use super::run_config::{hole_error_share, outcome_scalars, training_observer};
+use super::train::{Trainer, TrainerState};
 use super::value::Baseline;
 use super::vec::{BatchEnv, VecEnv, all_cores, par_map};
-use crate::plot::{Chart, Series};
 use learner_node::progress::Progress;
 use serde::{Deserialize, Serialize};
-use std::io::Write;
 use std::path::{Path, PathBuf};
-
-/// One validation's result.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ValidationPoint {
-    /// The update validated.
-    pub iteration: u64,
-    /// Environment steps then.
-    pub env_steps: u64,
-    /// Share in each outcome category ([`Outcome::ALL`] order).
-    pub outcomes: [f64; 4],
-    /// Mean normalised episode reward.
-    pub mean_normalised: f64,
-}
-
-impl ValidationPoint {
-    /// Whether it beats `other`: more completed insertions, then a higher
-    /// reward.
-    pub(crate) fn beats(&self, other: &ValidationPoint) -> bool {
-        let c = Outcome::CompletedInsertion.index();
-        (self.outcomes[c], self.mean_normalised) > (other.outcomes[c], other.mean_normalised)
-    }
-}
 
 /// The best validated policy.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -181,48 +158,6 @@ fn window_mean(points: &[CurvePoint]) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
-/// One point of the learning curves.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CurvePoint {
-    /// Update number.
-    pub iteration: u64,
-    /// Environment steps so far.
-    pub env_steps: u64,
-    /// Episodes finished in the update's batch.
-    pub episodes: usize,
-    /// Their mean reward (None: none finished; JSON has no NaN, so a NaN
-    /// here made the checkpoint unreadable).
-    pub mean_return: Option<f64>,
-    /// Their mean normalised reward.
-    pub mean_normalised: Option<f64>,
-    /// Share in each outcome category ([`Outcome::ALL`] order).
-    pub outcomes: [f64; 4],
-    /// KL of the update.
-    pub kl: f64,
-    /// Mean σ of the policy.
-    pub mean_std: f64,
-    /// The share of the batch's λ-returns the baseline explained before
-    /// its fit (absent from runs before it was recorded: 0).
-    #[serde(default)]
-    pub baseline_explained: f64,
-}
-
-impl CurvePoint {
-    fn from_stats(s: &IterationStats) -> Self {
-        Self {
-            iteration: s.iteration,
-            env_steps: s.env_steps,
-            episodes: s.episodes.len(),
-            mean_return: s.mean_return(),
-            mean_normalised: s.mean_normalised(),
-            outcomes: s.outcome_shares(),
-            kl: s.update.kl,
-            mean_std: s.mean_std,
-            baseline_explained: s.baseline_explained,
-        }
-    }
-}
-
 /// Why a run failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -248,6 +183,9 @@ pub enum RunError {
     /// A chart could not be drawn.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// The learning curves could not be written.
+    #[error(transparent)]
+    Curve(#[from] CurveError),
     /// Stopped (Ctrl-C) before it was done.
     #[error("stopped before the evaluation was done")]
     Stopped,
@@ -507,14 +445,18 @@ pub fn train(
             break;
         }
         if let Some(r) = &ramp {
-            let steps = cfg.env.training.hole_error_ramp_steps as f64;
-            r.set_share(trainer.state.env_steps as f64 / steps);
+            r.set_share(hole_error_share(
+                &cfg.env.training,
+                trainer.state.env_steps,
+                &history,
+            ));
         }
         let share = cfg.env.training.overload_share(trainer.state.env_steps);
         trainer.env().overload_share().set(share);
         let s = trainer.iterate()?;
         episodes += s.episodes.len();
-        let p = CurvePoint::from_stats(&s);
+        let mut p = CurvePoint::from_stats(&s);
+        p.hole_error_std_m = ramp.as_ref().map_or(0.0, |r| r.current_std_m());
         let rate = episodes as f64 / started.elapsed().as_secs_f64().max(1e-9);
         progress.update(
             s.env_steps.min(cfg.env_steps),
@@ -533,6 +475,7 @@ pub fn train(
             ("kl", p.kl),
             ("mean_std", p.mean_std),
             ("baseline_explained", p.baseline_explained),
+            ("hole_error_std_mm", 1e3 * p.hole_error_std_m),
         ];
         let m = p.mean_normalised.unwrap_or(f64::NAN);
         tb.scalars(
@@ -576,102 +519,6 @@ pub fn train(
     }
     progress.finish();
     save(&trainer, &history, &validations, &best_validated)
-}
-
-/// Writes `validation.csv`: one row per validation.
-fn write_validation_csv(out: &Path, points: &[ValidationPoint]) -> Result<(), RunError> {
-    let mut text = String::from(
-        "iteration,env_steps,mean_normalised,completed_insertion,inserted_into_hole,\
-         touched_the_box,failed\n",
-    );
-    for p in points {
-        let o = |x: Outcome| p.outcomes[x.index()];
-        text.push_str(&format!(
-            "{},{},{},{},{},{},{}\n",
-            p.iteration,
-            p.env_steps,
-            p.mean_normalised,
-            o(Outcome::CompletedInsertion),
-            o(Outcome::InsertedIntoHole),
-            o(Outcome::TouchedBox),
-            o(Outcome::Failed)
-        ));
-    }
-    write_atomic(&out.join("validation.csv"), text.as_bytes())
-}
-
-/// Writes `curve.csv` and the two charts of a run.
-pub fn write_curves(
-    out: &Path,
-    history: &[CurvePoint],
-    algorithm: Algorithm,
-) -> Result<(), RunError> {
-    let opt = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
-    let path = out.join("curve.csv");
-    let mut f = std::fs::File::create(&path).map_err(io(&path))?;
-    let mut text = String::from(
-        "iteration,env_steps,episodes,mean_return,mean_normalised,completed_insertion,inserted_into_hole,touched_the_box,failed,kl,mean_std,baseline_explained\n",
-    );
-    for p in history {
-        let o = p.outcomes;
-        text += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            p.iteration,
-            p.env_steps,
-            p.episodes,
-            opt(p.mean_return),
-            opt(p.mean_normalised),
-            o[3],
-            o[2],
-            o[1],
-            o[0],
-            p.kl,
-            p.mean_std,
-            p.baseline_explained
-        );
-    }
-    f.write_all(text.as_bytes()).map_err(io(&path))?;
-    let finished: Vec<&CurvePoint> = history.iter().filter(|p| p.episodes > 0).collect();
-    if finished.is_empty() {
-        return Ok(());
-    }
-    // Episode-weighted means over the last SMOOTH updates: an update ends
-    // only a few episodes (the paper's four), too few for a share.
-    const SMOOTH: usize = 20;
-    let pts = |f: &dyn Fn(&CurvePoint) -> f64| {
-        (0..finished.len())
-            .map(|i| {
-                let w = &finished[i.saturating_sub(SMOOTH - 1)..=i];
-                let n: usize = w.iter().map(|p| p.episodes).sum();
-                let m = w.iter().map(|p| f(p) * p.episodes as f64).sum::<f64>() / n as f64;
-                (finished[i].env_steps as f64, m)
-            })
-            .collect::<Vec<_>>()
-    };
-    let name = match algorithm {
-        Algorithm::Trpo => "TRPO",
-        Algorithm::Ppo => "PPO",
-    };
-    Chart::new(
-        &format!("{name}: episode reward"),
-        "environment steps (20 Hz policy steps)",
-        "mean normalised episode reward (last 20 updates)",
-    )
-    .with(Series::line(
-        "mean normalised reward",
-        pts(&|p| p.mean_normalised.unwrap_or(f64::NAN)),
-    ))
-    .write_png(out.join("return.png"))?;
-    let mut chart = Chart::new(
-        &format!("{name}: outcome of the episodes"),
-        "environment steps (20 Hz policy steps)",
-        "share of the episodes of the last 20 updates",
-    );
-    for o in Outcome::ALL.into_iter().rev() {
-        chart = chart.with(Series::line(o.name(), pts(&|p| p.outcomes[o.index()])));
-    }
-    chart.write_png(out.join("outcomes.png"))?;
-    Ok(())
 }
 
 /// The result of an evaluation.

@@ -119,6 +119,32 @@ pub(super) fn training_observer(cfg: &TrainConfig) -> Result<TrainingObserver, R
     Ok((observer, Some(r)))
 }
 
+/// The share of the hole error's ramp done after `history` (the updates
+/// so far, `env_steps` steps): the steps over `training.hole_error_ramp_steps`,
+/// or with `training.hole_error_gate` only the steps of updates whose
+/// training episodes completed the insertion at least that often. Derived
+/// from the history alone, so a resumed run goes on where it stopped.
+pub(super) fn hole_error_share(
+    aids: &super::env::TrainingAids,
+    env_steps: u64,
+    history: &[super::curve::CurvePoint],
+) -> f64 {
+    let len = aids.hole_error_ramp_steps.max(1) as f64;
+    if aids.hole_error_gate <= 0.0 {
+        return (env_steps as f64 / len).min(1.0);
+    }
+    let c = super::reward::Outcome::CompletedInsertion.index();
+    let mut before = 0;
+    let mut counted = 0;
+    for p in history {
+        if p.episodes > 0 && p.outcomes[c] >= aids.hole_error_gate {
+            counted += p.env_steps.saturating_sub(before);
+        }
+        before = p.env_steps;
+    }
+    (counted as f64 / len).min(1.0)
+}
+
 /// The scalars a run logs to TensorBoard for one row of its curve or
 /// validation CSV: `extra`, then `{prefix}/mean_normalised` and the share
 /// of each outcome (`{prefix}/completed_insertion`, …).
@@ -139,4 +165,70 @@ pub(super) fn outcome_scalars(
         v.push((format!("{prefix}/{name}"), outcomes[o.index()]));
     }
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::curve::CurvePoint;
+    use super::super::env::TrainingAids;
+    use super::hole_error_share;
+
+    fn point(env_steps: u64, completed: f64) -> CurvePoint {
+        CurvePoint {
+            iteration: env_steps / 1000,
+            env_steps,
+            episodes: 4,
+            mean_return: Some(0.0),
+            mean_normalised: Some(0.0),
+            outcomes: [1.0 - completed, 0.0, 0.0, completed],
+            kl: 0.0,
+            mean_std: 1.0,
+            baseline_explained: 0.0,
+            hole_error_std_m: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_gated_ramp_counts_only_the_updates_that_completed_often_enough() {
+        let mut aids = TrainingAids {
+            hole_error_ramp_steps: 4000,
+            ..TrainingAids::default()
+        };
+        let history = [
+            point(1000, 0.0),
+            point(2000, 0.5),
+            point(3000, 0.2),
+            point(4000, 0.25),
+        ];
+        // Without a gate the share follows the steps.
+        assert_eq!(hole_error_share(&aids, 2000, &history[..2]), 0.5);
+        assert_eq!(hole_error_share(&aids, 8000, &history), 1.0);
+        aids.hole_error_gate = 0.25;
+        assert_eq!(hole_error_share(&aids, 0, &[]), 0.0);
+        assert_eq!(hole_error_share(&aids, 1000, &history[..1]), 0.0);
+        // Updates 2 and 4 reached the gate: 2000 of 4000 steps.
+        assert_eq!(hole_error_share(&aids, 4000, &history), 0.5);
+        // An update that ended no episode does not advance it.
+        let mut idle = point(5000, 1.0);
+        idle.episodes = 0;
+        let mut h = history.to_vec();
+        h.push(idle);
+        assert_eq!(hole_error_share(&aids, 5000, &h), 0.5);
+    }
+
+    #[test]
+    fn a_gate_needs_a_ramp_and_a_share() {
+        let gated = |gate, steps| TrainingAids {
+            hole_error_gate: gate,
+            hole_error_ramp_steps: steps,
+            ..TrainingAids::default()
+        };
+        assert!(gated(0.25, 1000).validate().is_ok());
+        let e = gated(0.25, 0).validate().unwrap_err().to_string();
+        assert!(e.contains("training.hole_error_gate"), "{e}");
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let e = gated(bad, 1000).validate().unwrap_err().to_string();
+            assert!(e.contains("training.hole_error_gate"), "{e}");
+        }
+    }
 }
