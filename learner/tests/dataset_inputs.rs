@@ -201,6 +201,12 @@ fn bad_logs_are_skipped_and_named_and_damaged_datasets_refused() {
         .expect_err("refused")
         .to_string();
     assert!(e.contains("episode 0 is in both train and test"), "{e}");
+    // A list out of order or with a repeat: the sample counts bisect it.
+    std::fs::write(&split, r#"{"train": [], "test": [0, 0]}"#).unwrap();
+    let e = learner::train::Split::read(&split, &ds.meta)
+        .expect_err("refused")
+        .to_string();
+    assert!(e.contains("test must list its episodes ascending"), "{e}");
     // A wrench window that matches a shortened table still disagrees with
     // the samples (the loader would copy windows of the wrong length).
     std::fs::write(out.join("wrench.bin"), &wrench[..wrench.len() / 2]).unwrap();

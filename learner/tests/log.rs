@@ -480,3 +480,58 @@ fn recovery_refuses_to_overwrite_its_input() {
     assert!(log::recover(&path, &path).is_err());
     assert_eq!(std::fs::read(&path).unwrap(), before);
 }
+
+/// The most compressible log our writer can be given: the arm at rest
+/// (frames that differ only in their header) and a blank camera (a capped
+/// lens: black, no depth). Its chunks must stay within the reader's bound
+/// on a chunk's compression ratio, or the reader would refuse a log it
+/// wrote itself. Measured (docs/data.md): 187–241× at worst, against
+/// the bound of 1 000×.
+#[test]
+fn a_blank_camera_and_an_arm_at_rest_read_back() {
+    let dir = test_support::scratch_dir("log");
+    for opts in [
+        LogOptions::default(),
+        LogOptions {
+            foxglove: false,
+            ..LogOptions::default()
+        },
+        LogOptions {
+            chunk_bytes: 64 << 20,
+            flush_period_s: 60.0,
+            ..LogOptions::default()
+        },
+    ] {
+        let path = dir.path().join("blank.mcap");
+        let mut w = LogWriter::create_with(&path, opts.clone()).unwrap();
+        let n = 10_000u64;
+        for i in 0..n {
+            let mut f = *SensorFrame::boxed_zeroed();
+            f.header = Header::new(i, 1_000, i * 1_000_000, 1);
+            f.step = i;
+            f.n_joints = 7;
+            f.ee_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
+            w.sensor(&f).unwrap();
+            if i % 50 == 0 {
+                let mut c = CameraFrame::boxed_zeroed();
+                c.header = Header::new(i / 50, 5, i * 1_000_000, 1);
+                c.index = i / 50;
+                c.calibration.width = 128;
+                c.calibration.height = 128;
+                c.calibration.focal_px = 154.5;
+                c.calibration.principal_px = [64.0, 64.0];
+                c.calibration.pose_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
+                w.camera(&c).unwrap();
+            }
+        }
+        w.finish().unwrap();
+        let r = LogReader::open(&path).unwrap_or_else(|e| panic!("{opts:?}: {e}"));
+        let back: Vec<SensorFrame> = r
+            .read_raw(topics::SENSOR, None)
+            .unwrap_or_else(|e| panic!("{opts:?}: {e}"));
+        assert_eq!(back.len() as u64, n, "{opts:?}");
+        let cams = r.read_camera(None).unwrap();
+        assert_eq!(cams.len() as u64, n / 50, "{opts:?}");
+        std::fs::remove_file(&path).unwrap();
+    }
+}

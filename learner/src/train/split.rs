@@ -72,11 +72,18 @@ impl Split {
                 "episode {e} is not in the dataset: another dataset than the run's?"
             )));
         }
+        // `samples` searches the lists by bisection: each must ascend, each
+        // episode once.
+        for (name, list) in [("train", &split.train), ("test", &split.test)] {
+            if let Some(w) = list.windows(2).find(|w| w[0] >= w[1]) {
+                return Err(bad(format!(
+                    "{name} must list its episodes ascending, each once: {} before {}",
+                    w[0], w[1]
+                )));
+            }
+        }
         // Held-out accuracy is only held out if no episode is in both.
         let train: std::collections::HashSet<u32> = split.train.iter().copied().collect();
-        if train.len() != split.train.len() {
-            return Err(bad("an episode is listed twice in train".into()));
-        }
         if let Some(e) = split.test.iter().find(|e| train.contains(e)) {
             return Err(bad(format!(
                 "episode {e} is in both train and test: the test split must be held out"
