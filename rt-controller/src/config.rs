@@ -54,6 +54,10 @@ pub struct ControllerConfig {
     pub qp: QpConfig,
     /// Safety supervisor settings.
     pub safety: SafetyConfig,
+    /// The joint speed limits the QP keeps to and the supervisor faults on:
+    /// `urdf` (constant) or `fr3` (the Franka Research 3's own,
+    /// position-dependent).
+    pub joint_speed_limits: SpeedLimitSource,
 }
 
 impl Default for ControllerConfig {
@@ -66,8 +70,24 @@ impl Default for ControllerConfig {
             osc: OscConfig::default(),
             qp: QpConfig::default(),
             safety: SafetyConfig::default(),
+            joint_speed_limits: Default::default(),
         }
     }
+}
+
+/// Which joint speed limits the controller keeps to and faults on (TOML
+/// `joint_speed_limits`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedLimitSource {
+    /// The URDF's `velocity` of each joint, the same at every position.
+    #[default]
+    Urdf,
+    /// The Franka Research 3's position-dependent limits, as Franka's FCI
+    /// documentation ("Limits for Franka Research 3") and libfranka's
+    /// `computeUpperLimitsJointVelocity` / `computeLowerLimitsJointVelocity`
+    /// (`include/franka/rate_limiting.h`) give them.
+    Fr3,
 }
 
 /// What a policy step is added to (TOML `trajectory.target`).
@@ -301,7 +321,9 @@ pub struct SafetyConfig {
     pub max_moment_nm: f64,
     /// Fault when a joint is this far past its position limit, rad.
     pub position_limit_tolerance_rad: f64,
-    /// Fault when a joint's speed exceeds its limit times this factor.
+    /// Fault when a joint's speed exceeds its limit (`joint_speed_limits`,
+    /// at its position) times this factor. At most 1 on a Franka, whose
+    /// own reflex sits at its limit.
     pub velocity_fault_scale: f64,
     /// Joint damping of the safe command in Fault, N·m·s/rad.
     pub fault_damping_nms: f64,

@@ -37,15 +37,17 @@ pub mod impedance;
 pub mod linalg;
 pub mod osc;
 pub mod qp;
+pub mod speed_limits;
 pub mod supervisor;
 pub mod trajectory;
 
 pub use config::{
     ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, SafetyConfig,
-    TrajectoryConfig, TrajectoryTarget,
+    SpeedLimitSource, TrajectoryConfig, TrajectoryTarget,
 };
 pub use cycle::ControlCycle;
 pub use qp::QpOutcome;
+pub use speed_limits::SpeedLimits;
 pub use supervisor::{Counters, FaultReason, Mode, Rejection, Supervisor, Transition};
 
 use impedance::EeState;
@@ -132,7 +134,7 @@ pub struct Controller {
     ee_frame: FrameId,
     kv: [f64; 6],
     tau_max: DVector<f64>,
-    vel_max: DVector<f64>,
+    speed: SpeedLimits,
     q_lo: DVector<f64>,
     q_hi: DVector<f64>,
 }
@@ -148,7 +150,7 @@ impl Controller {
             kv: config.impedance.effective_kv(),
             ee_frame,
             tau_max: model.effort_limits(),
-            vel_max: model.velocity_limits(),
+            speed: SpeedLimits::new(config.joint_speed_limits, model)?,
             q_lo: model.lower_limits(),
             q_hi: model.upper_limits(),
             config,
@@ -158,6 +160,11 @@ impl Controller {
     /// The validated configuration.
     pub fn config(&self) -> &ControllerConfig {
         &self.config
+    }
+
+    /// The joint speed limits the QP keeps to and the supervisor faults on.
+    pub fn speed_limits(&self) -> &SpeedLimits {
+        &self.speed
     }
 
     /// The controlled frame.
@@ -342,9 +349,10 @@ fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: 
     for i in 0..q.len() {
         let p_hi = 2.0 * (ctrl.q_hi[i] - c.position_margin_rad - q[i] - v[i] * h) / (h * h);
         let p_lo = 2.0 * (ctrl.q_lo[i] + c.position_margin_rad - q[i] - v[i] * h) / (h * h);
-        let vmax = ctrl.vel_max[i] * c.velocity_limit_scale;
-        let v_hi = (vmax - v[i]) / hv;
-        let v_lo = (-vmax - v[i]) / hv;
+        let limit = ctrl.speed.joint(i);
+        let scale = c.velocity_limit_scale;
+        let v_hi = (speed_limits::scaled(limit.upper(q[i]), scale, true) - v[i]) / hv;
+        let v_lo = (speed_limits::scaled(limit.lower(q[i]), scale, false) - v[i]) / hv;
         let (mut lo, mut hi) = (p_lo.max(v_lo), p_hi.min(v_hi));
         if lo > hi {
             // Position limits matter more than speed limits.
@@ -482,7 +490,8 @@ pub fn step(
     let cfg = &ctrl.config;
     let (q, v) = (state.q, state.v);
 
-    let state_check = supervisor::Supervisor::check_state(&cfg.safety, model, q, v, state.wrench);
+    let state_check =
+        supervisor::Supervisor::check_state(&cfg.safety, model, &ctrl.speed, q, v, state.wrench);
     if let Err(supervisor::FaultReason::NonFiniteState) = state_check {
         d.supervisor.raise(FaultReason::NonFiniteState, now);
         safe_command(model, ctrl, d, None);

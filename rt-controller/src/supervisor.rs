@@ -258,11 +258,12 @@ impl Supervisor {
     /// limit: a limit fault never hides a NaN or an infinity in a later
     /// joint (with a limit fault the step still computes the dynamics and
     /// the safe command at this state). Then every joint against its
-    /// position and velocity limits (the first joint at fault is reported),
-    /// then the wrench.
+    /// position limits and its speed limits at its position (`speed`; the
+    /// first joint at fault is reported), then the wrench.
     pub fn check_state(
         cfg: &SafetyConfig,
         model: &Model,
+        speed: &crate::SpeedLimits,
         q: &[f64],
         v: &[f64],
         wrench: Option<&[f64; 6]>,
@@ -277,7 +278,11 @@ impl Supervisor {
             if q < j.limits.lower - tol || q > j.limits.upper + tol {
                 return Err(FaultReason::JointPositionLimit { joint: k, q });
             }
-            if v.abs() > j.limits.velocity * cfg.velocity_fault_scale {
+            let limit = speed.joint(k);
+            let scale = cfg.velocity_fault_scale;
+            let hi = crate::speed_limits::scaled(limit.upper(q), scale, true);
+            let lo = crate::speed_limits::scaled(limit.lower(q), scale, false);
+            if v > hi || v < lo {
                 return Err(FaultReason::JointVelocityLimit { joint: k, v });
             }
         }
@@ -369,8 +374,9 @@ mod tests {
         let cfg = SafetyConfig::default();
         let model = robot_model::descriptions::builtin("panda").unwrap();
         let ok_q = robot_model::descriptions::PANDA_READY_Q;
+        let speed = crate::SpeedLimits::new(crate::SpeedLimitSource::Urdf, &model).unwrap();
         let check = |q: &[f64], v: &[f64], w: Option<&[f64; 6]>| {
-            Supervisor::check_state(&cfg, &model, q, v, w)
+            Supervisor::check_state(&cfg, &model, &speed, q, v, w)
         };
         let mut q = ok_q;
         q[0] = 10.0; // joint 0 far past its limit

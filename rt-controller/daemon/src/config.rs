@@ -2,7 +2,7 @@
 //! real-time settings. Every field is documented and defaulted; unknown
 //! fields are errors and bad values name their dotted field.
 
-use rt_controller::ControllerConfig;
+use rt_controller::{ControllerConfig, SpeedLimitSource};
 use serde::{Deserialize, Serialize};
 use shared_mem_schema::config::{
     ConfigFileError, FieldError, at_least, ensure, non_negative, parse_toml, positive, read_toml,
@@ -422,7 +422,9 @@ impl DaemonConfig {
 
     /// What a daemon that drives a robot needs beyond [`Self::validate`]
     /// (checked once the command line's overrides are in): a Franka's
-    /// faults must survive a restart, so it needs `fault_record`.
+    /// faults must survive a restart, so it needs `fault_record`; its
+    /// supervisor must fault at or below the robot's own speed limits
+    /// (`velocity_fault_scale` ≤ 1, the FR3's position-dependent limits).
     pub fn validate_for_start(&self) -> Result<(), DaemonConfigError> {
         if self.backend.kind == BackendKind::Franka && self.fault_record.is_none() {
             ensure(
@@ -431,6 +433,26 @@ impl DaemonConfig {
                 "none",
                 "is required with backend.kind = \"franka\" (or --fault-record): a fault must \
                  survive a restart",
+            )?;
+        }
+        if self.backend.kind == BackendKind::Franka {
+            // The supervisor must fault before the robot's own reflex,
+            // which sits at the robot's speed limits.
+            let scale = self.controller.safety.velocity_fault_scale;
+            ensure(
+                scale <= 1.0,
+                "controller.safety.velocity_fault_scale",
+                scale,
+                "must be at most 1 with backend.kind = \"franka\" (the robot faults at its \
+                 own limit)",
+            )?;
+            let fr3 = self.backend.franka.generation == FrankaGeneration::Fr3;
+            ensure(
+                !fr3 || self.controller.joint_speed_limits == SpeedLimitSource::Fr3,
+                "controller.joint_speed_limits",
+                format_args!("{:?}", self.controller.joint_speed_limits),
+                "must be \"fr3\" with backend.franka.generation = \"fr3\" (its speed limits \
+                 depend on the joints' positions)",
             )?;
         }
         Ok(())

@@ -1,6 +1,7 @@
 //! Configurations that would remove a protection on a robot are refused by
 //! the field's name: the Franka's torque-rate limit off, no wrench (no
-//! force supervision), unbounded Net F/T time-outs, no fault record.
+//! force supervision), unbounded Net F/T time-outs, no fault record, a
+//! speed fault above the robot's own limits.
 
 use rt_controller_daemon::config::DaemonConfig;
 
@@ -46,4 +47,26 @@ fn a_robot_configuration_that_removes_a_protection_is_refused() {
     let cfg = DaemonConfig::from_toml(text, "test").unwrap();
     let err = cfg.validate_for_start().unwrap_err();
     assert!(err.to_string().contains("fault_record"), "{err}");
+}
+
+#[test]
+fn a_franka_supervisor_that_would_fault_after_the_robot_is_refused() {
+    let speeds = "[controller]\njoint_speed_limits = \"fr3\"\n";
+    let scale = "[controller.safety]\nvelocity_fault_scale = 1.0\n";
+    let start = |text: &str| DaemonConfig::from_toml(&franka(text), "test")?.validate_for_start();
+    start(&format!("{speeds}{scale}")).expect("the FR3's limits, faulting at them");
+    for (extra, field) in [
+        (scale.to_string(), "controller.joint_speed_limits"),
+        (speeds.to_string(), "controller.safety.velocity_fault_scale"),
+        (
+            format!("{speeds}[controller.safety]\nvelocity_fault_scale = 1.01\n"),
+            "controller.safety.velocity_fault_scale",
+        ),
+    ] {
+        let err = start(&extra).expect_err(&extra).to_string();
+        assert!(err.contains(field), "{extra}: {err}");
+    }
+    // A Panda (FER) keeps the URDF's constant limits, but not above them.
+    let fer = "[backend.franka]\ngeneration = \"panda\"\n";
+    start(&format!("{scale}{fer}")).expect("the Panda's constant limits");
 }

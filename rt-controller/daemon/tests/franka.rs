@@ -128,6 +128,9 @@ fn the_daemon_drives_franky_sim() {
 fault_record = "{record}"
 [controller]
 ee_frame = "fr3_hand_tcp"
+joint_speed_limits = "fr3"
+[controller.safety]
+velocity_fault_scale = 1.0
 [backend]
 kind = "franka"
 namespace = "{ns}"

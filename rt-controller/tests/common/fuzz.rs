@@ -350,8 +350,9 @@ pub fn check(case: &Case) -> Result<(), TestCaseError> {
             latched = Some(code);
         }
         // The state check agrees with this model of it.
-        let checked =
-            Supervisor::check_state(&cfg.safety, model, &s.q[..nv], &s.v[..nv], Some(&s.wrench));
+        let speed = cc.controller().speed_limits();
+        let (q, v) = (&s.q[..nv], &s.v[..nv]);
+        let checked = Supervisor::check_state(&cfg.safety, model, speed, q, v, Some(&s.wrench));
         prop_assert_eq!(checked.err().map(|r| fault_code(Some(r))), from_state);
         prev_cmd.copy_from_slice(tau);
         prev_state = s;
