@@ -155,6 +155,10 @@ pub struct FrankaBackend<'r> {
     seq: u64,
     last_command_seq: u64,
     finished: bool,
+    /// A read or write failed in the loop: the control handle is kept, not
+    /// dropped there (dropping it cancels the motion over TCP and blocks),
+    /// and [`Hardware::finish`] drops it outside the real-time section.
+    failed: bool,
     /// Lowest `control_command_success_rate` the robot reported (1: no
     /// command missed in its window).
     pub min_success_rate: f64,
@@ -218,6 +222,7 @@ impl<'r> FrankaBackend<'r> {
             seq: 0,
             last_command_seq: 0,
             finished: false,
+            failed: false,
             min_success_rate: 1.0,
             netft: wrench_sensor,
         })
@@ -374,7 +379,7 @@ impl Hardware for FrankaBackend<'_> {
     }
 
     fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
-        if self.finished {
+        if self.finished || self.failed {
             return Ok(None);
         }
         let control = match &mut self.control {
@@ -394,9 +399,10 @@ impl Hardware for FrankaBackend<'_> {
         let (s, _since_last) = match control.read_once() {
             Ok(r) => r,
             Err(e) => {
-                // The motion is over on the robot's side; dropping the
-                // handle cancels it on ours.
-                self.control = None;
+                // The motion is over on the robot's side; `finish` drops
+                // the handle (cancelling it on ours) once the loop has
+                // left the real-time section.
+                self.failed = true;
                 return Err(robot_error(&e, "reading the robot state"));
             }
         };
@@ -412,7 +418,7 @@ impl Hardware for FrankaBackend<'_> {
 
     fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError> {
         // One command per state: a repeated send has nothing to answer.
-        if !self.pending || self.control.is_none() {
+        if !self.pending || self.control.is_none() || self.failed {
             return Ok(());
         }
         self.pending = false;
@@ -425,7 +431,7 @@ impl Hardware for FrankaBackend<'_> {
             }
         });
         written.map_err(|e| {
-            self.control = None;
+            self.failed = true;
             robot_error(&e, "sending torques")
         })
     }
@@ -435,6 +441,12 @@ impl Hardware for FrankaBackend<'_> {
             return Ok(());
         };
         self.finished = true;
+        if self.failed {
+            // Cancels the motion (a blocking TCP request), here outside
+            // the real-time section.
+            drop(control);
+            return Ok(());
+        }
         if !self.pending {
             control
                 .read_once()
@@ -707,5 +719,24 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_watchdog_outlasts_the_robots_udp_time_out() {
+        // A silent robot ends `read_once` after franka-rs's fixed UDP
+        // time-out with fault 104, its record and final status; the
+        // shipped unit's watchdog must not kill the daemon first.
+        let unit = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../deploy/rt-controller.service");
+        let text = std::fs::read_to_string(&unit).unwrap();
+        let value = text
+            .lines()
+            .filter_map(|l| l.strip_prefix("WatchdogSec="))
+            .next_back()
+            .expect("WatchdogSec");
+        let watchdog_s: f64 = value.trim_end_matches('s').parse().expect(value);
+        let udp_s = franka::network::DEFAULT_UDP_TIMEOUT.as_secs_f64();
+        // Half a second for the last feed's age and the fault's write.
+        assert!(watchdog_s >= udp_s + 0.5, "WatchdogSec={value}, UDP {udp_s} s");
     }
 }
