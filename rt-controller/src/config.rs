@@ -77,7 +77,7 @@ impl Default for ControllerConfig {
 
 /// Which joint speed limits the controller keeps to and faults on (TOML
 /// `joint_speed_limits`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SpeedLimitSource {
     /// The URDF's `velocity` of each joint, the same at every position.
@@ -86,8 +86,30 @@ pub enum SpeedLimitSource {
     /// The Franka Research 3's position-dependent limits, as Franka's FCI
     /// documentation ("Limits for Franka Research 3") and libfranka's
     /// `computeUpperLimitsJointVelocity` / `computeLowerLimitsJointVelocity`
-    /// (`include/franka/rate_limiting.h`) give them.
+    /// (`include/franka/rate_limiting.h`) give them. On a Franka the daemon
+    /// replaces them by the robot's own ([`SpeedLimitSource::Ramps`]).
     Fr3,
+    /// Position-dependent limits of that form with each joint's own values,
+    /// in joint order (TOML `{ ramps = [{ q_lo = …, q_hi = …, v_max = …,
+    /// offset = …, decel = … }, …] }`): what an FR3 serves in its URDF.
+    Ramps(Vec<RampLimit>),
+}
+
+/// One joint's position-dependent speed limit: towards a stop `d` away at
+/// most `−offset + √(2·decel·d)`, and never above `v_max`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RampLimit {
+    /// Lower position limit of the ramp, rad.
+    pub q_lo: f64,
+    /// Upper position limit of the ramp, rad.
+    pub q_hi: f64,
+    /// Largest speed, rad/s.
+    pub v_max: f64,
+    /// Speed offset, rad/s.
+    pub offset: f64,
+    /// Deceleration, rad/s².
+    pub decel: f64,
 }
 
 /// What a policy step is added to (TOML `trajectory.target`).
@@ -322,8 +344,8 @@ pub struct SafetyConfig {
     /// Fault when a joint is this far past its position limit, rad.
     pub position_limit_tolerance_rad: f64,
     /// Fault when a joint's speed exceeds its limit (`joint_speed_limits`,
-    /// at its position) times this factor. At most 1 on a Franka, whose
-    /// own reflex sits at its limit.
+    /// at its position) times this factor; above `qp.velocity_limit_scale`.
+    /// Below 1 on a Franka, whose own reflex sits at its limit.
     pub velocity_fault_scale: f64,
     /// Joint damping of the safe command in Fault, N·m·s/rad.
     pub fault_damping_nms: f64,
@@ -435,8 +457,9 @@ impl ControllerConfig {
         check(
             "safety.velocity_fault_scale",
             s.velocity_fault_scale,
-            s.velocity_fault_scale >= 1.0,
-            "must be finite and >= 1",
+            s.velocity_fault_scale.is_finite()
+                && s.velocity_fault_scale > self.qp.velocity_limit_scale,
+            "must be finite and above qp.velocity_limit_scale (the QP keeps below it)",
         )?;
         non_negative("safety.fault_damping_nms", s.fault_damping_nms)?;
         for (i, j) in model.joints.iter().enumerate().skip(1) {

@@ -42,7 +42,7 @@ pub mod supervisor;
 pub mod trajectory;
 
 pub use config::{
-    ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, SafetyConfig,
+    ConfigError, ControllerConfig, ImpedanceConfig, OscConfig, QpConfig, RampLimit, SafetyConfig,
     SpeedLimitSource, TrajectoryConfig, TrajectoryTarget,
 };
 pub use cycle::ControlCycle;
@@ -150,7 +150,7 @@ impl Controller {
             kv: config.impedance.effective_kv(),
             ee_frame,
             tau_max: model.effort_limits(),
-            speed: SpeedLimits::new(config.joint_speed_limits, model)?,
+            speed: SpeedLimits::new(&config.joint_speed_limits, model)?,
             q_lo: model.lower_limits(),
             q_hi: model.upper_limits(),
             config,
@@ -349,7 +349,9 @@ fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: 
     for i in 0..q.len() {
         let p_hi = 2.0 * (ctrl.q_hi[i] - c.position_margin_rad - q[i] - v[i] * h) / (h * h);
         let p_lo = 2.0 * (ctrl.q_lo[i] + c.position_margin_rad - q[i] - v[i] * h) / (h * h);
-        let limit = ctrl.speed.joint(i);
+        let Some(limit) = ctrl.speed.joint(i) else {
+            continue;
+        };
         let scale = c.velocity_limit_scale;
         let v_hi = (speed_limits::scaled(limit.upper(q[i]), scale, true) - v[i]) / hv;
         let v_lo = (speed_limits::scaled(limit.lower(q[i]), scale, false) - v[i]) / hv;

@@ -5,9 +5,9 @@
 //! acts before the robot's own reflex does. Built once; evaluating a limit
 //! is a few flops and never allocates.
 
-use crate::config::{ConfigError, SpeedLimitSource};
+use crate::config::{ConfigError, RampLimit, SpeedLimitSource};
 use robot_model::Model;
-use shared_mem_schema::config::FieldError;
+use shared_mem_schema::config::{FieldError, check, non_negative, positive};
 
 /// Near a position limit a joint may move towards it no faster than lets it
 /// stop there: `−offset + √(2·decel·distance)`, capped by the joint's
@@ -49,6 +49,20 @@ impl JointSpeedLimit {
         }
     }
 
+    /// The robot's own largest velocity at `q`, where its reflex sits:
+    /// [`Self::upper`] without the margin, and never below zero, so that a
+    /// joint at rest right at its stop is no fault.
+    pub fn robot_upper(&self, q: f64) -> f64 {
+        let margin = self.ramp.map_or(0.0, |r| r.margin);
+        (self.upper(q) + margin).max(0.0)
+    }
+
+    /// The robot's own smallest velocity at `q` (see [`Self::robot_upper`]).
+    pub fn robot_lower(&self, q: f64) -> f64 {
+        let margin = self.ramp.map_or(0.0, |r| r.margin);
+        (self.lower(q) - margin).min(0.0)
+    }
+
     /// Smallest (most negative) allowed velocity at position `q`.
     pub fn lower(&self, q: f64) -> f64 {
         match self.ramp {
@@ -72,23 +86,33 @@ pub fn scaled(limit: f64, scale: f64, upper: bool) -> f64 {
     }
 }
 
-/// The FR3's joints: position limits, largest speed, offset and
-/// deceleration of Franka's documented limits (the numbers of libfranka
-/// 0.10–0.15's `rate_limiting.h`, where `2·decel` appears folded in: 12.0,
-/// 5.17, 7.00, 8.00, 34.0, 11.0, 34.0).
-const FR3: [(f64, f64, f64, f64, f64); 7] = [
-    (-2.7501, 2.7501, 2.62, 0.30, 6.0),
-    (-1.7918, 1.7918, 2.62, 0.20, 2.585),
-    (-2.9065, 2.9065, 2.62, 0.20, 3.5),
-    (-3.0481, -0.1458, 2.62, 0.30, 4.0),
-    (-2.8101, 2.8101, 5.26, 0.35, 17.0),
-    (0.54092, 4.5205, 4.18, 0.35, 5.5),
-    (-3.0196, 3.0196, 5.26, 0.35, 17.0),
+/// The FR3's limits as Franka documents them (libfranka 0.10–0.15's
+/// `rate_limiting.h`, where `2·decel` appears folded in: 12.0, 5.17, 7.00,
+/// 8.00, 34.0, 11.0, 34.0).
+pub const FR3_RAMPS: [RampLimit; 7] = [
+    ramp(-2.7501, 2.7501, 2.62, 0.30, 6.0),
+    ramp(-1.7918, 1.7918, 2.62, 0.20, 2.585),
+    ramp(-2.9065, 2.9065, 2.62, 0.20, 3.5),
+    ramp(-3.0481, -0.1458, 2.62, 0.30, 4.0),
+    ramp(-2.8101, 2.8101, 5.26, 0.35, 17.0),
+    ramp(0.54092, 4.5205, 4.18, 0.35, 5.5),
+    ramp(-3.0196, 3.0196, 5.26, 0.35, 17.0),
 ];
 
+const fn ramp(q_lo: f64, q_hi: f64, v_max: f64, offset: f64, decel: f64) -> RampLimit {
+    RampLimit {
+        q_lo,
+        q_hi,
+        v_max,
+        offset,
+        decel,
+    }
+}
+
 /// libfranka's `kJointVelocityLimitsTolerance` for the FR3 (`kLimitEps`,
-/// no lost-packet allowance), rad/s.
-const FR3_MARGIN: f64 = 1e-3;
+/// no lost-packet allowance), rad/s: the controller keeps this far inside
+/// a position-dependent limit.
+pub const RAMP_MARGIN: f64 = 1e-3;
 
 /// Every joint's speed limit, in the model's joint order.
 #[derive(Debug, Clone, PartialEq)]
@@ -99,57 +123,76 @@ pub struct SpeedLimits {
 impl SpeedLimits {
     /// The limits `source` names for `model`. The FR3's need a model of
     /// the FR3: seven joints whose URDF speeds are the FR3's (a Panda's
-    /// model with the FR3's limits is refused, naming the joint).
-    pub fn new(source: SpeedLimitSource, model: &Model) -> Result<Self, ConfigError> {
+    /// model with the FR3's limits is refused, naming the joint); ramps of
+    /// a robot's own need one per joint, finite, each with `q_lo < q_hi`,
+    /// `v_max` and `decel` positive and `offset` not negative.
+    pub fn new(source: &SpeedLimitSource, model: &Model) -> Result<Self, ConfigError> {
         let urdf = model.velocity_limits();
-        let joints = match source {
-            SpeedLimitSource::Urdf => urdf
-                .iter()
-                .map(|&v_max| JointSpeedLimit { v_max, ramp: None })
-                .collect(),
+        let ramps: &[RampLimit] = match source {
+            SpeedLimitSource::Urdf => {
+                let joints = urdf
+                    .iter()
+                    .map(|&v_max| JointSpeedLimit { v_max, ramp: None })
+                    .collect();
+                return Ok(Self { joints });
+            }
             SpeedLimitSource::Fr3 => {
-                if urdf.len() != FR3.len() {
-                    return Err(ConfigError::WrongLength {
-                        field: "joint_speed_limits (\"fr3\")".into(),
-                        got: FR3.len(),
-                        expected: urdf.len(),
-                    });
-                }
-                let mut joints = Vec::with_capacity(FR3.len());
-                for (k, (&(q_lo, q_hi, v_max, offset, decel), &v)) in
-                    FR3.iter().zip(urdf.iter()).enumerate()
-                {
-                    if (v - v_max).abs() > 1e-6 {
+                for (k, (r, &v)) in FR3_RAMPS.iter().zip(urdf.iter()).enumerate() {
+                    if (v - r.v_max).abs() > 1e-6 {
                         return Err(ConfigError::BadValue(FieldError::new(
                             "joint_speed_limits",
                             "fr3",
                             format!(
                                 "needs the FR3's model: joint {k}'s URDF speed is {v} rad/s, \
-                                 the FR3's {v_max}"
+                                 the FR3's {}",
+                                r.v_max
                             ),
                         )));
                     }
-                    let ramp = Ramp {
-                        q_lo,
-                        q_hi,
-                        offset,
-                        decel,
-                        margin: FR3_MARGIN,
-                    };
-                    joints.push(JointSpeedLimit {
-                        v_max,
-                        ramp: Some(ramp),
-                    });
                 }
-                joints
+                &FR3_RAMPS
             }
+            SpeedLimitSource::Ramps(r) => r,
         };
+        if ramps.len() != urdf.len() {
+            return Err(ConfigError::WrongLength {
+                field: "joint_speed_limits".into(),
+                got: ramps.len(),
+                expected: urdf.len(),
+            });
+        }
+        let mut joints = Vec::with_capacity(ramps.len());
+        for (k, r) in ramps.iter().enumerate() {
+            let field = |name: &str| format!("joint_speed_limits.ramps[{k}].{name}");
+            let ok = [r.q_lo, r.q_hi, r.v_max, r.offset, r.decel]
+                .iter()
+                .all(|x| x.is_finite());
+            check(
+                &field("q_lo"),
+                r.q_lo,
+                ok && r.q_lo < r.q_hi,
+                "must be finite and below q_hi",
+            )?;
+            positive(&field("v_max"), r.v_max)?;
+            non_negative(&field("offset"), r.offset)?;
+            positive(&field("decel"), r.decel)?;
+            joints.push(JointSpeedLimit {
+                v_max: r.v_max,
+                ramp: Some(Ramp {
+                    q_lo: r.q_lo,
+                    q_hi: r.q_hi,
+                    offset: r.offset,
+                    decel: r.decel,
+                    margin: RAMP_MARGIN,
+                }),
+            });
+        }
         Ok(Self { joints })
     }
 
-    /// Joint `k`'s limit.
-    pub fn joint(&self, k: usize) -> &JointSpeedLimit {
-        &self.joints[k]
+    /// Joint `k`'s limit; `None` past the last joint.
+    pub fn joint(&self, k: usize) -> Option<&JointSpeedLimit> {
+        self.joints.get(k)
     }
 
     /// The number of joints.
@@ -169,7 +212,7 @@ mod tests {
     use robot_model::descriptions::{FR3_READY_Q, builtin};
 
     fn fr3() -> SpeedLimits {
-        SpeedLimits::new(SpeedLimitSource::Fr3, &builtin("fr3").unwrap()).unwrap()
+        SpeedLimits::new(&SpeedLimitSource::Fr3, &builtin("fr3").unwrap()).unwrap()
     }
 
     #[test]
@@ -177,21 +220,21 @@ mod tests {
         let l = fr3();
         let caps = [2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26];
         for (k, cap) in caps.iter().enumerate() {
-            let j = l.joint(k);
+            let j = l.joint(k).unwrap();
             // Joint 6's lower limit already ramps at the ready pose (q =
             // 1.57 rad, 1.03 rad from its stop: 0.35 − √(11·1.03)).
-            let mid = 0.5 * (FR3[k].0 + FR3[k].1);
+            let mid = 0.5 * (FR3_RAMPS[k].q_lo + FR3_RAMPS[k].q_hi);
             assert!((j.upper(mid) - (cap - 1e-3)).abs() < 1e-12, "joint {k}");
             assert!((j.lower(mid) + (cap - 1e-3)).abs() < 1e-12, "joint {k}");
         }
         let q5 = FR3_READY_Q[5];
         let want = 0.35 - (11.0 * (q5 - 0.54092)).sqrt() + 1e-3;
-        assert!((l.joint(5).lower(q5) - want).abs() < 1e-12);
+        assert!((l.joint(5).unwrap().lower(q5) - want).abs() < 1e-12);
     }
 
     #[test]
     fn near_a_position_limit_the_fr3_limit_ramps_to_zero_and_past_it() {
-        let j = *fr3().joint(0);
+        let j = *fr3().joint(0).unwrap();
         // libfranka: −0.30 + √(12·(2.7501 − 2.7)) − 0.001.
         let want = -0.30 + (12.0 * (2.7501_f64 - 2.7)).sqrt() - 1e-3;
         assert!((j.upper(2.7) - want).abs() < 1e-12);
@@ -203,16 +246,22 @@ mod tests {
         assert!((j.lower(-2.7) + want).abs() < 1e-12);
         // Moving away from the near stop keeps the full speed.
         assert!((j.lower(2.7) + 2.619).abs() < 1e-12);
+        // The robot's own limit, where the supervisor faults: no margin,
+        // and a joint at rest at its stop is within it.
+        assert!((j.robot_upper(2.7) - (want + 1e-3)).abs() < 1e-12);
+        assert_eq!(j.robot_upper(2.7501), 0.0);
+        assert_eq!(j.robot_lower(-3.0), 0.0);
+        assert_eq!(j.robot_lower(0.0), -2.62);
     }
 
     #[test]
     fn the_urdf_limits_are_constant_and_the_fr3_ones_need_the_fr3() {
         let panda = builtin("panda").unwrap();
-        let l = SpeedLimits::new(SpeedLimitSource::Urdf, &panda).unwrap();
+        let l = SpeedLimits::new(&SpeedLimitSource::Urdf, &panda).unwrap();
         let v0 = panda.velocity_limits()[0];
-        assert_eq!(l.joint(0).upper(10.0), v0);
-        assert_eq!(l.joint(0).lower(-10.0), -v0);
-        let e = SpeedLimits::new(SpeedLimitSource::Fr3, &panda)
+        assert_eq!(l.joint(0).unwrap().upper(10.0), v0);
+        assert_eq!(l.joint(0).unwrap().lower(-10.0), -v0);
+        let e = SpeedLimits::new(&SpeedLimitSource::Fr3, &panda)
             .unwrap_err()
             .to_string();
         assert!(
@@ -220,7 +269,43 @@ mod tests {
             "{e}"
         );
         let iiwa = builtin("iiwa14").unwrap();
-        assert!(SpeedLimits::new(SpeedLimitSource::Fr3, &iiwa).is_err());
+        assert!(SpeedLimits::new(&SpeedLimitSource::Fr3, &iiwa).is_err());
+    }
+
+    #[test]
+    fn a_robots_own_ramps_are_used_and_checked_by_name() {
+        let fr3 = builtin("fr3").unwrap();
+        let mut ramps = FR3_RAMPS.to_vec();
+        // An FR3 that serves a larger offset on joint 0 (as some do).
+        ramps[0].offset = 0.652;
+        let l = SpeedLimits::new(&SpeedLimitSource::Ramps(ramps.clone()), &fr3).unwrap();
+        let want = -0.652 + (12.0 * (2.7501_f64 - 2.7)).sqrt() - 1e-3;
+        assert!((l.joint(0).unwrap().upper(2.7) - want).abs() < 1e-12);
+        for (k, field, bad) in [
+            (2, "q_lo", f64::NAN),
+            (3, "q_lo", 0.0),
+            (4, "v_max", -1.0),
+            (5, "offset", -0.1),
+            (6, "decel", 0.0),
+        ] {
+            let mut r = ramps.clone();
+            match field {
+                "q_lo" if bad == 0.0 => r[k].q_lo = r[k].q_hi + 1.0,
+                "q_lo" => r[k].q_lo = bad,
+                "v_max" => r[k].v_max = bad,
+                "offset" => r[k].offset = bad,
+                _ => r[k].decel = bad,
+            }
+            let e = SpeedLimits::new(&SpeedLimitSource::Ramps(r), &fr3)
+                .unwrap_err()
+                .to_string();
+            let name = format!("joint_speed_limits.ramps[{k}].{field}");
+            assert!(e.contains(&name), "{e}");
+        }
+        let e = SpeedLimits::new(&SpeedLimitSource::Ramps(ramps[..6].to_vec()), &fr3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint_speed_limits") && e.contains('6'), "{e}");
     }
 
     #[test]

@@ -278,11 +278,13 @@ impl Supervisor {
             if q < j.limits.lower - tol || q > j.limits.upper + tol {
                 return Err(FaultReason::JointPositionLimit { joint: k, q });
             }
-            let limit = speed.joint(k);
+            // The robot's own limit at q (a joint without one in `speed`,
+            // which `Controller::new` never builds, gets no speed fault).
+            let Some(limit) = speed.joint(k) else {
+                continue;
+            };
             let scale = cfg.velocity_fault_scale;
-            let hi = crate::speed_limits::scaled(limit.upper(q), scale, true);
-            let lo = crate::speed_limits::scaled(limit.lower(q), scale, false);
-            if v > hi || v < lo {
+            if v > limit.robot_upper(q) * scale || v < limit.robot_lower(q) * scale {
                 return Err(FaultReason::JointVelocityLimit { joint: k, v });
             }
         }
@@ -374,7 +376,7 @@ mod tests {
         let cfg = SafetyConfig::default();
         let model = robot_model::descriptions::builtin("panda").unwrap();
         let ok_q = robot_model::descriptions::PANDA_READY_Q;
-        let speed = crate::SpeedLimits::new(crate::SpeedLimitSource::Urdf, &model).unwrap();
+        let speed = crate::SpeedLimits::new(&crate::SpeedLimitSource::Urdf, &model).unwrap();
         let check = |q: &[f64], v: &[f64], w: Option<&[f64; 6]>| {
             Supervisor::check_state(&cfg, &model, &speed, q, v, w)
         };

@@ -422,9 +422,7 @@ impl DaemonConfig {
 
     /// What a daemon that drives a robot needs beyond [`Self::validate`]
     /// (checked once the command line's overrides are in): a Franka's
-    /// faults must survive a restart, so it needs `fault_record`; its
-    /// supervisor must fault at or below the robot's own speed limits
-    /// (`velocity_fault_scale` ≤ 1, the FR3's position-dependent limits).
+    /// faults must survive a restart, so it needs `fault_record`.
     pub fn validate_for_start(&self) -> Result<(), DaemonConfigError> {
         if self.backend.kind == BackendKind::Franka && self.fault_record.is_none() {
             ensure(
@@ -435,22 +433,31 @@ impl DaemonConfig {
                  survive a restart",
             )?;
         }
+        Ok(())
+    }
+
+    /// What a daemon that moves a Franka needs of the control law (checked
+    /// before the motion, not by the operator's commands): a supervisor
+    /// that faults before the robot's own reflex, at `velocity_fault_scale`
+    /// below 1 of the robot's speed limits, on an FR3 its position-dependent
+    /// ones.
+    pub fn validate_for_motion(&self) -> Result<(), DaemonConfigError> {
         if self.backend.kind == BackendKind::Franka {
             // The supervisor must fault before the robot's own reflex,
             // which sits at the robot's speed limits.
             let scale = self.controller.safety.velocity_fault_scale;
             ensure(
-                scale <= 1.0,
+                scale < 1.0,
                 "controller.safety.velocity_fault_scale",
                 scale,
-                "must be at most 1 with backend.kind = \"franka\" (the robot faults at its \
+                "must be below 1 with backend.kind = \"franka\" (the robot faults at its \
                  own limit)",
             )?;
             let fr3 = self.backend.franka.generation == FrankaGeneration::Fr3;
             ensure(
-                !fr3 || self.controller.joint_speed_limits == SpeedLimitSource::Fr3,
+                !fr3 || self.controller.joint_speed_limits != SpeedLimitSource::Urdf,
                 "controller.joint_speed_limits",
-                format_args!("{:?}", self.controller.joint_speed_limits),
+                "\"urdf\"",
                 "must be \"fr3\" with backend.franka.generation = \"fr3\" (its speed limits \
                  depend on the joints' positions)",
             )?;

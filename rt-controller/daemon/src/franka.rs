@@ -25,11 +25,13 @@ use crate::netft::NetFt;
 use crate::shared::{
     FAULT_ROBOT_COMMUNICATION, FAULT_ROBOT_LIMIT, FAULT_ROBOT_OTHER, FAULT_ROBOT_REFLEX,
 };
+use franka::joint_velocity_limits::PositionBasedJointVelocityLimitConstants;
 use franka::{
     ActiveTorqueControl, FciVersion, FrankaError, MAX_CUTOFF_FREQUENCY, MAX_TORQUE_RATE,
     RealtimeConfig, Robot, RobotOptions, RobotState, Torques, VersionPolicy,
 };
 use robot_model::{Data, Model};
+use rt_controller::RampLimit;
 use shared_mem_schema::process::mono_now_ns;
 use shared_mem_schema::{HardwareState, TorqueCommand};
 
@@ -155,10 +157,10 @@ pub struct FrankaBackend<'r> {
     seq: u64,
     last_command_seq: u64,
     finished: bool,
-    /// A read or write failed in the loop: the control handle is kept, not
+    /// Where the loop's robot I/O failed: the control handle is kept, not
     /// dropped there (dropping it cancels the motion over TCP and blocks),
-    /// and [`Hardware::finish`] drops it outside the real-time section.
-    failed: bool,
+    /// and [`Hardware::finish`] ends it outside the real-time section.
+    failed: IoFailure,
     /// Lowest `control_command_success_rate` the robot reported (1: no
     /// command missed in its window).
     pub min_success_rate: f64,
@@ -222,7 +224,7 @@ impl<'r> FrankaBackend<'r> {
             seq: 0,
             last_command_seq: 0,
             finished: false,
-            failed: false,
+            failed: IoFailure::None,
             min_success_rate: 1.0,
             netft: wrench_sensor,
         })
@@ -284,6 +286,48 @@ impl<'r> FrankaBackend<'r> {
         }
         Ok(out)
     }
+}
+
+/// Where the loop's robot I/O failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum IoFailure {
+    /// Nothing failed.
+    None,
+    /// Reading the robot's state.
+    Read,
+    /// Sending the torques.
+    Write,
+}
+
+/// The joint speed limits the connected FR3 serves in its URDF, which
+/// franka-rs's own rate limiter reads (`JointVelocityLimitsConfig`), in the
+/// controller's form: the daemon keeps to these rather than to the
+/// documented table, since an FR3 may serve other values. A model without
+/// them is a [`HardwareError::Mismatch`] (exit status 2).
+pub fn served_speed_limits(robot: &Robot) -> Result<Vec<RampLimit>, HardwareError> {
+    let urdf = robot
+        .robot_model()
+        .map_err(|e| robot_error(&e, "reading the robot's model"))?;
+    let limits = franka::JointVelocityLimitsConfig::from_urdf(&urdf).map_err(|e| {
+        HardwareError::Mismatch(format!(
+            "the robot's model has no joint speed limits the controller can keep to: {e}"
+        ))
+    })?;
+    Ok(ramps_of(limits.joint_params()))
+}
+
+/// franka-rs's per-joint speed-limit constants as the controller's ramps.
+pub fn ramps_of(params: &[PositionBasedJointVelocityLimitConstants]) -> Vec<RampLimit> {
+    params
+        .iter()
+        .map(|p| RampLimit {
+            q_lo: p.lower_position_limit,
+            q_hi: p.upper_position_limit,
+            v_max: p.max_velocity,
+            offset: p.velocity_offset,
+            decel: p.deceleration_limit,
+        })
+        .collect()
 }
 
 /// Largest difference, N·m on any joint, between the gravity our model
@@ -379,7 +423,7 @@ impl Hardware for FrankaBackend<'_> {
     }
 
     fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError> {
-        if self.finished || self.failed {
+        if self.finished || self.failed != IoFailure::None {
             return Ok(None);
         }
         let control = match &mut self.control {
@@ -402,7 +446,7 @@ impl Hardware for FrankaBackend<'_> {
                 // The motion is over on the robot's side; `finish` drops
                 // the handle (cancelling it on ours) once the loop has
                 // left the real-time section.
-                self.failed = true;
+                self.failed = IoFailure::Read;
                 return Err(robot_error(&e, "reading the robot state"));
             }
         };
@@ -418,7 +462,7 @@ impl Hardware for FrankaBackend<'_> {
 
     fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError> {
         // One command per state: a repeated send has nothing to answer.
-        if !self.pending || self.control.is_none() || self.failed {
+        if !self.pending || self.control.is_none() || self.failed != IoFailure::None {
             return Ok(());
         }
         self.pending = false;
@@ -431,7 +475,7 @@ impl Hardware for FrankaBackend<'_> {
             }
         });
         written.map_err(|e| {
-            self.failed = true;
+            self.failed = IoFailure::Write;
             robot_error(&e, "sending torques")
         })
     }
@@ -441,11 +485,24 @@ impl Hardware for FrankaBackend<'_> {
             return Ok(());
         };
         self.finished = true;
-        if self.failed {
-            // Cancels the motion (a blocking TCP request), here outside
-            // the real-time section.
-            drop(control);
-            return Ok(());
+        match self.failed {
+            IoFailure::None => {}
+            IoFailure::Read => {
+                // The robot ended the motion itself (its error) or went
+                // silent; franka-rs's cancel would wait for a TCP reply
+                // without a time-out. Nothing is cancelled and the process
+                // ends next: the handle is let go as it is.
+                std::mem::forget(control);
+                return Ok(());
+            }
+            IoFailure::Write => {
+                // The robot still runs the motion: cancel it (a blocking
+                // TCP request), here outside the real-time section. Were
+                // it left, the robot's own communication reflex would stop
+                // it within milliseconds of the missing commands.
+                drop(control);
+                return Ok(());
+            }
         }
         if !self.pending {
             control
@@ -737,6 +794,40 @@ mod tests {
         let watchdog_s: f64 = value.trim_end_matches('s').parse().expect(value);
         let udp_s = franka::network::DEFAULT_UDP_TIMEOUT.as_secs_f64();
         // Half a second for the last feed's age and the fault's write.
-        assert!(watchdog_s >= udp_s + 0.5, "WatchdogSec={value}, UDP {udp_s} s");
+        assert!(
+            watchdog_s >= udp_s + 0.5,
+            "WatchdogSec={value}, UDP {udp_s} s"
+        );
+    }
+
+    #[test]
+    fn the_robots_own_limits_become_the_controllers_ramps_unchanged() {
+        // franka-rs's FR3 description: the controller's limits from its
+        // constants must equal franka-rs's own, margin included, over each
+        // joint's range and past both stops.
+        let served = franka::JointVelocityLimitsConfig::from_urdf(franka::model::FR3_URDF).unwrap();
+        let ramps = ramps_of(served.joint_params());
+        let model = robot_model::descriptions::builtin("fr3").unwrap();
+        let ours = rt_controller::SpeedLimits::new(
+            &rt_controller::SpeedLimitSource::Ramps(ramps.clone()),
+            &model,
+        )
+        .unwrap();
+        for k in 0..JOINTS {
+            let (lo, hi) = (ramps[k].q_lo, ramps[k].q_hi);
+            for i in 0..=100 {
+                let mut q = [0.0; JOINTS];
+                q[k] = lo - 0.1 + (hi - lo + 0.2) * f64::from(i) / 100.0;
+                let j = ours.joint(k).unwrap();
+                assert!(
+                    (j.upper(q[k]) - served.upper_limits(&q)[k]).abs() < 1e-12,
+                    "{k} {q:?}"
+                );
+                assert!(
+                    (j.lower(q[k]) - served.lower_limits(&q)[k]).abs() < 1e-12,
+                    "{k} {q:?}"
+                );
+            }
+        }
     }
 }

@@ -3,7 +3,10 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rt_controller_daemon::config::{BackendKind, Clock, DaemonConfig, WrenchSource};
+use rt_controller::SpeedLimitSource;
+use rt_controller_daemon::config::{
+    BackendKind, Clock, DaemonConfig, FrankaGeneration, WrenchSource,
+};
 use rt_controller_daemon::fault_record::{self, FaultRecord, RecordState, RecordUpdate};
 use rt_controller_daemon::rt::{self, Notifier};
 use rt_controller_daemon::rt_alloc::{self, RtAllocator};
@@ -165,6 +168,8 @@ fn run(args: Args) -> Result<i32, Failure> {
         }
         None => {}
     }
+    cfg.validate_for_motion()
+        .map_err(|e| with(exit::CONFIG)(e.into()))?;
     install_termination_handler();
     transport::quiet_logs();
     // Before anything touches the arm: one daemon per record, and none
@@ -313,8 +318,29 @@ fn start_and_drive(
                 },
                 WrenchSource::RobotEstimate | WrenchSource::None => None,
             };
+            // An FR3 limits joint speeds by position, with the values it
+            // serves: the controller keeps to those.
+            let mut cfg = cfg.clone();
+            let documented = cfg.controller.joint_speed_limits == SpeedLimitSource::Fr3;
+            if f.generation == FrankaGeneration::Fr3 && documented {
+                match franka::served_speed_limits(&robot) {
+                    Ok(ramps) => {
+                        let same = ramps.as_slice() == rt_controller::speed_limits::FR3_RAMPS;
+                        info!(
+                            "rt-controller: joint speed limits from the robot's model{}: {ramps:?}",
+                            if same {
+                                " (Franka's documented ones)"
+                            } else {
+                                ""
+                            }
+                        );
+                        cfg.controller.joint_speed_limits = SpeedLimitSource::Ramps(ramps);
+                    }
+                    Err(e) => return Ending::before_ready(e.into()),
+                }
+            }
             match FrankaBackend::new(&robot, f.clone(), &model, wrench_sensor) {
-                Ok(hw) => drive(cfg, model, hw, &node, record, |hw| {
+                Ok(hw) => drive(&cfg, model, hw, &node, record, |hw| {
                     info!(
                         "rt-controller: the robot's lowest control command success rate: {:.3}",
                         hw.min_success_rate

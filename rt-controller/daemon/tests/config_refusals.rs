@@ -52,14 +52,14 @@ fn a_robot_configuration_that_removes_a_protection_is_refused() {
 #[test]
 fn a_franka_supervisor_that_would_fault_after_the_robot_is_refused() {
     let speeds = "[controller]\njoint_speed_limits = \"fr3\"\n";
-    let scale = "[controller.safety]\nvelocity_fault_scale = 1.0\n";
-    let start = |text: &str| DaemonConfig::from_toml(&franka(text), "test")?.validate_for_start();
+    let scale = "[controller.safety]\nvelocity_fault_scale = 0.95\n";
+    let start = |text: &str| DaemonConfig::from_toml(&franka(text), "test")?.validate_for_motion();
     start(&format!("{speeds}{scale}")).expect("the FR3's limits, faulting at them");
     for (extra, field) in [
         (scale.to_string(), "controller.joint_speed_limits"),
         (speeds.to_string(), "controller.safety.velocity_fault_scale"),
         (
-            format!("{speeds}[controller.safety]\nvelocity_fault_scale = 1.01\n"),
+            format!("{speeds}[controller.safety]\nvelocity_fault_scale = 1.0\n"),
             "controller.safety.velocity_fault_scale",
         ),
     ] {

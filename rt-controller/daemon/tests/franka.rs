@@ -130,7 +130,7 @@ fault_record = "{record}"
 ee_frame = "fr3_hand_tcp"
 joint_speed_limits = "fr3"
 [controller.safety]
-velocity_fault_scale = 1.0
+velocity_fault_scale = 0.95
 [backend]
 kind = "franka"
 namespace = "{ns}"
