@@ -19,8 +19,14 @@ fn config(source: SpeedLimitSource, fault_scale: f64) -> ControllerConfig {
 }
 
 /// One step of the FR3 at the ready pose but joint 0 at `q0` moving at
-/// `v0`: the mode after it and joint 0's upper acceleration bound.
-fn one_step(source: SpeedLimitSource, fault_scale: f64, q0: f64, v0: f64) -> (Mode, f64) {
+/// `v0`: the mode after it, joint 0's upper acceleration bound and the
+/// fault, if any.
+fn one_step(
+    source: SpeedLimitSource,
+    fault_scale: f64,
+    q0: f64,
+    v0: f64,
+) -> (Mode, f64, Option<FaultReason>) {
     let model = builtin("fr3").unwrap();
     let ctrl = Controller::new(&model, config(source, fault_scale)).unwrap();
     let mut d = ctrl.create_data(&model);
@@ -35,17 +41,17 @@ fn one_step(source: SpeedLimitSource, fault_scale: f64, q0: f64, v0: f64) -> (Mo
         wrench: None,
     };
     step(&model, &ctrl, &mut d, &state, None, 0.0);
-    (d.mode(), d.acc_hi[0])
+    (d.mode(), d.acc_hi[0], d.supervisor.fault())
 }
 
 #[test]
 fn near_its_stop_the_qp_brakes_a_joint_the_fr3_would_fault_and_the_urdf_would_not() {
     // At 2.5 rad the FR3 allows −0.30 + √(12·0.2501) − 0.001 = 1.431 rad/s
     // towards the stop (0.9 of it: 1.288), the URDF 2.62.
-    let (mode, acc_hi) = one_step(SpeedLimitSource::Fr3, 1.2, 2.5, 1.5);
+    let (mode, acc_hi, _) = one_step(SpeedLimitSource::Fr3, 1.2, 2.5, 1.5);
     assert_ne!(mode, Mode::Fault);
     assert!(acc_hi < -4.0, "must decelerate: {acc_hi}");
-    let (mode, acc_hi) = one_step(SpeedLimitSource::Urdf, 1.2, 2.5, 1.5);
+    let (mode, acc_hi, _) = one_step(SpeedLimitSource::Urdf, 1.2, 2.5, 1.5);
     assert_ne!(mode, Mode::Fault);
     assert!(
         acc_hi > 0.0,
@@ -55,37 +61,32 @@ fn near_its_stop_the_qp_brakes_a_joint_the_fr3_would_fault_and_the_urdf_would_no
 
 #[test]
 fn the_supervisor_faults_on_the_fr3_limit_at_the_joints_position() {
-    // At 2.70 rad the FR3 allows 0.474 rad/s towards the stop: 1 rad/s is a
+    // At 2.70 rad the FR3 allows 0.475 rad/s towards the stop: 1 rad/s is a
     // fault with its limits, well inside the URDF's 2.62 rad/s.
-    let model = builtin("fr3").unwrap();
-    let ctrl = Controller::new(&model, config(SpeedLimitSource::Fr3, 1.0)).unwrap();
-    let mut d = ctrl.create_data(&model);
-    let mut q = FR3_READY_Q.to_vec();
-    q[0] = 2.70;
-    let mut v = vec![0.0; 7];
-    v[0] = 1.0;
-    let state = RobotState {
-        q: &q,
-        v: &v,
-        tau_measured: None,
-        wrench: None,
-    };
-    step(&model, &ctrl, &mut d, &state, None, 0.0);
-    assert_eq!(d.mode(), Mode::Fault);
+    let (mode, _, fault) = one_step(SpeedLimitSource::Fr3, 0.95, 2.70, 1.0);
+    assert_eq!(mode, Mode::Fault);
     assert!(
         matches!(
-            d.supervisor.fault(),
+            fault,
             Some(FaultReason::JointVelocityLimit { joint: 0, .. })
         ),
-        "{:?}",
-        d.supervisor.fault()
+        "{fault:?}"
     );
-    // Moving away from that stop at the same speed is fine.
-    let (mode, _) = one_step(SpeedLimitSource::Fr3, 1.0, 2.70, -1.0);
-    assert_ne!(mode, Mode::Fault);
+    // Moving away from that stop at the same speed is fine, and so is a
+    // joint at rest right at its stop (the robot's limit there is zero).
+    assert_ne!(
+        one_step(SpeedLimitSource::Fr3, 0.95, 2.70, -1.0).0,
+        Mode::Fault
+    );
+    assert_ne!(
+        one_step(SpeedLimitSource::Fr3, 0.95, 2.7437, 0.0).0,
+        Mode::Fault
+    );
     // With the URDF's limits the same state is no fault.
-    let (mode, _) = one_step(SpeedLimitSource::Urdf, 1.0, 2.70, 1.0);
-    assert_ne!(mode, Mode::Fault);
+    assert_ne!(
+        one_step(SpeedLimitSource::Urdf, 1.0, 2.70, 1.0).0,
+        Mode::Fault
+    );
 }
 
 #[test]
