@@ -318,6 +318,11 @@ enabled = false
         text.contains("stopped (signal 15)"),
         "no stop line; log:\n{text}"
     );
+    // The controller keeps to the speed limits the robot serves.
+    assert!(
+        text.contains("joint speed limits from the robot's model"),
+        "the robot's speed limits were not read; log:\n{text}"
+    );
     // franka-rs allocates nothing per cycle: the loop's only allocations
     // are iceoryx2's, served by the real-time pools.
     assert!(
