@@ -349,12 +349,16 @@ fn acceleration_bounds(ctrl: &Controller, d: &mut ControllerData, q: &[f64], v: 
     for i in 0..q.len() {
         let p_hi = 2.0 * (ctrl.q_hi[i] - c.position_margin_rad - q[i] - v[i] * h) / (h * h);
         let p_lo = 2.0 * (ctrl.q_lo[i] + c.position_margin_rad - q[i] - v[i] * h) / (h * h);
-        let Some(limit) = ctrl.speed.joint(i) else {
-            continue;
-        };
         let scale = c.velocity_limit_scale;
-        let v_hi = (speed_limits::scaled(limit.upper(q[i]), scale, true) - v[i]) / hv;
-        let v_lo = (speed_limits::scaled(limit.lower(q[i]), scale, false) - v[i]) / hv;
+        // `Controller::new` builds a limit per joint; without one only the
+        // position bound would hold.
+        let (v_lo, v_hi) = match ctrl.speed.joint(i) {
+            Some(limit) => (
+                (speed_limits::scaled(limit.lower(q[i]), scale, false) - v[i]) / hv,
+                (speed_limits::scaled(limit.upper(q[i]), scale, true) - v[i]) / hv,
+            ),
+            None => (f64::NEG_INFINITY, f64::INFINITY),
+        };
         let (mut lo, mut hi) = (p_lo.max(v_lo), p_hi.min(v_hi));
         if lo > hi {
             // Position limits matter more than speed limits.
