@@ -9,69 +9,61 @@ use crate::config::{ConfigError, RampLimit, SpeedLimitSource};
 use robot_model::Model;
 use shared_mem_schema::config::{FieldError, check, non_negative, positive};
 
-/// Near a position limit a joint may move towards it no faster than lets it
-/// stop there: `−offset + √(2·decel·distance)`, capped by the joint's
-/// largest speed, less `margin`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Ramp {
-    /// Lower position limit of the ramp, rad (the robot's, not the URDF's).
-    pub q_lo: f64,
-    /// Upper position limit of the ramp, rad.
-    pub q_hi: f64,
-    /// Speed offset, rad/s.
-    pub offset: f64,
-    /// Deceleration, rad/s².
-    pub decel: f64,
-    /// Taken off the limit on both sides (libfranka's
-    /// `kJointVelocityLimitsTolerance`), rad/s.
-    pub margin: f64,
-}
-
 /// One joint's speed limit.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JointSpeedLimit {
-    /// Largest speed anywhere, rad/s.
-    pub v_max: f64,
-    /// The position-dependent part; `None`: constant `±v_max`.
-    pub ramp: Option<Ramp>,
+pub enum JointSpeedLimit {
+    /// `±v_max` at every position, rad/s.
+    Constant(f64),
+    /// Position-dependent: near a stop the joint may move towards it no
+    /// faster than lets it stop there (see [`RampLimit`]); the controller
+    /// keeps [`RAMP_MARGIN`] inside it.
+    Ramp(RampLimit),
 }
 
 impl JointSpeedLimit {
-    /// Largest allowed velocity at position `q` (may be slightly negative
-    /// at the limit: the joint must move back).
-    pub fn upper(&self, q: f64) -> f64 {
-        match self.ramp {
-            None => self.v_max,
-            Some(r) => {
-                let stop = (2.0 * r.decel * (r.q_hi - q)).max(0.0).sqrt();
-                (stop - r.offset).max(0.0).min(self.v_max) - r.margin
+    /// The robot's own (upper, lower) velocity limits at `q`, no margin.
+    fn raw(&self, q: f64) -> (f64, f64) {
+        match *self {
+            Self::Constant(v) => (v, -v),
+            Self::Ramp(r) => {
+                let up = (2.0 * r.decel * (r.q_hi - q)).max(0.0).sqrt();
+                let down = (2.0 * r.decel * (q - r.q_lo)).max(0.0).sqrt();
+                (
+                    (up - r.offset).max(0.0).min(r.v_max),
+                    (r.offset - down).min(0.0).max(-r.v_max),
+                )
             }
         }
     }
 
-    /// The robot's own largest velocity at `q`, where its reflex sits:
-    /// [`Self::upper`] without the margin, and never below zero, so that a
-    /// joint at rest right at its stop is no fault.
+    fn margin(&self) -> f64 {
+        match self {
+            Self::Constant(_) => 0.0,
+            Self::Ramp(_) => RAMP_MARGIN,
+        }
+    }
+
+    /// Largest velocity the controller allows at position `q` (slightly
+    /// negative at the stop of a ramp: the joint must move back).
+    pub fn upper(&self, q: f64) -> f64 {
+        self.raw(q).0 - self.margin()
+    }
+
+    /// Smallest (most negative) velocity the controller allows at `q`.
+    pub fn lower(&self, q: f64) -> f64 {
+        self.raw(q).1 + self.margin()
+    }
+
+    /// The robot's own largest velocity at `q`, where its reflex sits: no
+    /// margin, and never below zero, so that a joint at rest right at its
+    /// stop is no fault.
     pub fn robot_upper(&self, q: f64) -> f64 {
-        let margin = self.ramp.map_or(0.0, |r| r.margin);
-        (self.upper(q) + margin).max(0.0)
+        self.raw(q).0
     }
 
     /// The robot's own smallest velocity at `q` (see [`Self::robot_upper`]).
     pub fn robot_lower(&self, q: f64) -> f64 {
-        let margin = self.ramp.map_or(0.0, |r| r.margin);
-        (self.lower(q) - margin).min(0.0)
-    }
-
-    /// Smallest (most negative) allowed velocity at position `q`.
-    pub fn lower(&self, q: f64) -> f64 {
-        match self.ramp {
-            None => -self.v_max,
-            Some(r) => {
-                let stop = (2.0 * r.decel * (q - r.q_lo)).max(0.0).sqrt();
-                (r.offset - stop).min(0.0).max(-self.v_max) + r.margin
-            }
-        }
+        self.raw(q).1
     }
 }
 
@@ -132,7 +124,7 @@ impl SpeedLimits {
             SpeedLimitSource::Urdf => {
                 let joints = urdf
                     .iter()
-                    .map(|&v_max| JointSpeedLimit { v_max, ramp: None })
+                    .map(|&v_max| JointSpeedLimit::Constant(v_max))
                     .collect();
                 return Ok(Self { joints });
             }
@@ -176,16 +168,7 @@ impl SpeedLimits {
             positive(&field("v_max"), r.v_max)?;
             non_negative(&field("offset"), r.offset)?;
             positive(&field("decel"), r.decel)?;
-            joints.push(JointSpeedLimit {
-                v_max: r.v_max,
-                ramp: Some(Ramp {
-                    q_lo: r.q_lo,
-                    q_hi: r.q_hi,
-                    offset: r.offset,
-                    decel: r.decel,
-                    margin: RAMP_MARGIN,
-                }),
-            });
+            joints.push(JointSpeedLimit::Ramp(*r));
         }
         Ok(Self { joints })
     }
@@ -193,16 +176,6 @@ impl SpeedLimits {
     /// Joint `k`'s limit; `None` past the last joint.
     pub fn joint(&self, k: usize) -> Option<&JointSpeedLimit> {
         self.joints.get(k)
-    }
-
-    /// The number of joints.
-    pub fn len(&self) -> usize {
-        self.joints.len()
-    }
-
-    /// True for a robot without joints.
-    pub fn is_empty(&self) -> bool {
-        self.joints.is_empty()
     }
 }
 
