@@ -281,6 +281,7 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
         for i in 0..7 {
             f.q[i] = 0.1 * i as f64 + 1e-3 * k as f64;
             f.tau_cmd[i] = -(i as f64) - 0.5;
+            f.tau_sent[i] = -(i as f64) - 0.25;
         }
         f.ee_pos_m = [0.5, -0.25, 0.125 + 1e-4 * k as f64];
         f.ee_quat_xyzw = [1.0, 0.0, 0.0, 0.0];
@@ -346,7 +347,8 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
         assert_eq!(f64s(&m["q"]), f.q);
         assert_eq!(f64s(&m["tau_cmd"]), f.tau_cmd);
         assert_eq!(f64s(&m["ee_pos_m"]), f.ee_pos_m);
-        assert_eq!(f64s(&m["wrench"]), f.wrench, "the last field too");
+        assert_eq!(f64s(&m["wrench"]), f.wrench);
+        assert_eq!(f64s(&m["tau_sent"]), f.tau_sent, "the last field too");
     }
     let action = &log[topics::ACTION][0];
     assert_eq!(action["header"]["seq"], 5);

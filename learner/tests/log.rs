@@ -229,11 +229,20 @@ fn another_schema_version_is_refused_by_name() {
     let text = e.to_string();
     assert!(
         text.contains(&format!("schema version {foreign}"))
-            && text.contains(&format!("version {}", shared_mem_schema::SCHEMA_VERSION)),
+            && text.contains(&format!(
+                "versions {} to {}",
+                shared_mem_schema::OLDEST_RECORDED_VERSION,
+                shared_mem_schema::SCHEMA_VERSION
+            )),
         "{text}"
     );
     assert!(text.contains("/controller/sensor"), "{text}");
+    std::fs::remove_file(&path).unwrap();
     // Reading a channel as the wrong struct is a size error, not garbage.
+    let mut w = LogWriter::create(&path).unwrap();
+    w.sensor(&sensor(1)).unwrap();
+    w.finish().unwrap();
+    let r = LogReader::open(&path).unwrap();
     let e = r
         .read_raw::<PolicyAction>(topics::SENSOR, None)
         .unwrap_err();

@@ -246,6 +246,9 @@ impl ControlCycle {
         frame.ee_quat_xyzw = [quat.i, quat.j, quat.k, quat.w];
         frame.ee_twist.copy_from_slice(ee.twist.as_slice());
         frame.wrench = state.wrench;
+        // What the hardware is sent unless its backend changes it (the
+        // daemon's Franka backend overwrites it after sending).
+        frame.tau_sent = cmd.tau;
         info
     }
 }

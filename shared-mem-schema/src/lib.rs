@@ -33,7 +33,7 @@ pub use camera::{CameraCalibration, CameraFrame, MAX_IMAGE_HEIGHT, MAX_IMAGE_WID
 pub use controller::{
     ControllerCommand, ControllerMode, ControllerStatus, HISTOGRAM_BINS, LatencyHistogram,
 };
-pub use message::{Header, Message, SCHEMA_VERSION, write_text};
+pub use message::{Header, Message, OLDEST_RECORDED_VERSION, SCHEMA_VERSION, write_text};
 pub use robot::{HardwareState, MAX_JOINTS, PolicyAction, SensorFrame, TorqueCommand};
 pub use sim::{EpisodeReport, MAX_CONFIG_BYTES, MAX_MESSAGE_BYTES, SimCommand, Stage};
 

@@ -8,7 +8,13 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the message layout. Bump it whenever any message's layout or
 /// meaning changes; peers built from different versions refuse to talk.
-pub const SCHEMA_VERSION: u32 = 3;
+/// Version 4 appended `tau_sent` to [`crate::SensorFrame`].
+pub const SCHEMA_VERSION: u32 = 4;
+
+/// The oldest schema version whose recorded messages this build still reads
+/// from logs ([`Message::read_recorded`]): what was recorded stays readable.
+/// Live peers must match [`SCHEMA_VERSION`] exactly.
+pub const OLDEST_RECORDED_VERSION: u32 = 3;
 
 /// Bytes of a [`Header`]: every message's layout starts with them.
 pub(crate) const HEADER_BYTES: usize = 40;
@@ -89,6 +95,47 @@ pub trait Message: Pod + ZeroCopySend + core::fmt::Debug {
         let mut b = Self::boxed_zeroed();
         bytemuck::bytes_of_mut(&mut *b).copy_from_slice(bytes);
         Some(b)
+    }
+
+    /// A message of an older schema version (`version`, from
+    /// [`OLDEST_RECORDED_VERSION`] up) whose layout differs from this
+    /// build's, brought to this build's layout; `None` where the bytes are
+    /// not that version's layout. The default: the layout never changed.
+    fn upgrade(_bytes: &[u8], _version: u32) -> Option<Box<Self>> {
+        None
+    }
+
+    /// A recorded message from its bytes, of this build's schema version or
+    /// an older one it still reads (the header keeps the recorded
+    /// version). The error says what does not fit.
+    fn read_recorded(bytes: &[u8]) -> Result<Box<Self>, String> {
+        if bytes.len() < HEADER_BYTES {
+            return Err(format!(
+                "{} bytes, shorter than the {HEADER_BYTES}-byte header",
+                bytes.len()
+            ));
+        }
+        let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_BYTES]);
+        let version = header.schema_version;
+        if !(OLDEST_RECORDED_VERSION..=SCHEMA_VERSION).contains(&version) {
+            return Err(format!(
+                "schema version {version}; this build reads versions \
+                 {OLDEST_RECORDED_VERSION} to {SCHEMA_VERSION}"
+            ));
+        }
+        let upgraded = if version < SCHEMA_VERSION && bytes.len() != size_of::<Self>() {
+            Self::upgrade(bytes, version)
+        } else {
+            None
+        };
+        upgraded.or_else(|| Self::read_from(bytes)).ok_or_else(|| {
+            format!(
+                "{} bytes; {} is {} bytes in schema version {SCHEMA_VERSION}",
+                bytes.len(),
+                Self::NAME,
+                size_of::<Self>()
+            )
+        })
     }
 }
 

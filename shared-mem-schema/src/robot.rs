@@ -126,6 +126,12 @@ pub struct SensorFrame {
     pub ee_twist: [f64; 6],
     /// Wrist wrench in the F/T sensor frame: force (N) then moment (N·m).
     pub wrench: [f64; 6],
+    /// Torques the hardware was sent for this cycle, N·m, as they left the
+    /// daemon: on hw-sim `tau_cmd` itself; on a Franka what crossed the
+    /// wire, after the gravity the robot adds itself was taken off and the
+    /// effort clamp, low-pass filter and rate limiter were applied. NaN in
+    /// a log of schema version 3, which did not record them.
+    pub tau_sent: [f64; MAX_JOINTS],
 }
 
 /// Learner → controller, 20 Hz: the paper's action, a displacement of the
@@ -166,12 +172,86 @@ impl PolicyAction {
 
 message!(HardwareState, topics::HARDWARE_STATE, "HardwareState");
 message!(TorqueCommand, topics::TORQUE_COMMAND, "TorqueCommand");
-message!(SensorFrame, topics::SENSOR, "SensorFrame");
+
+impl Message for SensorFrame {
+    const TOPIC: &'static str = topics::SENSOR;
+    const NAME: &'static str = "SensorFrame";
+    fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// Version 3 had no `tau_sent`, the last field: its bytes are this
+    /// layout's without it, and the torques sent read as NaN (unknown).
+    fn upgrade(bytes: &[u8], version: u32) -> Option<Box<Self>> {
+        let tail = std::mem::offset_of!(SensorFrame, tau_sent);
+        if version != 3 || bytes.len() != tail {
+            return None;
+        }
+        let mut f = Self::boxed_zeroed();
+        bytemuck::bytes_of_mut(&mut *f)[..tail].copy_from_slice(bytes);
+        f.tau_sent = [f64::NAN; MAX_JOINTS];
+        Some(f)
+    }
+}
 message!(PolicyAction, topics::ACTION, "PolicyAction");
 
 // Layouts (`Pod` rejects padding; these pin the sizes).
 const J: usize = 8 * MAX_JOINTS;
 const _: () = assert!(size_of::<HardwareState>() == H + 16 + 8 + 3 * J + 48);
 const _: () = assert!(size_of::<TorqueCommand>() == H + 16 + 8 + J);
-const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 16 + 4 * J + 8 * 19);
+const _: () = assert!(size_of::<SensorFrame>() == H + 16 + 16 + 5 * J + 8 * 19);
 const _: () = assert!(size_of::<PolicyAction>() == H + 8 + 32);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::message::{OLDEST_RECORDED_VERSION, SCHEMA_VERSION};
+
+    fn frame() -> SensorFrame {
+        let mut f = *SensorFrame::boxed_zeroed();
+        f.header = Header::new(7, 1, 2, 3);
+        f.step = 11;
+        f.q[6] = 0.5;
+        f.tau_cmd[1] = -4.0;
+        f.wrench[5] = 0.25;
+        f.tau_sent[1] = -3.5;
+        f
+    }
+
+    #[test]
+    fn a_version_3_sensor_frame_reads_with_unknown_torques_sent() {
+        let mut f = frame();
+        f.header.schema_version = OLDEST_RECORDED_VERSION;
+        let tail = std::mem::offset_of!(SensorFrame, tau_sent);
+        let old = SensorFrame::read_recorded(&f.as_bytes()[..tail]).unwrap();
+        assert_eq!(old.header, f.header);
+        assert_eq!((old.step, old.q, old.tau_cmd), (f.step, f.q, f.tau_cmd));
+        assert_eq!(old.wrench, f.wrench);
+        assert!(old.tau_sent.iter().all(|t| t.is_nan()));
+    }
+
+    #[test]
+    fn this_versions_frame_reads_whole_and_others_are_refused_by_version() {
+        let f = frame();
+        assert_eq!(*SensorFrame::read_recorded(f.as_bytes()).unwrap(), f);
+        let tail = std::mem::offset_of!(SensorFrame, tau_sent);
+        // This version's frame cut short is a size error, not an upgrade.
+        let e = SensorFrame::read_recorded(&f.as_bytes()[..tail]).unwrap_err();
+        assert!(e.contains("bytes"), "{e}");
+        for v in [OLDEST_RECORDED_VERSION - 1, SCHEMA_VERSION + 1] {
+            let mut g = f;
+            g.header.schema_version = v;
+            let e = SensorFrame::read_recorded(g.as_bytes()).unwrap_err();
+            assert!(e.contains(&format!("schema version {v}")), "{e}");
+        }
+        let e = SensorFrame::read_recorded(&f.as_bytes()[..10]).unwrap_err();
+        assert!(e.contains("header"), "{e}");
+    }
+
+    #[test]
+    fn messages_whose_layout_did_not_change_read_from_the_oldest_version() {
+        let mut a = PolicyAction::new(5, 1, [0.001, 0.0, -0.002, 0.01]);
+        a.header.schema_version = OLDEST_RECORDED_VERSION;
+        assert_eq!(*PolicyAction::read_recorded(a.as_bytes()).unwrap(), a);
+    }
+}

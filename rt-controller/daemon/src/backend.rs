@@ -55,6 +55,13 @@ pub trait Hardware {
     fn poll(&mut self) -> Result<Option<&HardwareState>, HardwareError>;
     /// Sends a torque command.
     fn send(&mut self, cmd: &TorqueCommand) -> Result<(), HardwareError>;
+    /// The joint torques the last [`Hardware::send`] put on the wire, N·m,
+    /// where the backend changes the command's `tau` on the way (the
+    /// Franka's gravity, filter and rate limiter); `None` where it sends
+    /// `tau` as it is. The sensor frame's `tau_sent` records it.
+    fn sent_torques(&self) -> Option<&[f64]> {
+        None
+    }
     /// Ends the control session after the loop's last command (the
     /// shutdown hold's end), or after the loop ended in an error; called
     /// outside the real-time section. The Franka backend finishes its

@@ -557,6 +557,11 @@ impl<H: Hardware> Daemon<H> {
         let sent = mono_now_ns();
         self.last_command.header.t_mono_ns = sent;
         self.hw.send(&self.last_command)?;
+        if let Some(tau) = self.hw.sent_torques() {
+            // What the backend made of the command (a copy, no allocation).
+            let n = tau.len().min(self.sensor.tau_sent.len());
+            self.sensor.tau_sent[..n].copy_from_slice(&tau[..n]);
+        }
         // Silence counts from the command the hardware answers: a lockstep
         // wait for the policy's action above can be long, and the hardware
         // cannot step before it has the command.

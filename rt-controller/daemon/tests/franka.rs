@@ -211,6 +211,19 @@ enabled = false
     // The impedance holds the pose; a gravity model that did not match the
     // robot's would sag by tenths of a radian.
     assert!(drift < 0.02, "joints drifted {drift} rad while holding");
+    // The frame records what went to the robot: the control law's torques
+    // less the gravity the robot adds itself (tens of N·m at the shoulder
+    // while holding), within the FR3's effort limits, nothing past joint 7.
+    let (cmd, sent) = (last.tau_cmd, last.tau_sent);
+    assert!(
+        sent[..7].iter().all(|t| t.is_finite() && t.abs() <= 87.0) && sent[7] == 0.0,
+        "tau_sent {sent:?}"
+    );
+    let gravity_off = (0..7).map(|i| (cmd[i] - sent[i]).abs()).fold(0.0, f64::max);
+    assert!(
+        gravity_off > 1.0,
+        "tau_sent {sent:?} is the control law's tau_cmd {cmd:?}: not what the robot was sent"
+    );
 
     // Follow ten 5 mm steps up (+z), one per 50 ms of the robot's time,
     // each answering the newest frame.

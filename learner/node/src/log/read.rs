@@ -9,7 +9,9 @@
 use super::walk::{OP_CHUNK, Salvage, ScanReport, check_summary_crc, chunk_records, walk_all};
 use super::{CAMERA_ENCODING, RAW_ENCODING, ros2, topics};
 use mcap::records::Record;
-use shared_mem_schema::{CameraCalibration, CameraFrame, Header, Message, SCHEMA_VERSION};
+use shared_mem_schema::{
+    CameraCalibration, CameraFrame, Header, Message, OLDEST_RECORDED_VERSION, SCHEMA_VERSION,
+};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -181,9 +183,12 @@ impl CameraImage {
             ));
         }
         let header: Header = bytemuck::pod_read_unaligned(&data[..size_of::<Header>()]);
-        if header.schema_version != SCHEMA_VERSION {
+        // The camera frame's layout is unchanged since the oldest version
+        // read.
+        if !(OLDEST_RECORDED_VERSION..=SCHEMA_VERSION).contains(&header.schema_version) {
             return Err(format!(
-                "camera frame of schema version {}, this build reads version {SCHEMA_VERSION}",
+                "camera frame of schema version {}, this build reads versions \
+                 {OLDEST_RECORDED_VERSION} to {SCHEMA_VERSION}",
                 header.schema_version
             ));
         }
@@ -570,7 +575,8 @@ impl LogReader {
     }
 
     /// The raw struct messages of `T`'s channel at `topic`, checked: size
-    /// and schema version must be this build's.
+    /// and schema version must be this build's or an older one it reads
+    /// ([`Message::read_recorded`]).
     pub fn read_raw<T: Message>(
         &self,
         topic: &str,
@@ -593,30 +599,9 @@ impl LogReader {
             } else {
                 &m.data[..]
             };
-            let v = T::read_from(bytes).ok_or_else(|| {
-                self.content_err(
-                    topic,
-                    format!(
-                        "message {} has {} bytes; {} is {} bytes in schema version \
-                         {SCHEMA_VERSION}",
-                        m.sequence,
-                        bytes.len(),
-                        T::NAME,
-                        size_of::<T>()
-                    ),
-                )
+            let v = T::read_recorded(bytes).map_err(|what| {
+                self.content_err(topic, format!("message {}: {what}", m.sequence))
             })?;
-            let version = v.header().schema_version;
-            if version != SCHEMA_VERSION {
-                return Err(self.content_err(
-                    topic,
-                    format!(
-                        "message {} is of schema version {version}; this build reads version \
-                         {SCHEMA_VERSION}",
-                        m.sequence
-                    ),
-                ));
-            }
             out.push(*v);
         }
         Ok(out)

@@ -118,6 +118,7 @@ pub static SENSOR_FRAME: MsgDef = MsgDef {
         ("ee_quat_xyzw", Array(F64, 4)),
         ("ee_twist", Array(F64, 6)),
         ("wrench", Array(F64, 6)),
+        ("tau_sent", Array(F64, MAX_JOINTS)),
     ],
 };
 
@@ -340,7 +341,8 @@ mod tests {
                 ee_pos_m,
                 ee_quat_xyzw,
                 ee_twist,
-                wrench
+                wrench,
+                tau_sent
             ]
         );
         same_layout!(
