@@ -52,6 +52,10 @@ pub enum PolicyCmd {
         /// Distillation configuration (TOML, see configs/distill/).
         #[arg(long)]
         config: PathBuf,
+        /// Changes one setting of the configuration by its dotted path,
+        /// e.g. `--set student.seed=2` (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
         /// Run directory.
         #[arg(long, default_value = "runs/distill")]
         out: PathBuf,
@@ -120,10 +124,12 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
         }
         PolicyCmd::Distill {
             config,
+            sets,
             out,
             resume,
         } => {
-            let cfg = crate::rl::distill::read_config(&config)?;
+            let cfg: crate::rl::distill::DistillConfig =
+                crate::settings::read_with_overrides(Some(&config), &sets)?;
             let c = crate::rl::distill::distill(cfg, &out, resume, stop)?;
             println!(
                 "{} rounds, {} environment steps; checkpoint {}",
