@@ -284,3 +284,42 @@ fn a_state_with_another_baseline_than_the_configurations_is_refused() {
         .unwrap();
     assert!(e.to_string().contains("policy.baseline"), "{e}");
 }
+
+/// During `value_warmup_updates` the policy and its observation statistics
+/// stay as they were while the value network learns; the first update after
+/// it moves the policy.
+#[test]
+fn the_value_warm_up_trains_the_baseline_alone() {
+    for algorithm in [Algorithm::Trpo, Algorithm::Ppo] {
+        let cfg = PolicyConfig {
+            algorithm,
+            batch_steps: 200,
+            baseline: BaselineKind::Network,
+            value_warmup_updates: 3,
+            ..Default::default()
+        };
+        let mut trainer = Trainer::new(Reach::new(10), cfg, 5).unwrap();
+        let policy = trainer.state.policy.clone();
+        let baseline = serde_json::to_string(&trainer.state.baseline).unwrap();
+        let mut explained = Vec::new();
+        for _ in 0..3 {
+            let s = trainer.iterate().unwrap();
+            assert_eq!(s.update.kl, 0.0, "{algorithm:?}");
+            explained.push(s.baseline_explained);
+        }
+        assert_eq!(
+            trainer.state.policy, policy,
+            "{algorithm:?}: the policy moved"
+        );
+        assert_ne!(
+            serde_json::to_string(&trainer.state.baseline).unwrap(),
+            baseline,
+            "{algorithm:?}: the baseline did not learn"
+        );
+        trainer.iterate().unwrap();
+        assert_ne!(
+            trainer.state.policy, policy,
+            "{algorithm:?}: no update after the warm-up"
+        );
+    }
+}

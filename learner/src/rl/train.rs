@@ -69,6 +69,13 @@ pub struct PolicyConfig {
     pub trpo: TrpoConfig,
     /// PPO's settings.
     pub ppo: PpoConfig,
+    /// Updates at a run's start (its first, also from `init_from`) in which
+    /// only the value baseline learns: the policy and its observation
+    /// statistics stay as they are while it acts. Fine-tuning a distilled
+    /// policy with a fresh baseline otherwise steps along advantages of a
+    /// baseline that knows nothing yet (DAPG, Rajeswaran et al. 2018, warm
+    /// the critic first). 0: none.
+    pub value_warmup_updates: u64,
 }
 
 impl Default for PolicyConfig {
@@ -87,6 +94,7 @@ impl Default for PolicyConfig {
             value: ValueConfig::default(),
             trpo: TrpoConfig::default(),
             ppo: PpoConfig::default(),
+            value_warmup_updates: 0,
         }
     }
 }
@@ -503,7 +511,10 @@ impl<E: BatchEnv> Trainer<E> {
         // new one acts with (OpenAI baselines' trpo_mpi and ppo1 update
         // their `ob_rms` so). The actions were drawn under the previous
         // statistics, a mismatch that shrinks as they settle.
-        if let Some(n) = &mut self.state.policy.obs_norm {
+        let warming = self.state.iteration < self.cfg.value_warmup_updates;
+        if let Some(n) = &mut self.state.policy.obs_norm
+            && !warming
+        {
             n.update(&raw);
         }
         batch.obs = self.state.policy.inputs(&raw);
@@ -515,6 +526,14 @@ impl<E: BatchEnv> Trainer<E> {
             .collect();
         let baseline_explained = explained_variance(&values, &targets);
         let update = match self.cfg.algorithm {
+            // The baseline alone learns (below); the policy is left as is.
+            _ if warming => UpdateStats {
+                kl: 0.0,
+                improvement: 0.0,
+                expected: 0.0,
+                step_fraction: 0.0,
+                clip_fraction: 0.0,
+            },
             Algorithm::Trpo => trpo_step(&mut self.state.policy, &mut batch, &self.cfg.trpo),
             Algorithm::Ppo => {
                 // Minibatch order from its own stream: the same run on any
