@@ -62,16 +62,29 @@ pub enum TransportError {
     /// The service exists with other capacities than this build's (created
     /// by a process that did not use [`ServiceSettings::of`]).
     #[error(
-        "service '{service}' allows {found} publishers, this stack requires {expected}: it was \
+        "service '{service}' allows {found} {what}, this stack requires {expected}: it was \
          created by a foreign process; stop it and remove the service"
     )]
     ForeignSettings {
         /// Service name.
         service: String,
-        /// Publishers the existing service allows.
+        /// Which capacity: "publishers" or "subscribers".
+        what: &'static str,
+        /// What the existing service allows.
         found: usize,
         /// What [`ServiceSettings::of`] asks for.
         expected: usize,
+    },
+    /// A topic's subscribers are all taken: only its intended readers may
+    /// subscribe ([`ServiceSettings::subscribers`]).
+    #[error("service '{service}' already has all the subscribers it allows ({max}): {readers}")]
+    SubscribersTaken {
+        /// Service name.
+        service: String,
+        /// Subscribers the service allows.
+        max: usize,
+        /// Who they are meant to be.
+        readers: &'static str,
     },
     /// `VISION_TOUCH_IPC_ROOT` does not name a directory iceoryx2 can use.
     #[error("{0}")]
@@ -98,7 +111,11 @@ pub struct ServiceSettings {
     /// the simulator's reports), so that no other process of the same user
     /// can speak for the robot or the controller.
     pub publishers: usize,
-    /// Subscribers allowed at once.
+    /// Subscribers allowed at once: on the 1 kHz loop's own streams with
+    /// the hardware (its state and torque command) the one reader meant
+    /// for it and one observer (a monitor, a test), so that no further
+    /// process can join them and make the real-time thread set up its
+    /// connection ([`readers_of`]); elsewhere 8.
     pub subscribers: usize,
 }
 
@@ -117,8 +134,19 @@ impl ServiceSettings {
         Self {
             buffer,
             publishers: if owner_of(T::TOPIC).is_some() { 1 } else { 4 },
-            subscribers: 8,
+            subscribers: if readers_of(T::TOPIC).is_some() { 2 } else { 8 },
         }
+    }
+}
+
+/// Who may subscribe to `topic`, for the topics whose readers are limited
+/// ([`ServiceSettings::subscribers`]; `None`: any of 8).
+pub fn readers_of(topic: &str) -> Option<&'static str> {
+    use crate::topics::*;
+    match topic {
+        HARDWARE_STATE => Some("the controller and one observer"),
+        TORQUE_COMMAND => Some("the hardware and one observer"),
+        _ => None,
     }
 }
 
@@ -262,7 +290,10 @@ pub fn stack_config() -> Result<&'static Config, TransportError> {
 /// resources of dead nodes are removed first, so a previous `kill -9` never
 /// breaks a start.
 pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
-    let config = stack_config()?;
+    create_node_with(name, stack_config()?)
+}
+
+fn create_node_with(name: &str, config: &Config) -> Result<StackNode, TransportError> {
     cleanup_dead_nodes();
     let node_name = NodeName::new(name).map_err(|e| ipc_err(name, "node name", e))?;
     NodeBuilder::new()
@@ -271,6 +302,42 @@ pub fn create_node(name: &str) -> Result<StackNode, TransportError> {
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| ipc_err(name, "creating node", e))
+}
+
+/// How long a real-time node ([`create_rt_node`]) waits for shared memory
+/// that another process is still setting up, where iceoryx2 waits up to
+/// its `global.creation_timeout` (1 s by default) in 1 ms sleeps: when a
+/// peer joins a service the loop publishes or reads, the next send or
+/// receive on the loop's thread opens that peer's connection.
+pub const RT_CREATION_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(2);
+
+/// As [`create_node`], for a real-time loop: its waits for a peer's shared
+/// memory end after [`RT_CREATION_TIMEOUT`]. A connection not ready by
+/// then is given up and counted ([`degraded_connections`]); opening a
+/// service at start-up is retried (see [`Channel::open`]).
+pub fn create_rt_node(name: &str) -> Result<StackNode, TransportError> {
+    let mut config = stack_config()?.clone();
+    config.global.creation_timeout = RT_CREATION_TIMEOUT;
+    create_node_with(name, &config)
+}
+
+static DEGRADED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Connections to a peer that this process's ports could not set up, or
+/// found corrupted, so far. iceoryx2 reports them through the ports'
+/// degradation handler, set here to count and go on without its warning
+/// (which formats text: an allocation on a real-time thread); the
+/// controller's monitor thread logs the count's growth.
+pub fn degraded_connections() -> u64 {
+    DEGRADED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+fn count_degradation(
+    _cause: iceoryx2::port::DegradationCause,
+    _info: &iceoryx2::port::DegradationInfo,
+) -> iceoryx2::port::DegradationAction {
+    DEGRADED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    iceoryx2::port::DegradationAction::Ignore
 }
 
 /// Removes the shared-memory resources of nodes whose process died; returns
@@ -350,27 +417,50 @@ impl<T: Message> Channel<T> {
         let verifier = AttributeVerifier::new()
             .require(&attribute_key(), &version_value(version))
             .map_err(|e| ipc_err(&name, "attribute", e))?;
-        let opened = node
-            .service_builder(&sn)
-            .publish_subscribe::<T>()
-            .subscriber_max_buffer_size(s.buffer)
-            .max_publishers(s.publishers)
-            .max_subscribers(s.subscribers)
-            .history_size(0)
-            .enable_safe_overflow(true)
-            .open_or_create_with_attributes(&verifier);
+        let open = || {
+            node.service_builder(&sn)
+                .publish_subscribe::<T>()
+                .subscriber_max_buffer_size(s.buffer)
+                .max_publishers(s.publishers)
+                .max_subscribers(s.subscribers)
+                .history_size(0)
+                .enable_safe_overflow(true)
+                .open_or_create_with_attributes(&verifier)
+        };
+        // A real-time node waits only briefly for a service another process
+        // is creating (create_rt_node): at start-up, try again for a second.
+        let started = std::time::Instant::now();
+        let mut opened = open();
+        while matches!(
+            opened,
+            Err(
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::HangsInCreation
+                )
+            )
+        ) && started.elapsed() < std::time::Duration::from_secs(1)
+        {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+            opened = open();
+        }
         match opened {
             Ok(factory) => {
-                // Opening accepts a service that allows more publishers than
-                // asked for; the one-owner rule must not depend on who
-                // created it.
-                let found = factory.static_config().max_publishers();
-                if found != s.publishers {
-                    return Err(TransportError::ForeignSettings {
-                        service: name,
-                        found,
-                        expected: s.publishers,
-                    });
+                // Opening accepts a service that allows more publishers or
+                // subscribers than asked for; the one-owner rule and the
+                // readers' limit must not depend on who created it.
+                let c = factory.static_config();
+                for (what, found, expected) in [
+                    ("publishers", c.max_publishers(), s.publishers),
+                    ("subscribers", c.max_subscribers(), s.subscribers),
+                ] {
+                    if found != expected {
+                        return Err(TransportError::ForeignSettings {
+                            service: name,
+                            what,
+                            found,
+                            expected,
+                        });
+                    }
                 }
                 Ok(Self { name, factory })
             }
@@ -407,6 +497,7 @@ impl<T: Message> Channel<T> {
         use iceoryx2::port::publisher::PublisherCreateError;
         self.factory
             .publisher_builder()
+            .set_degradation_handler(count_degradation)
             .create()
             .map_err(|e| match (e, owner_of(T::TOPIC)) {
                 (PublisherCreateError::ExceedsMaxSupportedPublishers, Some(owner)) => {
@@ -423,11 +514,23 @@ impl<T: Message> Channel<T> {
     /// A subscriber queueing up to the topic's buffer size (oldest samples
     /// are dropped when full).
     pub fn subscriber(&self) -> Result<Sub<T>, TransportError> {
+        use iceoryx2::port::subscriber::SubscriberCreateError;
+        let settings = ServiceSettings::of::<T>();
         self.factory
             .subscriber_builder()
-            .buffer_size(ServiceSettings::of::<T>().buffer)
+            .buffer_size(settings.buffer)
+            .set_degradation_handler(count_degradation)
             .create()
-            .map_err(|e| ipc_err(&self.name, "creating subscriber", e))
+            .map_err(|e| match (e, readers_of(T::TOPIC)) {
+                (SubscriberCreateError::ExceedsMaxSupportedSubscribers, Some(readers)) => {
+                    TransportError::SubscribersTaken {
+                        service: self.name.clone(),
+                        max: settings.subscribers,
+                        readers,
+                    }
+                }
+                (e, _) => ipc_err(&self.name, "creating subscriber", e),
+            })
     }
 }
 

@@ -84,3 +84,73 @@ fn a_topic_with_one_owner_refuses_a_second_publisher() {
     let _a = transport::publisher::<PolicyAction>(&owner, &ns).unwrap();
     let _b = transport::publisher::<PolicyAction>(&intruder, &ns).unwrap();
 }
+
+#[test]
+fn the_hardware_streams_take_only_their_reader_and_one_observer() {
+    use shared_mem_schema::{HardwareState, SensorFrame, TorqueCommand};
+    transport::quiet_logs();
+    let ns = namespace("readers");
+    let node = transport::create_rt_node("schema-test-readers").unwrap();
+    let _torque_pub = transport::publisher::<TorqueCommand>(&node, &ns).unwrap();
+    let hardware = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    let _observer = transport::subscriber::<TorqueCommand>(&node, &ns).unwrap();
+    let _state_reader = transport::subscriber::<HardwareState>(&node, &ns).unwrap();
+    let _state_observer = transport::subscriber::<HardwareState>(&node, &ns).unwrap();
+    let intruder = transport::create_node("schema-test-reader-intruder").unwrap();
+    for err in [
+        transport::subscriber::<TorqueCommand>(&intruder, &ns).err(),
+        transport::subscriber::<HardwareState>(&intruder, &ns).err(),
+    ] {
+        let err = err.expect("a third subscriber must be refused");
+        assert!(
+            matches!(err, TransportError::SubscribersTaken { max: 2, .. }),
+            "wrong error: {err}"
+        );
+        assert!(err.to_string().contains("one observer"), "{err}");
+    }
+    // A reader that leaves frees its place.
+    drop(hardware);
+    transport::subscriber::<TorqueCommand>(&intruder, &ns).unwrap();
+    // The sensor frames keep 8 readers (the learner, loggers, tools).
+    let frames: Vec<_> = (0..8)
+        .map(|_| transport::subscriber::<SensorFrame>(&intruder, &ns).unwrap())
+        .collect();
+    assert_eq!(frames.len(), 8);
+}
+
+#[test]
+fn a_service_created_with_more_subscribers_is_refused() {
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
+    use shared_mem_schema::TorqueCommand;
+    transport::quiet_logs();
+    let ns = namespace("foreign-readers");
+    let node = transport::create_node("schema-test-foreign").unwrap();
+    // Created as a foreign process would: without the stack's settings.
+    let name = shared_mem_schema::service_name(&ns, TorqueCommand::TOPIC);
+    let key = AttributeKey::new(transport::SCHEMA_ATTRIBUTE.as_bytes()).unwrap();
+    let version = AttributeValue::new(SCHEMA_VERSION.to_string().as_bytes()).unwrap();
+    let attributes = AttributeSpecifier::new().define(&key, &version).unwrap();
+    let _foreign = node
+        .service_builder(&ServiceName::new(&name).unwrap())
+        .publish_subscribe::<TorqueCommand>()
+        .subscriber_max_buffer_size(8)
+        .history_size(0)
+        .enable_safe_overflow(true)
+        .max_publishers(1)
+        .max_subscribers(16)
+        .create_with_attributes(&attributes)
+        .unwrap();
+    let err = Channel::<TorqueCommand>::open(&node, &ns)
+        .err()
+        .expect("a service allowing 16 readers must be refused");
+    match &err {
+        TransportError::ForeignSettings {
+            what,
+            found,
+            expected,
+            ..
+        } => assert_eq!((*what, *found, *expected), ("subscribers", 16, 2)),
+        e => panic!("wrong error: {e}"),
+    }
+}

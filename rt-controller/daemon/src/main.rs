@@ -284,7 +284,7 @@ fn start_and_drive(
     model: robot_model::Model,
     record: Option<Arc<FaultRecord>>,
 ) -> Ending {
-    let node = match transport::create_node("rt-controller") {
+    let node = match transport::create_rt_node("rt-controller") {
         Ok(n) => n,
         Err(e) => return Ending::before_ready(e.into()),
     };
@@ -546,6 +546,7 @@ fn monitor_loop(
     let mut last_overflow = 0;
     let mut last_overruns = 0;
     let mut last_io_errors = 0;
+    let mut last_degraded = 0;
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
         let beat = shared.heartbeat.load(Ordering::Relaxed);
@@ -631,6 +632,16 @@ fn monitor_loop(
             &mut last_io_errors,
             "failed publications to or receives from the learner",
         );
+        let degraded = transport::degraded_connections();
+        if degraded > last_degraded {
+            warn!(
+                "rt-controller: {} shared-memory connections to a peer could not be set up \
+                 within {:?} or were corrupted; that peer gets nothing ({degraded} in all)",
+                degraded - last_degraded,
+                transport::RT_CREATION_TIMEOUT
+            );
+            last_degraded = degraded;
+        }
     }
 }
 
