@@ -9,7 +9,8 @@
 //! ```
 //!
 //! Prints a table, writes `jitter.json` and `jitter.png` (the wake-up latency
-//! histograms of both, log counts, titled and labelled) into `--out`.
+//! histograms of both, log counts, titled and labelled) into `--out`. With
+//! `--flood`, hostile peers load the daemon's services while it measures.
 
 use clap::Parser;
 use learner::plot::{Chart, Series};
@@ -38,6 +39,52 @@ struct Args {
     /// Where the JSON and the picture go.
     #[arg(long, default_value = "target/jitter")]
     out: PathBuf,
+    /// Hostile peers while measuring: three more action publishers (the
+    /// service's limit of four) sending as fast as they can, and a peer
+    /// that joins and leaves the sensor frames and status every 10 ms
+    /// (each join makes the daemon's loop set up a connection).
+    #[arg(long)]
+    flood: bool,
+}
+
+/// What the hostile peers of `--flood` did.
+#[derive(Debug, Default, Clone, Copy)]
+struct Flood {
+    actions: u64,
+    joins: u64,
+}
+
+/// One flooding publisher: actions answering the newest sensor frame, back
+/// to back, until `end_ns`.
+fn flood_actions(ns: String, i: usize, end_ns: u64) -> anyhow::Result<u64> {
+    let node = transport::create_node(&format!("jitter-flood-{i}"))?;
+    let actions = transport::publisher::<PolicyAction>(&node, &ns)?;
+    let frames = transport::subscriber::<SensorFrame>(&node, &ns)?;
+    let mut sent = 0u64;
+    while mono_now_ns() < end_ns && !termination_requested() {
+        let mut a = PolicyAction::new(sent + 1, mono_now_ns(), [0.0; 4]);
+        transport::drain(&frames, |f| {
+            a.header.episode = f.header.episode;
+            a.header.t_hw_ns = f.header.t_hw_ns;
+        })?;
+        transport::send(&actions, &a)?;
+        sent += 1;
+    }
+    Ok(sent)
+}
+
+/// A peer joining and leaving the daemon's published services every 10 ms.
+fn churn(ns: String, end_ns: u64) -> anyhow::Result<u64> {
+    let mut joins = 0u64;
+    while mono_now_ns() < end_ns && !termination_requested() {
+        let node = transport::create_node("jitter-churn")?;
+        let frames = transport::subscriber::<SensorFrame>(&node, &ns)?;
+        let status = transport::subscriber::<ControllerStatus>(&node, &ns)?;
+        joins += 1;
+        std::thread::sleep(Duration::from_millis(10));
+        drop((frames, status, node));
+    }
+    Ok(joins)
 }
 
 fn set_fifo(priority: i32) -> bool {
@@ -176,6 +223,23 @@ fn main() -> anyhow::Result<()> {
     );
     let timer = std::thread::spawn(move || bare_timer(d, prio_opt));
     let end = mono_now_ns() + (args.duration_s * 1e9) as u64;
+    let peers: Vec<std::thread::JoinHandle<anyhow::Result<Flood>>> = if args.flood {
+        let mut v: Vec<std::thread::JoinHandle<anyhow::Result<Flood>>> = (0..3)
+            .map(|i| {
+                let ns = ns.clone();
+                std::thread::spawn(move || {
+                    flood_actions(ns, i, end).map(|actions| Flood { actions, joins: 0 })
+                })
+            })
+            .collect();
+        let ns = ns.clone();
+        v.push(std::thread::spawn(move || {
+            churn(ns, end).map(|joins| Flood { actions: 0, joins })
+        }));
+        v
+    } else {
+        Vec::new()
+    };
     let mut seq = 0u64;
     let mut next = mono_now_ns();
     while mono_now_ns() < end && !termination_requested() {
@@ -200,6 +264,12 @@ fn main() -> anyhow::Result<()> {
         sleep_until_ns(next + (seq * 7919 % 1000) * 1000);
     }
     let (bare, bare_fifo) = timer.join().expect("timer thread");
+    let mut flood = Flood::default();
+    for p in peers {
+        let f = p.join().expect("flood thread")?;
+        flood.actions += f.actions;
+        flood.joins += f.joins;
+    }
     std::thread::sleep(Duration::from_millis(250));
     let mut last: Option<Box<ControllerStatus>> = None;
     transport::drain(&status, |s| last = Some(Box::new(*s)))?;
@@ -248,6 +318,14 @@ fn main() -> anyhow::Result<()> {
         last.realtime == 1
     );
     println!("(max of the daemon histograms: since the daemon started)");
+    if args.flood {
+        println!(
+            "flood: {} actions from three more publishers ({:.0}/s), {} joins of a peer",
+            flood.actions,
+            flood.actions as f64 / args.duration_s,
+            flood.joins
+        );
+    }
     let report = serde_json::json!({
         "duration_s": args.duration_s,
         "daemon_realtime": last.realtime == 1,
@@ -260,6 +338,10 @@ fn main() -> anyhow::Result<()> {
         "bare_timer_wakeup_latency": json(&bare),
         "compute": json(&compute),
         "action_to_torque": json(&latency),
+        "flood": args.flood.then(|| serde_json::json!({
+            "actions": flood.actions,
+            "joins": flood.joins,
+        })),
     });
     std::fs::write(
         dir.join("jitter.json"),
