@@ -48,6 +48,9 @@ pub enum EpisodePolicy {
     Random,
     /// A trained policy (`learner run --policy`).
     Learned,
+    /// Recorded elsewhere and imported (`learner dataset import`): the
+    /// policy that acted is not known.
+    Imported,
 }
 
 impl EpisodePolicy {
@@ -57,6 +60,7 @@ impl EpisodePolicy {
             Self::Heuristic => "heuristic",
             Self::Random => "random",
             Self::Learned => "learned",
+            Self::Imported => "imported",
         }
     }
 }
@@ -122,7 +126,9 @@ impl MixedPolicy {
                 a
             }
             // A mix draws only the two above.
-            EpisodePolicy::Random | EpisodePolicy::Learned => self.random.act(obs, task),
+            EpisodePolicy::Random | EpisodePolicy::Learned | EpisodePolicy::Imported => {
+                self.random.act(obs, task)
+            }
         }
     }
 }

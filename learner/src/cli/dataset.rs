@@ -32,6 +32,21 @@ pub enum DatasetCmd {
         #[arg(long)]
         robot_dir: Option<PathBuf>,
     },
+    /// Imports the authors' published HDF5 episodes (one file per
+    /// episode, their multimodal_representation layout) into a dataset,
+    /// labelled as their loader labels them (docs/data.md, "Importing the
+    /// authors' data").
+    Import {
+        /// HDF5 files (.h5, .hdf5) or directories of them.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Output directory.
+        #[arg(long, default_value = "data/dataset-imported")]
+        out: PathBuf,
+        /// The peg of every episode (their real-robot data: the triangle).
+        #[arg(long, value_enum, default_value_t = hw_sim::PegShape::Triangle)]
+        peg: hw_sim::PegShape,
+    },
     /// Counts, label balance and a PNG contact sheet.
     Inspect {
         /// Dataset directory.
@@ -50,6 +65,26 @@ pub enum DatasetCmd {
 pub fn run(cmd: DatasetCmd) -> Result<()> {
     use crate::dataset::{self, BuildConfig, Dataset};
     match cmd {
+        DatasetCmd::Import { inputs, out, peg } => {
+            let files = dataset::find_hdf5(&inputs)?;
+            anyhow::ensure!(!files.is_empty(), "no .h5 or .hdf5 files in {inputs:?}");
+            let progress = learner_node::progress::Progress::new(files.len() as u64, "files");
+            let mut done = 0;
+            let t = std::time::Instant::now();
+            let meta = dataset::import(&files, &out, peg, &BuildConfig::default(), |_, _| {
+                done += 1;
+                progress.update(done, String::new());
+            })?;
+            progress.finish();
+            println!(
+                "imported {} samples from {} files in {:.1} s into {}",
+                meta.samples,
+                meta.episodes.len(),
+                t.elapsed().as_secs_f64(),
+                out.display()
+            );
+            Ok(())
+        }
         DatasetCmd::Build {
             logs,
             out,

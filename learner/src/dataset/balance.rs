@@ -54,6 +54,9 @@ pub struct Balance {
     /// there were any).
     #[serde(default)]
     pub learned: [StageCounts; 4],
+    /// Imported episodes (`learner dataset import`; absent before).
+    #[serde(default)]
+    pub imported: [StageCounts; 4],
 }
 
 impl Balance {
@@ -63,6 +66,7 @@ impl Balance {
             EpisodePolicy::Heuristic => &mut self.heuristic,
             EpisodePolicy::Random => &mut self.random,
             EpisodePolicy::Learned => &mut self.learned,
+            EpisodePolicy::Imported => &mut self.imported,
         };
         let c = &mut row[tags.stage.code() as usize];
         c.samples += 1;
@@ -76,6 +80,7 @@ impl Balance {
             EpisodePolicy::Heuristic => &self.heuristic,
             EpisodePolicy::Random => &self.random,
             EpisodePolicy::Learned => &self.learned,
+            EpisodePolicy::Imported => &self.imported,
         };
         let mut t = StageCounts::default();
         for c in row {
@@ -89,6 +94,7 @@ impl Balance {
         let mut t = self.policy_total(EpisodePolicy::Heuristic);
         t.add(&self.policy_total(EpisodePolicy::Random));
         t.add(&self.policy_total(EpisodePolicy::Learned));
+        t.add(&self.policy_total(EpisodePolicy::Imported));
         t
     }
 

@@ -196,6 +196,49 @@ impl Builder {
     }
 }
 
+impl Builder {
+    /// A builder writing a dataset into `out` (created if absent).
+    pub(super) fn new(out: &Path, cfg: &BuildConfig) -> Result<Self> {
+        if cfg.block_samples == 0 || cfg.shard_samples == 0 {
+            return Err(DatasetError::EmptyBlocks {
+                block_samples: cfg.block_samples,
+                shard_samples: cfg.shard_samples,
+            });
+        }
+        if !(cfg.flow_mask_min_px.is_finite() && cfg.flow_mask_min_px >= 0.0) {
+            return Err(DatasetError::FlowMaskThreshold(cfg.flow_mask_min_px));
+        }
+        let io_err = |path: PathBuf| move |source| DatasetError::Io { path, source };
+        std::fs::create_dir_all(out).map_err(io_err(out.to_path_buf()))?;
+        let wrench_path = out.join("wrench.bin");
+        let wrench_table = std::fs::File::create(&wrench_path).map_err(io_err(wrench_path))?;
+        Ok(Builder {
+            dir: out.to_path_buf(),
+            cfg: cfg.clone(),
+            meta: Meta {
+                format_version: FORMAT_VERSION,
+                width: 0,
+                height: 0,
+                wrench_window: WRENCH_WINDOW,
+                samples: 0,
+                shards: Vec::new(),
+                episodes: Vec::new(),
+                skipped: Vec::new(),
+                build: cfg.clone(),
+                camera: None,
+            },
+            stats: stats_new(),
+            wrench_table: std::io::BufWriter::new(wrench_table),
+            contacts: Vec::new(),
+            shard: None,
+            pending: Vec::new(),
+            pending_n: 0,
+            contact_next: 0,
+            mask_px: 0,
+        })
+    }
+}
+
 /// The `.mcap` files under `inputs` (files or directories), sorted.
 pub fn find_logs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
@@ -230,43 +273,7 @@ pub fn build(
     workers: usize,
     mut on_log: impl FnMut(&Path, Result<usize, String>),
 ) -> Result<Meta> {
-    if cfg.block_samples == 0 || cfg.shard_samples == 0 {
-        return Err(DatasetError::EmptyBlocks {
-            block_samples: cfg.block_samples,
-            shard_samples: cfg.shard_samples,
-        });
-    }
-    if !(cfg.flow_mask_min_px.is_finite() && cfg.flow_mask_min_px >= 0.0) {
-        return Err(DatasetError::FlowMaskThreshold(cfg.flow_mask_min_px));
-    }
-    let io_err = |path: PathBuf| move |source| DatasetError::Io { path, source };
-    std::fs::create_dir_all(out).map_err(io_err(out.to_path_buf()))?;
-    let wrench_path = out.join("wrench.bin");
-    let wrench_table = std::fs::File::create(&wrench_path).map_err(io_err(wrench_path))?;
-    let mut b = Builder {
-        dir: out.to_path_buf(),
-        cfg: cfg.clone(),
-        meta: Meta {
-            format_version: FORMAT_VERSION,
-            width: 0,
-            height: 0,
-            wrench_window: WRENCH_WINDOW,
-            samples: 0,
-            shards: Vec::new(),
-            episodes: Vec::new(),
-            skipped: Vec::new(),
-            build: cfg.clone(),
-            camera: None,
-        },
-        stats: stats_new(),
-        wrench_table: std::io::BufWriter::new(wrench_table),
-        contacts: Vec::new(),
-        shard: None,
-        pending: Vec::new(),
-        pending_n: 0,
-        contact_next: 0,
-        mask_px: 0,
-    };
+    let mut b = Builder::new(out, cfg)?;
     // Robots named by the logs: built-in ones, or files in `robot_dir`
     // (a log is data from elsewhere; it never names a path to read).
     let robots = match &cfg.robot_dir {

@@ -17,6 +17,19 @@ pub enum DatasetError {
         #[source]
         source: std::io::Error,
     },
+    /// An imported HDF5 file differs from the authors' layout
+    /// (`learner dataset import`).
+    #[error("{}: key '{key}': expected {expected}, found {found}", file.display())]
+    Import {
+        /// The file.
+        file: PathBuf,
+        /// The key (dataset) at fault; "(file)" for the file itself.
+        key: String,
+        /// What the layout asks for.
+        expected: String,
+        /// What the file has.
+        found: String,
+    },
     /// An input given for the build does not exist.
     #[error("{}: no such file or directory", .0.display())]
     NoInput(PathBuf),

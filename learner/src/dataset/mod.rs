@@ -9,6 +9,7 @@
 //! table of every sample's wrench window kept beside the shards.
 //!
 //! Files: `sample` (the sample and its encoding), `label` (log → samples),
+//! `import` (the authors' HDF5 episodes → samples),
 //! `meta` (meta.json, stats.json), `build` (the writer and the parallel
 //! build), `reader` (an opened dataset), `loader` (shuffled batches with
 //! pairing negatives), `sheet` (the contact sheet), `balance` (how the
@@ -18,6 +19,7 @@ mod balance;
 mod build;
 mod episode;
 mod error;
+mod import;
 mod loader;
 mod meta;
 mod reader;
@@ -28,6 +30,7 @@ pub use balance::{Balance, MOVING_M, SampleTags, StageCounts};
 pub use build::{build, find_logs};
 pub use episode::{BuildConfig, EpisodeSamples, Models, episode_samples};
 pub use error::{DatasetError, Result};
+pub use import::{find_hdf5, import, import_file};
 pub use loader::{Batch, Loader, LoaderConfig};
 pub use meta::{BlockIndex, EpisodeInfo, Meta, Moments, Stats};
 pub use reader::Dataset;
