@@ -390,6 +390,27 @@ pub fn service_schema_version(name: &str) -> Option<String> {
     )
 }
 
+/// Whether opening a service failed only because another process is
+/// creating or removing it at the same moment.
+fn in_flux(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use PublishSubscribeOpenError as O;
+    use PublishSubscribeOpenOrCreateError as E;
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as C;
+    matches!(
+        e,
+        E::SystemInFlux
+            | E::PublishSubscribeOpenError(
+                O::DoesNotExist
+                    | O::HangsInCreation
+                    | O::ServiceInCorruptedState
+                    | O::IsMarkedForDestruction
+            )
+            | E::PublishSubscribeCreateError(
+                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance | C::HangsInCreation
+            )
+    )
+}
+
 /// A typed service of the stack, opened or created with the version
 /// handshake.
 pub struct Channel<T: Message> {
@@ -428,17 +449,12 @@ impl<T: Message> Channel<T> {
                 .open_or_create_with_attributes(&verifier)
         };
         // A real-time node waits only briefly for a service another process
-        // is creating (create_rt_node): at start-up, try again for a second.
+        // is creating or removing (create_rt_node), and sees it half made:
+        // at start-up, try again for two seconds.
         let started = std::time::Instant::now();
         let mut opened = open();
-        while matches!(
-            opened,
-            Err(
-                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-                    PublishSubscribeOpenError::HangsInCreation
-                )
-            )
-        ) && started.elapsed() < std::time::Duration::from_secs(1)
+        while opened.as_ref().err().is_some_and(in_flux)
+            && started.elapsed() < std::time::Duration::from_secs(2)
         {
             std::thread::sleep(std::time::Duration::from_millis(5));
             opened = open();
