@@ -87,14 +87,15 @@ fn expected(e: usize, s: usize) -> Sample {
     }
     let proprio =
         |t: usize| -> [f32; 8] { std::array::from_fn(|i| (t as f64 * 0.1 + i as f64 + ef) as f32) };
-    let contact = |t: usize| t >= 20 + e;
+    // In contact from step 20 + e to 39; the stage stays touched after.
+    let contact = |t: usize| (20 + e..40).contains(&t);
     Sample {
         episode: e as u32,
         index: s as u32,
         step: s as u64,
         contact: contact(s),
         contact_next: contact(s + 1),
-        stage: if contact(s) {
+        stage: if s >= 20 + e {
             Stage::Touched
         } else {
             Stage::Failed

@@ -318,8 +318,8 @@ fn the_value_warm_up_trains_the_baseline_alone() {
         );
         trainer.iterate().unwrap();
         assert_ne!(
-            trainer.state.policy, policy,
-            "{algorithm:?}: no update after the warm-up"
+            trainer.state.policy.net, policy.net,
+            "{algorithm:?}: no policy step after the warm-up"
         );
     }
 }

@@ -68,6 +68,17 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
         .dataset(key)
         .map_err(|e| bad(file, key, "the key present", format!("{e:?}")))?;
     let shape = ds.shape();
+    // Read whole, so bounded first: the authors' largest key holds 2.5 M
+    // values; a header claiming more than 2²⁸ is not their layout.
+    let count = shape.iter().try_fold(1usize, |n, &d| n.checked_mul(d));
+    if count.is_none_or(|n| n > 1 << 28) {
+        return Err(bad(
+            file,
+            key,
+            "at most 2^28 values",
+            format!("shape {shape:?}"),
+        ));
+    }
     let dt = ds
         .datatype()
         .map_err(|e| bad(file, key, "a readable datatype", format!("{e:?}")))?;
@@ -157,6 +168,14 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
             ));
         }
     };
+    if Some(values.len()) != count {
+        return Err(bad(
+            file,
+            key,
+            format!("{} values for shape {shape:?}", count.unwrap_or(0)),
+            format!("{}", values.len()),
+        ));
+    }
     Ok(Field { shape, values })
 }
 

@@ -29,7 +29,7 @@ def fields(e):
     ts = np.arange(T)[:, None, None]
     forces = ts + 0.01 * r + 0.1 * j + e
     contact = np.zeros((T, 50), dtype=bool)
-    contact[20 + e :, 49] = True
+    contact[20 + e : 40, 49] = True
     steps = np.arange(T)[:, None]
     proprio = steps * 0.1 + np.arange(8)[None, :] + e
     action = steps * 0.01 + np.arange(4)[None, :] * 0.001 - e * 0.002
