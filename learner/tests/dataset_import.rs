@@ -12,37 +12,16 @@
 use learner::dataset::{self, BuildConfig, Dataset, DatasetError, Sample};
 use shared_mem_schema::Stage;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 const T: usize = 50;
 const H: usize = 128;
 const W: usize = 128;
 
+mod interop_venv;
+
 fn h5py() -> Option<PathBuf> {
-    let py = std::env::var_os("INTEROP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-interop/bin/python")
-        });
-    let ok = Command::new(&py)
-        .args(["-c", "import h5py"])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    let required =
-        std::env::var("INTEROP_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
-    assert!(
-        ok || !required,
-        "h5py is required here but `{} -c 'import h5py'` fails; run scripts/interop-venv.sh",
-        py.display()
-    );
-    if !ok {
-        eprintln!(
-            "\n*** SKIPPED: h5py is not importable by {} ***\n",
-            py.display()
-        );
-    }
-    ok.then_some(py)
+    interop_venv::python("h5py", "h5py is")
 }
 
 fn write(py: &Path, out: &Path, episode: usize, storage: &str, fault: Option<&str>) {

@@ -8,41 +8,16 @@
 //! channel of a fresh MCAP log is decoded by the official `mcap` reader with
 //! `mcap-ros2-support`, each message by its own schema, to the values written.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 
-/// The readers' interpreter: `$INTEROP_PYTHON`, else the repository's
-/// `.venv-interop` (scripts/interop-venv.sh). None (the test then skips)
-/// when it cannot import them and `$INTEROP_REQUIRED` is not 1
-/// (scripts/test.sh sets it) and `$CI` is unset.
+mod interop_venv;
+
+/// The readers' interpreter ([`interop_venv::python`]).
 fn interop_python() -> Option<std::path::PathBuf> {
-    let py = std::env::var_os("INTEROP_PYTHON")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-interop/bin/python")
-        });
-    let ok = Command::new(&py)
-        .args([
-            "-c",
-            "import tensorboard, safetensors.numpy, mcap_ros2.decoder",
-        ])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    let required =
-        std::env::var("INTEROP_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
-    assert!(
-        ok || !required,
-        "tensorboard, safetensors and mcap-ros2-support are required here but `{} -c 'import \
-         tensorboard, safetensors.numpy, mcap_ros2.decoder'` fails; run scripts/interop-venv.sh",
-        py.display()
-    );
-    if !ok {
-        eprintln!(
-            "\n*** SKIPPED: the readers are not importable by {} ***\n",
-            py.display()
-        );
-    }
-    ok.then_some(py)
+    interop_venv::python(
+        "tensorboard, safetensors.numpy, mcap_ros2.decoder",
+        "tensorboard, safetensors and mcap-ros2-support are",
+    )
 }
 
 /// Runs `script` with `args` under `py`; its stdout, parsed as JSON (its

@@ -23,7 +23,7 @@ use super::{BuildConfig, DatasetError, EpisodeSamples, Meta, PROPRIO, Result, Sa
 use hw_sim::PegShape;
 use learner_node::mix::EpisodePolicy;
 use learner_node::policy::WRENCH_WINDOW;
-use rust_hdf5::{ByteOrder, DatatypeMessage, H5File};
+use rust_hdf5::{ByteOrder, DatatypeMessage, H5Dataset, H5File};
 use shared_mem_schema::Stage;
 use std::path::{Path, PathBuf};
 
@@ -61,12 +61,26 @@ fn type_name(dt: &DatatypeMessage) -> String {
     }
 }
 
-/// Reads `key` from `file` as f32 values, any integer, boolean or float
-/// element type, little-endian.
-fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
+/// `key`'s dataset in `file` and its element type as declared.
+fn dataset(f: &H5File, file: &Path, key: &str) -> Result<(H5Dataset, DatatypeMessage)> {
     let ds = f
         .dataset(key)
         .map_err(|e| bad(file, key, "the key present", format!("{e:?}")))?;
+    let dt = ds
+        .datatype()
+        .map_err(|e| bad(file, key, "a readable datatype", format!("{e:?}")))?;
+    Ok((ds, dt))
+}
+
+/// Reads `key` from `file` as f32 values, any integer, boolean or float
+/// element type, little-endian.
+fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
+    let (ds, dt) = dataset(f, file, key)?;
+    values(file, key, &ds, dt)
+}
+
+/// `ds`'s values (`key` of `file`, of element type `dt`) as f32.
+fn values(file: &Path, key: &str, ds: &H5Dataset, dt: DatatypeMessage) -> Result<Field> {
     let shape = ds.shape();
     // Read whole, so bounded first: the authors' largest key holds 2.5 M
     // values; a header claiming more than 2²⁸ is not their layout.
@@ -79,9 +93,6 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
             format!("shape {shape:?}"),
         ));
     }
-    let dt = ds
-        .datatype()
-        .map_err(|e| bad(file, key, "a readable datatype", format!("{e:?}")))?;
     let dt = match dt {
         DatatypeMessage::Enum { base, .. } => *base,
         d => d,
@@ -94,71 +105,26 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
             byte_order: ByteOrder::LittleEndian,
             ..
         } => match (size, signed) {
-            (1, false) => ds
-                .read_raw::<u8>()
-                .map_err(err)?
-                .into_iter()
-                .map(f32::from)
-                .collect(),
-            (1, true) => ds
-                .read_raw::<i8>()
-                .map_err(err)?
-                .into_iter()
-                .map(f32::from)
-                .collect(),
-            (2, false) => ds
-                .read_raw::<u16>()
-                .map_err(err)?
-                .into_iter()
-                .map(f32::from)
-                .collect(),
-            (2, true) => ds
-                .read_raw::<i16>()
-                .map_err(err)?
-                .into_iter()
-                .map(f32::from)
-                .collect(),
-            (4, false) => ds
-                .read_raw::<u32>()
-                .map_err(err)?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-            (4, true) => ds
-                .read_raw::<i32>()
-                .map_err(err)?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-            (8, false) => ds
-                .read_raw::<u64>()
-                .map_err(err)?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-            (8, true) => ds
-                .read_raw::<i64>()
-                .map_err(err)?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
+            (1, false) => widened(ds, f32::from as fn(u8) -> f32),
+            (1, true) => widened(ds, f32::from as fn(i8) -> f32),
+            (2, false) => widened(ds, f32::from as fn(u16) -> f32),
+            (2, true) => widened(ds, f32::from as fn(i16) -> f32),
+            (4, false) => widened(ds, |x: u32| x as f32),
+            (4, true) => widened(ds, |x: i32| x as f32),
+            (8, false) => widened(ds, |x: u64| x as f32),
+            (8, true) => widened(ds, |x: i64| x as f32),
             _ => return Err(bad(file, key, "a number type", type_name(&dt))),
         },
         DatatypeMessage::FloatingPoint {
             size: 4,
             byte_order: ByteOrder::LittleEndian,
             ..
-        } => ds.read_raw::<f32>().map_err(err)?,
+        } => ds.read_raw::<f32>(),
         DatatypeMessage::FloatingPoint {
             size: 8,
             byte_order: ByteOrder::LittleEndian,
             ..
-        } => ds
-            .read_raw::<f64>()
-            .map_err(err)?
-            .into_iter()
-            .map(|x| x as f32)
-            .collect(),
+        } => widened(ds, |x: f64| x as f32),
         _ => {
             return Err(bad(
                 file,
@@ -167,7 +133,8 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
                 type_name(&dt),
             ));
         }
-    };
+    }
+    .map_err(err)?;
     if Some(values.len()) != count {
         return Err(bad(
             file,
@@ -177,6 +144,14 @@ fn read(f: &H5File, file: &Path, key: &str) -> Result<Field> {
         ));
     }
     Ok(Field { shape, values })
+}
+
+/// The dataset's values read as `T` and widened to f32 by `to_f32`.
+fn widened<T: rust_hdf5::types::H5Type>(
+    ds: &H5Dataset,
+    to_f32: impl Fn(T) -> f32,
+) -> rust_hdf5::Result<Vec<f32>> {
+    Ok(ds.read_raw::<T>()?.into_iter().map(to_f32).collect())
 }
 
 /// Checks `field`'s shape against `expected` (`None`: any size there).
@@ -206,12 +181,7 @@ fn check_shape(file: &Path, key: &str, field: &Field, expected: &[Option<usize>]
 pub fn import_file(file: &Path, peg: PegShape) -> Result<EpisodeSamples> {
     let f =
         H5File::open(file).map_err(|e| bad(file, "(file)", "an HDF5 file", format!("{e:?}")))?;
-    let image_ds = f
-        .dataset("image")
-        .map_err(|e| bad(file, "image", "the key present", format!("{e:?}")))?;
-    let image_type = image_ds
-        .datatype()
-        .map_err(|e| bad(file, "image", "a readable datatype", format!("{e:?}")))?;
+    let (image_ds, image_type) = dataset(&f, file, "image")?;
     if !matches!(
         image_type,
         DatatypeMessage::FixedPoint {
@@ -222,7 +192,7 @@ pub fn import_file(file: &Path, peg: PegShape) -> Result<EpisodeSamples> {
     ) {
         return Err(bad(file, "image", "uint8", type_name(&image_type)));
     }
-    let image = read(&f, file, "image")?;
+    let image = values(file, "image", &image_ds, image_type)?;
     let (t, h, w) = match image.shape[..] {
         [t, h, w, 3] if t >= 2 && h > 0 && w > 0 => (t, h, w),
         _ => {

@@ -54,6 +54,16 @@ struct Flood {
     joins: u64,
 }
 
+/// Makes `a` answer the newest sensor frame in `frames`, as a policy does
+/// (the daemon drops actions answering none, or an old one).
+fn answer_newest(frames: &transport::Sub<SensorFrame>, a: &mut PolicyAction) -> anyhow::Result<()> {
+    transport::drain(frames, |f| {
+        a.header.episode = f.header.episode;
+        a.header.t_hw_ns = f.header.t_hw_ns;
+    })?;
+    Ok(())
+}
+
 /// One flooding publisher: actions answering the newest sensor frame, back
 /// to back, until `end_ns`.
 fn flood_actions(ns: String, i: usize, end_ns: u64) -> anyhow::Result<u64> {
@@ -63,10 +73,7 @@ fn flood_actions(ns: String, i: usize, end_ns: u64) -> anyhow::Result<u64> {
     let mut sent = 0u64;
     while mono_now_ns() < end_ns && !termination_requested() {
         let mut a = PolicyAction::new(sent + 1, mono_now_ns(), [0.0; 4]);
-        transport::drain(&frames, |f| {
-            a.header.episode = f.header.episode;
-            a.header.t_hw_ns = f.header.t_hw_ns;
-        })?;
+        answer_newest(&frames, &mut a)?;
         transport::send(&actions, &a)?;
         sent += 1;
     }
@@ -224,7 +231,7 @@ fn main() -> anyhow::Result<()> {
     let timer = std::thread::spawn(move || bare_timer(d, prio_opt));
     let end = mono_now_ns() + (args.duration_s * 1e9) as u64;
     let peers: Vec<std::thread::JoinHandle<anyhow::Result<Flood>>> = if args.flood {
-        let mut v: Vec<std::thread::JoinHandle<anyhow::Result<Flood>>> = (0..3)
+        let mut v: Vec<_> = (0..3)
             .map(|i| {
                 let ns = ns.clone();
                 std::thread::spawn(move || {
@@ -250,12 +257,7 @@ fn main() -> anyhow::Result<()> {
             -0.0005
         };
         let mut a = PolicyAction::new(seq, mono_now_ns(), [dx, 0.0, 0.0, 0.0]);
-        // Answering the newest sensor frame, as a policy does (the daemon
-        // drops actions answering none, or an old one).
-        transport::drain(&frames, |f| {
-            a.header.episode = f.header.episode;
-            a.header.t_hw_ns = f.header.t_hw_ns;
-        })?;
+        answer_newest(&frames, &mut a)?;
         transport::send(&actions, &a)?;
         // 20 Hz, each at another phase of the daemon's 1 ms cycle (both
         // clocks are absolute: a fixed phase would measure one point of
