@@ -345,9 +345,29 @@ fn a_run_can_start_from_another_runs_policy() {
     // same policy, a fresh network.
     let mut net = cfg.clone();
     net.policy.baseline = learner::rl::BaselineKind::Network;
-    let n = train(net, &dir.path().join("net"), false, &|| false).unwrap();
+    let n = train(net.clone(), &dir.path().join("net"), false, &|| false).unwrap();
     assert_eq!(n.state.policy, a.state.policy);
     assert_eq!(n.state.baseline.kind(), learner::rl::BaselineKind::Network);
+    // With an asymmetric critic and a new exploration σ: the same network,
+    // every log σ reset, a value network over the ground truth's 18 values
+    // and the time, and it trains on.
+    let mut asym = net.clone();
+    asym.policy.critic = learner::rl::train::CriticInput::GroundTruth;
+    asym.policy.init_from_log_std = Some(-2.0);
+    asym.env_steps = 40;
+    let m = train(asym, &dir.path().join("asym"), false, &|| false).unwrap();
+    assert_eq!(m.state.iteration, 1);
+    match &m.state.baseline {
+        learner::rl::Baseline::Network(v) => assert_eq!(v.sizes[0], 18 + 1),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(m.state.policy.sizes, a.state.policy.sizes);
+    assert!(
+        m.state.policy.log_std.iter().all(|l| (l + 2.0).abs() < 0.1),
+        "{:?}",
+        m.state.policy.log_std
+    );
+    assert_eq!(m.state.critic_norm.as_ref().map(|c| c.dim()), Some(18));
     // It trains on from there.
     cfg.env_steps = 40;
     let c = train(cfg.clone(), &dir.path().join("c"), false, &|| false).unwrap();

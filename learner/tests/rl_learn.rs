@@ -7,6 +7,7 @@
 
 use learner::rl::env::{RlEnvError, StepOutcome};
 use learner::rl::reward::{Outcome, RewardStage};
+use learner::rl::train::CriticInput;
 use learner::rl::{Algorithm, BaselineKind, BatchEnv, PolicyConfig, Trainer};
 
 /// A point on a line: observation (x, goal), action a clipped to [−1, 1]
@@ -21,7 +22,13 @@ struct Reach {
     /// What the observation is multiplied by (the learned representation's
     /// z means vary by a few hundredths).
     scale: f64,
+    /// The privileged state an asymmetric critic sees (x − goal, goal, and
+    /// a marker no observation holds), when it has one.
+    critic: Option<Vec<f64>>,
 }
+
+/// What the critic's third value holds: the actor must never see it.
+const CRITIC_MARKER: f64 = 1234.5;
 
 const STEPS: u32 = 20;
 
@@ -35,6 +42,14 @@ impl Reach {
             obs: vec![0.0; 2 * n],
             out: Vec::new(),
             scale: 1.0,
+            critic: None,
+        }
+    }
+
+    fn with_critic(n: usize) -> Self {
+        Self {
+            critic: Some(vec![0.0; 3 * n]),
+            ..Self::new(n)
         }
     }
 
@@ -49,6 +64,11 @@ impl Reach {
         for i in 0..self.x.len() {
             self.obs[2 * i] = self.scale * self.x[i];
             self.obs[2 * i + 1] = self.scale * self.goal[i];
+            if let Some(c) = &mut self.critic {
+                c[3 * i] = self.x[i] - self.goal[i];
+                c[3 * i + 1] = self.goal[i];
+                c[3 * i + 2] = CRITIC_MARKER;
+            }
         }
     }
 
@@ -109,11 +129,20 @@ impl BatchEnv for Reach {
     fn observations(&self) -> &[f64] {
         &self.obs
     }
+    fn critic_dim(&self) -> usize {
+        self.critic.as_ref().map_or(0, |_| 3)
+    }
+    fn critic_observations(&self) -> &[f64] {
+        self.critic.as_deref().unwrap_or(&[])
+    }
 }
 
 /// Success rate of the policy's mean over 100 fresh goals.
 fn evaluate(trainer: &Trainer<Reach>) -> f64 {
     let mut env = Reach::scaled(100, trainer.env().scale);
+    // The actor's inputs are the observation's two values, whatever the
+    // critic sees.
+    assert_eq!(trainer.state.policy.sizes[0], 2);
     let which: Vec<_> = (0..100).map(|i| (i, 1_000_000 + i as u64)).collect();
     env.reset(&which).unwrap();
     for _ in 0..STEPS {
@@ -322,4 +351,75 @@ fn the_value_warm_up_trains_the_baseline_alone() {
             "{algorithm:?}: no policy step after the warm-up"
         );
     }
+}
+
+fn critic_config(algorithm: Algorithm) -> PolicyConfig {
+    PolicyConfig {
+        algorithm,
+        batch_steps: 400,
+        baseline: BaselineKind::Network,
+        critic: CriticInput::GroundTruth,
+        ..Default::default()
+    }
+}
+
+/// With an asymmetric critic the value network sees the environment's
+/// privileged state (under its own statistics), the policy only its
+/// observation, and the reach is still learned.
+#[test]
+fn an_asymmetric_critic_sees_the_privileged_state_and_the_policy_learns() {
+    for algorithm in [Algorithm::Ppo, Algorithm::Trpo] {
+        let mut trainer =
+            Trainer::new(Reach::with_critic(10), critic_config(algorithm), 7).unwrap();
+        let value_inputs = match &trainer.state.baseline {
+            learner::rl::Baseline::Network(v) => v.sizes[0],
+            other => panic!("{other:?}"),
+        };
+        // The critic's three values and the episode's time.
+        assert_eq!(value_inputs, 3 + 1, "{algorithm:?}");
+        for _ in 0..30 {
+            trainer.iterate().unwrap();
+        }
+        let norm = trainer
+            .state
+            .critic_norm
+            .as_ref()
+            .expect("critic statistics");
+        assert_eq!(norm.count, 30 * 400, "{algorithm:?}");
+        // The marker reached the critic's statistics and nothing of the
+        // actor's: its normalisation holds the observation's two values.
+        assert!(
+            (norm.mean[2] - CRITIC_MARKER).abs() < 1e-6,
+            "{:?}",
+            norm.mean
+        );
+        let actor = trainer.state.policy.obs_norm.as_ref().unwrap();
+        assert_eq!(actor.dim(), 2);
+        assert!(
+            actor.mean.iter().all(|m| m.abs() < 10.0),
+            "{:?}",
+            actor.mean
+        );
+        let after = evaluate(&trainer);
+        assert!(after >= 0.8, "{algorithm:?}: {after}");
+    }
+    // It survives a checkpoint: the resumed run is the uninterrupted one.
+    let cfg = PolicyConfig {
+        batch_steps: 200,
+        ..critic_config(Algorithm::Ppo)
+    };
+    let mut a = Trainer::new(Reach::with_critic(10), cfg.clone(), 3).unwrap();
+    a.iterate().unwrap();
+    let state = serde_json::from_str(&serde_json::to_string(&a.state).unwrap()).unwrap();
+    let mut b = Trainer::resume(Reach::with_critic(10), cfg, state).unwrap();
+    assert_eq!(a.iterate().unwrap(), b.iterate().unwrap());
+    assert_eq!(a.state, b.state);
+}
+
+#[test]
+fn an_asymmetric_critic_without_a_privileged_state_is_refused() {
+    let e = Trainer::new(Reach::new(2), critic_config(Algorithm::Ppo), 3)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("policy.critic"), "{e}");
 }

@@ -324,7 +324,14 @@ pub fn train(
         );
     }
     let (observer, ramp) = training_observer(&cfg)?;
-    let env = VecEnv::new(&cfg.env, cfg.num_envs, observer, cfg.threads)?;
+    let mut env = VecEnv::new(&cfg.env, cfg.num_envs, observer, cfg.threads)?;
+    if cfg.policy.critic == super::train::CriticInput::GroundTruth {
+        env = env.with_critic(std::sync::Arc::new(super::observe::GroundTruth));
+    }
+    let critic_dim = match cfg.policy.critic {
+        super::train::CriticInput::Policy => env.obs_dim(),
+        super::train::CriticInput::GroundTruth => env.critic_dim(),
+    };
     let state = match (state, &cfg.init_from) {
         (Some(s), _) => Some(s),
         (None, Some(from)) => {
@@ -377,21 +384,21 @@ pub fn train(
             // The baseline does not change what the policy does: one that
             // is not this configuration's is replaced by a fresh one.
             let mut baseline = c.state.baseline;
-            if !baseline.fits(cfg.policy.baseline, env.obs_dim(), &cfg.policy.value) {
+            if !baseline.fits(cfg.policy.baseline, critic_dim, &cfg.policy.value) {
                 eprintln!(
                     "learner: init_from {}: its value baseline is not this run's \
                      (policy.baseline, policy.value.hidden); a fresh one is fitted",
                     from.display()
                 );
                 let mut rng = stack_common::rng::seeded(cfg.seed, 901);
-                baseline = Baseline::new(
-                    cfg.policy.baseline,
-                    env.obs_dim(),
-                    &cfg.policy.value,
-                    &mut rng,
-                );
+                baseline =
+                    Baseline::new(cfg.policy.baseline, critic_dim, &cfg.policy.value, &mut rng);
             }
-            Some(TrainerState::fresh(c.state.policy, baseline, cfg.seed))
+            let mut policy = c.state.policy;
+            if let Some(l) = cfg.policy.init_from_log_std {
+                policy.log_std.iter_mut().for_each(|x| *x = l);
+            }
+            Some(TrainerState::fresh(policy, baseline, cfg.seed))
         }
         (None, None) => None,
     };

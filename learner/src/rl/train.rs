@@ -31,6 +31,20 @@ pub enum Algorithm {
     Ppo,
 }
 
+/// What the value baseline observes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CriticInput {
+    /// The policy's own observation, under its normalisation.
+    #[default]
+    Policy,
+    /// The simulator's ground-truth state (the 18 values of
+    /// [`super::observe::GroundTruth`]) under its own running
+    /// normalisation: an asymmetric critic (Pinto et al. 2018), allowed in
+    /// simulation because only the actor is deployed. Training only.
+    GroundTruth,
+}
+
 /// The policy and its learning (`[policy]`): what both algorithms share,
 /// with each one's own settings in `[policy.trpo]` and `[policy.ppo]`.
 /// Defaults are the paper's appendix (simulation column) and, where it is
@@ -47,6 +61,13 @@ pub struct PolicyConfig {
     pub gamma: f64,
     /// GAE λ (paper: 0.97).
     pub gae_lambda: f64,
+    /// What the value baseline sees (`policy`: the policy's observation;
+    /// `ground_truth`: the simulator's state, an asymmetric critic).
+    pub critic: CriticInput,
+    /// For a run started from `init_from`: every action component's log σ
+    /// starts at this rather than at the source's (a distilled student
+    /// carries its teacher's exploration noise). None: the source's.
+    pub init_from_log_std: Option<f64>,
     /// Hidden layer widths of the policy's MLP (pytorch-trpo: 64, 64).
     pub hidden: Vec<usize>,
     /// Initial log σ of every action component (pytorch-trpo: 0).
@@ -85,6 +106,8 @@ impl Default for PolicyConfig {
             batch_steps: 2000,
             gamma: 0.995,
             gae_lambda: 0.97,
+            critic: CriticInput::Policy,
+            init_from_log_std: None,
             hidden: vec![64, 64],
             init_log_std: 0.0,
             normalise_observations: true,
@@ -122,6 +145,15 @@ impl PolicyConfig {
                 "policy.observation_clip",
                 self.observation_clip,
                 "must be positive and finite",
+            ));
+        }
+        if let Some(l) = self.init_from_log_std
+            && !l.is_finite()
+        {
+            return Err(FieldError::new(
+                "policy.init_from_log_std",
+                l,
+                "must be finite",
             ));
         }
         if !self.init_log_std.is_finite() {
@@ -222,6 +254,8 @@ impl IterationStats {
 struct Segment {
     /// The observations as the environment gave them.
     obs: Vec<f64>,
+    /// The critic's observations (empty without an asymmetric critic).
+    critic: Vec<f64>,
     actions: Vec<f64>,
     rewards: Vec<f64>,
     times: Vec<f64>,
@@ -235,6 +269,8 @@ struct Collected {
     batch: RolloutBatch,
     /// The observations as the environment gave them.
     raw: Vec<f64>,
+    /// The critic's observations as the environment gave them.
+    critic_raw: Vec<f64>,
     /// Step of each sample over the episode length.
     times: Vec<f64>,
     /// The baseline's value of each sample's state.
@@ -243,24 +279,31 @@ struct Collected {
 
 impl Collected {
     /// Moves a finished or cut segment in, with its advantages against
-    /// `baseline` (which sees the observations as `policy`'s network does);
-    /// `last` is the state after it and its time (None: the episode ended,
-    /// by a fault or at the horizon: nothing to bootstrap).
+    /// `baseline` (which sees the observations as `policy`'s network does,
+    /// or the critic's under `critic_norm`); `last` is the state after it
+    /// (policy's and critic's observation) and its time (None: the episode
+    /// ended, by a fault or at the horizon: nothing to bootstrap).
     fn finish(
         &mut self,
         seg: &mut Segment,
-        last: Option<(&[f64], f64)>,
+        last: Option<(&[f64], &[f64], f64)>,
         baseline: &Baseline,
         policy: &GaussianPolicy,
+        critic_norm: Option<&ObsNorm>,
         cfg: &PolicyConfig,
     ) {
         if seg.rewards.is_empty() {
             return;
         }
-        let values = baseline.predict(&policy.inputs(&seg.obs), &seg.times);
-        let last_value = last.map_or(0.0, |(o, t)| baseline.predict(&policy.inputs(o), &[t])[0]);
+        let inputs = |obs: &[f64], critic: &[f64]| match critic_norm {
+            Some(n) => n.apply(critic),
+            None => policy.inputs(obs),
+        };
+        let values = baseline.predict(&inputs(&seg.obs, &seg.critic), &seg.times);
+        let last_value = last.map_or(0.0, |(o, c, t)| baseline.predict(&inputs(o, c), &[t])[0]);
         let adv = gae(&seg.rewards, &values, last_value, cfg.gamma, cfg.gae_lambda);
         self.raw.append(&mut seg.obs);
+        self.critic_raw.append(&mut seg.critic);
         self.batch.actions.append(&mut seg.actions);
         self.batch.advantages.extend(adv);
         self.times.append(&mut seg.times);
@@ -290,6 +333,10 @@ pub struct TrainerState {
     /// PPO resizes it when its parameters are not the refit's.
     #[serde(default)]
     pub adam: Adam,
+    /// The asymmetric critic's observation statistics (None: the baseline
+    /// sees the policy's observation).
+    #[serde(default)]
+    pub critic_norm: Option<ObsNorm>,
 }
 
 impl TrainerState {
@@ -303,6 +350,7 @@ impl TrainerState {
             episodes_started: 0,
             seed,
             adam: Adam::default(),
+            critic_norm: None,
         }
     }
 }
@@ -338,14 +386,27 @@ impl<E: BatchEnv> Trainer<E> {
             policy.obs_norm = Some(ObsNorm::new(env.obs_dim(), cfg.observation_clip));
         }
         let mut rng = stack_common::rng::seeded(seed, 901);
-        let baseline = Baseline::new(cfg.baseline, env.obs_dim(), &cfg.value, &mut rng);
+        let baseline = Baseline::new(
+            cfg.baseline,
+            critic_dim_of(&env, &cfg),
+            &cfg.value,
+            &mut rng,
+        );
         let state = TrainerState::fresh(policy, baseline, seed);
         Self::resume(env, cfg, state)
     }
 
     /// A run resumed from `state` (its episodes in progress start afresh).
-    pub fn resume(env: E, cfg: PolicyConfig, state: TrainerState) -> Result<Self, RlEnvError> {
+    pub fn resume(env: E, cfg: PolicyConfig, mut state: TrainerState) -> Result<Self, RlEnvError> {
         cfg.validate()?;
+        if cfg.critic == CriticInput::GroundTruth && env.critic_dim() == 0 {
+            return Err(RlEnvError::Config(FieldError::new(
+                "policy.critic",
+                "ground_truth",
+                "these environments give the value baseline no state of its own",
+            )));
+        }
+        let critic_dim = critic_dim_of(&env, &cfg);
         let n = env.num_envs();
         if state.policy.sizes.first() != Some(&env.obs_dim())
             || state.policy.act_dim() != env.act_dim()
@@ -373,16 +434,16 @@ impl<E: BatchEnv> Trainer<E> {
                 },
             )));
         }
-        if !state.baseline.fits(cfg.baseline, env.obs_dim(), &cfg.value) {
+        if !state.baseline.fits(cfg.baseline, critic_dim, &cfg.value) {
             return Err(RlEnvError::Config(FieldError::new(
                 "policy.baseline",
                 format!("{:?}", cfg.baseline),
                 format!(
                     "the state to continue has a {:?} baseline that is not this one \
-                     (policy.value.hidden {:?} over {} observation values)",
+                     (policy.value.hidden {:?} over {} observation values, policy.critic)",
                     state.baseline.kind(),
                     cfg.value.hidden,
-                    env.obs_dim()
+                    critic_dim
                 ),
             )));
         }
@@ -394,6 +455,20 @@ impl<E: BatchEnv> Trainer<E> {
                 got: n.dim(),
                 expected: env.obs_dim(),
             });
+        }
+        // The critic's statistics start with its first batch (a run from
+        // `init_from` brings none).
+        match cfg.critic {
+            CriticInput::Policy => state.critic_norm = None,
+            CriticInput::GroundTruth => {
+                if state
+                    .critic_norm
+                    .as_ref()
+                    .is_none_or(|n| n.dim() != critic_dim)
+                {
+                    state.critic_norm = Some(ObsNorm::new(critic_dim, cfg.observation_clip));
+                }
+            }
         }
         Ok(Self {
             env,
@@ -426,6 +501,12 @@ impl<E: BatchEnv> Trainer<E> {
     pub fn iterate(&mut self) -> Result<IterationStats, RlEnvError> {
         let n = self.env.num_envs();
         let (od, ad) = (self.env.obs_dim(), self.env.act_dim());
+        // The critic's observation length (0: it sees the policy's).
+        let cd = if self.state.critic_norm.is_some() {
+            self.env.critic_dim()
+        } else {
+            0
+        };
         let max_steps = self.env.max_steps();
         let horizon = max_steps.max(1) as f64;
         let mut rng = stack_common::rng::seeded(self.state.seed, 1000 + self.state.iteration);
@@ -447,6 +528,7 @@ impl<E: BatchEnv> Trainer<E> {
                 self.env.reset(&which)?;
             }
             let obs = self.env.observations().to_vec();
+            let critic = self.env.critic_observations()[..n * cd].to_vec();
             let actions = self.state.policy.sample(&obs, &mut rng);
             let outcomes = self.env.step(&actions)?.to_vec();
             collected += n;
@@ -454,6 +536,7 @@ impl<E: BatchEnv> Trainer<E> {
             for (i, out) in outcomes.iter().enumerate() {
                 let seg = &mut self.segments[i];
                 seg.obs.extend_from_slice(&obs[i * od..(i + 1) * od]);
+                seg.critic.extend_from_slice(&critic[i * cd..(i + 1) * cd]);
                 seg.actions
                     .extend_from_slice(&actions[i * ad..(i + 1) * ad]);
                 seg.rewards.push(out.reward);
@@ -471,6 +554,7 @@ impl<E: BatchEnv> Trainer<E> {
                         None,
                         &self.state.baseline,
                         &self.state.policy,
+                        self.state.critic_norm.as_ref(),
                         &self.cfg,
                     );
                     episodes.push(EpisodeStats {
@@ -487,14 +571,20 @@ impl<E: BatchEnv> Trainer<E> {
         }
         // Cut the running segments at the batch's end; they go on next time.
         let obs = self.env.observations().to_vec();
+        let critic = self.env.critic_observations()[..n * cd].to_vec();
         for i in (0..n).filter(|&i| !self.pending[i]) {
-            let last = (&obs[i * od..(i + 1) * od], self.t[i] as f64 / horizon);
+            let last = (
+                &obs[i * od..(i + 1) * od],
+                &critic[i * cd..(i + 1) * cd],
+                self.t[i] as f64 / horizon,
+            );
             let mut seg = std::mem::take(&mut self.segments[i]);
             col.finish(
                 &mut seg,
                 Some(last),
                 &self.state.baseline,
                 &self.state.policy,
+                self.state.critic_norm.as_ref(),
                 &self.cfg,
             );
         }
@@ -502,6 +592,7 @@ impl<E: BatchEnv> Trainer<E> {
         let Collected {
             mut batch,
             raw,
+            critic_raw,
             times,
             values,
         } = col;
@@ -518,6 +609,12 @@ impl<E: BatchEnv> Trainer<E> {
             n.update(&raw);
         }
         batch.obs = self.state.policy.inputs(&raw);
+        // The critic's statistics take in every batch, warm-up included:
+        // only the policy must act unchanged then.
+        let critic_inputs = self.state.critic_norm.as_mut().map(|n| {
+            n.update(&critic_raw);
+            n.apply(&critic_raw)
+        });
         let targets: Vec<f64> = batch
             .advantages
             .iter()
@@ -554,7 +651,7 @@ impl<E: BatchEnv> Trainer<E> {
         let mut order =
             stack_common::rng::seeded(self.state.seed, (3 << 32) + self.state.iteration);
         self.state.baseline.fit(
-            &batch.obs,
+            critic_inputs.as_deref().unwrap_or(&batch.obs),
             &times,
             &targets,
             self.cfg.baseline_ridge,
@@ -571,5 +668,13 @@ impl<E: BatchEnv> Trainer<E> {
             mean_std: ls.iter().map(|l| l.exp()).sum::<f64>() / ls.len() as f64,
             baseline_explained,
         })
+    }
+}
+
+/// Values per state the baseline of `cfg` sees in `env`.
+fn critic_dim_of<E: BatchEnv>(env: &E, cfg: &PolicyConfig) -> usize {
+    match cfg.critic {
+        CriticInput::Policy => env.obs_dim(),
+        CriticInput::GroundTruth => env.critic_dim(),
     }
 }

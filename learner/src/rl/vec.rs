@@ -24,6 +24,17 @@ pub trait BatchEnv {
     fn step(&mut self, actions: &[f64]) -> Result<&[StepOutcome], RlEnvError>;
     /// The latest observation of every environment, one after the other.
     fn observations(&self) -> &[f64];
+    /// Length of one critic observation: what an asymmetric value
+    /// baseline sees beside the policy's (0: none, the default).
+    fn critic_dim(&self) -> usize {
+        0
+    }
+    /// The latest critic observation of every environment, one after the
+    /// other (`num_envs() * critic_dim()` values). The policy never sees
+    /// them: they are the simulator's privileged state.
+    fn critic_observations(&self) -> &[f64] {
+        &[]
+    }
 }
 
 /// Runs `f` on every item, the items split into `threads` contiguous
@@ -68,6 +79,9 @@ pub fn all_cores() -> usize {
 pub struct VecEnv {
     envs: Vec<RlEnv>,
     observer: Arc<dyn Observer>,
+    /// The value baseline's own observer (privileged), if it has one.
+    critic: Option<Arc<dyn Observer>>,
+    critic_obs: Vec<f64>,
     threads: usize,
     obs: Vec<f64>,
     outcomes: Vec<StepOutcome>,
@@ -108,10 +122,21 @@ impl VecEnv {
             outcomes: Vec::with_capacity(n),
             envs,
             observer,
+            critic: None,
+            critic_obs: Vec::new(),
             threads: threads.min(n),
             max_steps: cfg.max_steps,
             overload_share,
         })
+    }
+
+    /// The same environments with `critic` observing them for the value
+    /// baseline as well (an asymmetric critic). The critic must not need
+    /// the camera: it sees the simulator's state.
+    pub fn with_critic(mut self, critic: Arc<dyn Observer>) -> Self {
+        self.critic_obs = vec![0.0; self.envs.len() * critic.dim()];
+        self.critic = Some(critic);
+        self
     }
 
     /// The overload ramp's progress, read by every environment
@@ -134,6 +159,9 @@ impl VecEnv {
         let views: Vec<_> = self.envs.iter().filter_map(|e| e.view()).collect();
         if views.len() == self.envs.len() {
             self.observer.observe(&views, &mut self.obs);
+            if let Some(c) = &self.critic {
+                c.observe(&views, &mut self.critic_obs);
+            }
         }
     }
 }
@@ -206,5 +234,13 @@ impl BatchEnv for VecEnv {
 
     fn observations(&self) -> &[f64] {
         &self.obs
+    }
+
+    fn critic_dim(&self) -> usize {
+        self.critic.as_ref().map_or(0, |c| c.dim())
+    }
+
+    fn critic_observations(&self) -> &[f64] {
+        &self.critic_obs
     }
 }
