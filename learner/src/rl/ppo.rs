@@ -40,6 +40,13 @@ pub struct PpoConfig {
     /// The gradient is scaled down to at most this Euclidean norm (0: no
     /// cap).
     pub max_grad_norm: f64,
+    /// The update stops early, before the minibatch that would follow,
+    /// once the mean KL divergence of the new policy from the old over the
+    /// last minibatch's states exceeds 1.5 × this (0: never; Stable
+    /// Baselines3's `target_kl`). The clip alone does not bound the step:
+    /// a policy of small σ moved ~1 σ per update (KL 0.1–0.5) in the
+    /// fine-tune of docs/rl.md.
+    pub target_kl: f64,
 }
 
 impl Default for PpoConfig {
@@ -50,6 +57,7 @@ impl Default for PpoConfig {
             minibatch: 64,
             learning_rate: 3e-4,
             max_grad_norm: 0.5,
+            target_kl: 0.0,
         }
     }
 }
@@ -69,6 +77,13 @@ impl PpoConfig {
                 "policy.ppo.learning_rate",
                 self.learning_rate,
                 "must be positive and finite",
+            ));
+        }
+        if !(self.target_kl.is_finite() && self.target_kl >= 0.0) {
+            return Err(FieldError::new(
+                "policy.ppo.target_kl",
+                self.target_kl,
+                "must be ≥ 0 and finite (0: off)",
             ));
         }
         if !(self.max_grad_norm.is_finite() && self.max_grad_norm >= 0.0) {
@@ -184,10 +199,45 @@ pub fn ppo_update(
     let mut order = all.clone();
     let mut params = policy.flat();
     let mut clip_fraction = 0.0;
+    // The minibatch KL of the new policy from the old, past the limit.
+    let od = batch.obs.len() / n.max(1);
+    let too_far = |policy: &GaussianPolicy, idx: &[usize]| {
+        if cfg.target_kl <= 0.0 {
+            return false;
+        }
+        let obs: Vec<f64> = idx
+            .iter()
+            .flat_map(|&i| &batch.obs[i * od..(i + 1) * od])
+            .copied()
+            .collect();
+        let new = policy.net_means(&obs);
+        let kl = idx
+            .iter()
+            .zip(new.chunks_exact(d))
+            .map(|(&i, m1)| {
+                kl_gaussian(
+                    &old_means[i * d..(i + 1) * d],
+                    &old.log_std,
+                    m1,
+                    &policy.log_std,
+                )
+            })
+            .sum::<f64>()
+            / idx.len().max(1) as f64;
+        kl > 1.5 * cfg.target_kl
+    };
+    let mut stopped = false;
     for _ in 0..cfg.epochs {
+        if stopped {
+            break;
+        }
         order.shuffle(rng);
         let (mut clipped, mut seen) = (0.0, 0usize);
         for idx in order.chunks(cfg.minibatch) {
+            if too_far(policy, idx) {
+                stopped = true;
+                break;
+            }
             let mut c = clipped_surrogate(policy, batch, &old_log_prob, idx, cfg.clip);
             let norm = c.grad.iter().map(|g| g * g).sum::<f64>().sqrt();
             if !norm.is_finite() {
@@ -334,6 +384,44 @@ mod tests {
         assert_eq!(adam.t, 10 * 4, "10 epochs of 4 minibatches of ≤ 64");
     }
 
+    /// With `target_kl` the update stops once a minibatch's KL passes 1.5×
+    /// it: fewer steps, and a KL near the target where the unbounded update
+    /// goes far past it (a small σ makes every step large in KL).
+    #[test]
+    fn target_kl_stops_the_update_early() {
+        let run = |target_kl: f64| {
+            let mut rng = stack_common::rng::seeded(5, 0);
+            let mut p = GaussianPolicy::new(2, &[8], 1, -2.0, &mut rng);
+            let obs: Vec<f64> = (0..400).map(|k| (k as f64 * 0.37).sin()).collect();
+            let actions = p.sample(&obs, &mut rng);
+            let means = p.means(&obs);
+            let advantages = obs
+                .chunks(2)
+                .zip(actions.iter().zip(&means))
+                .map(|(o, (a, m))| (a - m) * o[0].signum())
+                .collect();
+            let mut batch = RolloutBatch {
+                obs,
+                actions,
+                advantages,
+            };
+            let mut adam = Adam::default();
+            let cfg = PpoConfig {
+                target_kl,
+                learning_rate: 3e-3,
+                ..Default::default()
+            };
+            let s = ppo_update(&mut p, &mut batch, &cfg, &mut adam, &mut rng);
+            (s.kl, adam.t)
+        };
+        let (free_kl, free_steps) = run(0.0);
+        let (kl, steps) = run(0.002);
+        assert_eq!(free_steps, 40);
+        assert!(steps < free_steps, "{steps}");
+        assert!(free_kl > 0.02, "{free_kl}");
+        assert!(kl < 0.01, "{kl} (unbounded: {free_kl})");
+    }
+
     #[test]
     fn bad_settings_are_named() {
         for (c, field) in [
@@ -350,6 +438,13 @@ mod tests {
                     ..Default::default()
                 },
                 "policy.ppo.minibatch",
+            ),
+            (
+                PpoConfig {
+                    target_kl: -1.0,
+                    ..Default::default()
+                },
+                "policy.ppo.target_kl",
             ),
         ] {
             let e = c.validate().unwrap_err().to_string();
