@@ -31,6 +31,12 @@ export FRANKY_SIM_REQUIRED=1
 export INTEROP_PYTHON="$PWD/$INTEROP_VENV/bin/python"
 export INTEROP_REQUIRED=1
 
+# PyTorch, whose twin of the Full Model (bench-anchors/torch-repr) loads the
+# exported representation and must compute the same z means.
+. scripts/torch-venv.sh
+export TORCH_PYTHON="$PWD/$TORCH_VENV/bin/python"
+export TORCH_REQUIRED=1
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy"

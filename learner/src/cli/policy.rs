@@ -12,7 +12,9 @@ pub enum PolicyCmd {
     /// and, for a representation policy, DIR/encoder.bin (the robot PC's
     /// `policy-node run --policy DIR/policy.json` reads them without the
     /// training stack); and, for other tools, DIR/policy.safetensors with
-    /// DIR/policy-spec.json (docs/rl.md, "The policy for other tools").
+    /// DIR/policy-spec.json (docs/rl.md, "The policy for other tools"), and
+    /// for a representation policy DIR/representation.safetensors with its
+    /// spec (`learner repr export`'s).
     Export {
         /// The training run's checkpoint.json.
         #[arg(long)]
@@ -151,6 +153,13 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
                     format!("writing the safetensors export into {}", out.display())
                 })?;
             println!("{} and {} written", st.display(), spec.display());
+            // A representation policy's encoder, for other tools as well.
+            if let crate::rl::ObservationKind::Representation(model) =
+                run::read_checkpoint(&checkpoint)?.config.observation
+            {
+                let [st, spec] = crate::interop::repr_export::export_model_dir(&model, &out)?;
+                println!("{} and {} written", st.display(), spec.display());
+            }
         }
         PolicyCmd::Eval {
             checkpoint,

@@ -32,6 +32,18 @@ pub enum ReprCmd {
         #[arg(long, value_enum, default_value_t = crate::train::DeviceKind::Cpu)]
         device: crate::train::DeviceKind,
     },
+    /// Writes a trained representation for other tools:
+    /// OUT/representation.safetensors (the PyTorch twin's parameter names)
+    /// and OUT/representation-spec.json (architecture, input
+    /// normalisation; docs/representation.md, "Loading it in PyTorch").
+    Export {
+        /// The exported model (a training run's `model/`).
+        #[arg(long)]
+        model: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Evaluates a trained run on its test split: the appendix table with
     /// baselines, flow for candidate actions, PCA of z.
     Eval {
@@ -102,6 +114,10 @@ pub fn run(cmd: ReprCmd) -> Result<()> {
                     out.display()
                 );
             }
+        }
+        ReprCmd::Export { model, out } => {
+            let [st, spec] = crate::interop::repr_export::export_model_dir(&model, &out)?;
+            println!("{} and {} written", st.display(), spec.display());
         }
         ReprCmd::Eval {
             run,

@@ -18,8 +18,8 @@ const ACTION_FEATURES: usize = 32;
 /// every layer, as the authors' code).
 #[derive(Module, Debug)]
 pub struct ActionFusion {
-    action: Vec<Linear>,
-    fuse: Vec<Linear>,
+    pub(crate) action: Vec<Linear>,
+    pub(crate) fuse: Vec<Linear>,
 }
 
 impl ActionFusion {
@@ -93,10 +93,10 @@ const FLOW_UP: [usize; 4] = [64, 32, 32, 32];
 /// sigmoid) is the robot's flow, upsampled ×4 to the image.
 #[derive(Module, Debug)]
 pub struct FlowDecoder {
-    entry: Conv2d,
-    ups: Vec<ConvTranspose2d>,
-    flow: Conv2d,
-    mask: Conv2d,
+    pub(crate) entry: Conv2d,
+    pub(crate) ups: Vec<ConvTranspose2d>,
+    pub(crate) flow: Conv2d,
+    pub(crate) mask: Conv2d,
 }
 
 /// The flow decoder's prediction at full size.
@@ -172,10 +172,10 @@ pub fn zero_maps(b: usize, d: usize, side: usize, device: &Device) -> Vec<Tensor
 /// proprioception through four-layer MLPs.
 #[derive(Module, Debug)]
 pub struct ReconDecoders {
-    rgb_fc: Linear,
-    rgb_convs: Vec<Conv2d>,
-    wrench: LeakyMlp,
-    proprio: LeakyMlp,
+    pub(crate) rgb_fc: Linear,
+    pub(crate) rgb_convs: Vec<Conv2d>,
+    pub(crate) wrench: LeakyMlp,
+    pub(crate) proprio: LeakyMlp,
 }
 
 /// Channels of the RGB reconstruction's six convolutions.

@@ -30,6 +30,7 @@ pub mod inference;
 pub mod init;
 pub mod inputs;
 pub mod losses;
+pub mod named;
 pub mod net;
 
 pub use config::{EeTarget, LossWeights, Modalities, ModelConfig, ModelKind};

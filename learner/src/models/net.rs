@@ -92,12 +92,12 @@ pub struct ReprNet {
     pub(crate) proprio: Option<ProprioEncoder>,
     /// Deterministic model: the concatenated features (4 × 2d) → d.
     pub(crate) concat_fusion: Option<LeakyMlp>,
-    action: Option<ActionFusion>,
-    flow: Option<FlowDecoder>,
-    contact: Option<Linear>,
-    pairing: Option<Linear>,
-    ee: Option<LeakyMlp>,
-    recon: Option<ReconDecoders>,
+    pub(crate) action: Option<ActionFusion>,
+    pub(crate) flow: Option<FlowDecoder>,
+    pub(crate) contact: Option<Linear>,
+    pub(crate) pairing: Option<Linear>,
+    pub(crate) ee: Option<LeakyMlp>,
+    pub(crate) recon: Option<ReconDecoders>,
 }
 
 impl ReprNet {

@@ -1,6 +1,7 @@
-//! The interpreter of the repository's interop virtual environment
-//! (scripts/interop-venv.sh), shared by the tests that run other tools'
-//! Python code (interop.rs, dataset_import.rs).
+//! The interpreters of the repository's interop and PyTorch virtual
+//! environments (scripts/interop-venv.sh, scripts/torch-venv.sh), shared by
+//! the tests that run other tools' Python code (interop.rs,
+//! dataset_import.rs, repr_export.rs).
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -9,12 +10,40 @@ use std::process::{Command, Stdio};
 /// `import {modules}`. None (the test then skips, saying so) when it cannot
 /// and `$INTEROP_REQUIRED` is not 1 (scripts/test.sh sets it) and `$CI` is
 /// unset; otherwise a failure naming `what` is missing.
+#[allow(dead_code)] // Each test file uses one of the two venvs.
 pub fn python(modules: &str, what: &str) -> Option<PathBuf> {
-    let py = std::env::var_os("INTEROP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.venv-interop/bin/python")
-        });
+    venv_python(
+        ("INTEROP_PYTHON", "INTEROP_REQUIRED", ".venv-interop"),
+        "scripts/interop-venv.sh",
+        modules,
+        what,
+    )
+}
+
+/// The same for the PyTorch environment (scripts/torch-venv.sh):
+/// `$TORCH_PYTHON` else `.venv-torch`, required under `$TORCH_REQUIRED`.
+#[allow(dead_code)]
+pub fn torch_python(modules: &str, what: &str) -> Option<PathBuf> {
+    venv_python(
+        ("TORCH_PYTHON", "TORCH_REQUIRED", ".venv-torch"),
+        "scripts/torch-venv.sh",
+        modules,
+        what,
+    )
+}
+
+fn venv_python(
+    (var, required_var, dir): (&str, &str, &str),
+    script: &str,
+    modules: &str,
+    what: &str,
+) -> Option<PathBuf> {
+    let py = std::env::var_os(var).map(PathBuf::from).unwrap_or_else(|| {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(dir)
+            .join("bin/python")
+    });
     let check = format!("import {modules}");
     let ok = Command::new(&py)
         .args(["-c", &check])
@@ -22,10 +51,10 @@ pub fn python(modules: &str, what: &str) -> Option<PathBuf> {
         .status()
         .is_ok_and(|s| s.success());
     let required =
-        std::env::var("INTEROP_REQUIRED").is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
+        std::env::var(required_var).is_ok_and(|v| v == "1") || std::env::var("CI").is_ok();
     assert!(
         ok || !required,
-        "{what} required here but `{} -c '{check}'` fails; run scripts/interop-venv.sh",
+        "{what} required here but `{} -c '{check}'` fails; run {script}",
         py.display()
     );
     if !ok {
