@@ -15,8 +15,8 @@ mod interop_venv;
 /// The readers' interpreter ([`interop_venv::python`]).
 fn interop_python() -> Option<std::path::PathBuf> {
     interop_venv::python(
-        "tensorboard, safetensors.numpy, mcap_ros2.decoder",
-        "tensorboard, safetensors and mcap-ros2-support are",
+        "tensorboard, safetensors.numpy, mcap_ros2.decoder, jsonschema",
+        "tensorboard, safetensors, mcap-ros2-support and jsonschema are",
     )
 }
 
@@ -199,10 +199,12 @@ fn an_exported_policy_acts_in_numpy_as_it_does_here() {
 
 /// Every message of a log decoded by the official reader: CDR channels by
 /// `mcap-ros2-support` from their `ros2msg` schema, JSON channels as JSON
-/// (their schema encoding `jsonschema`); anything else fails. Prints
+/// validated by `jsonschema` against their own schema (encoding
+/// `jsonschema`); anything else fails. Prints
 /// {topic: [message as plain JSON, ...]}.
 const DECODE_LOG: &str = r#"
 import json, sys
+import jsonschema
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -227,8 +229,12 @@ with open(sys.argv[1], "rb") as f:
             assert decode is not None, channel.topic
             value = plain(decode(message.data))
         elif channel.message_encoding == "json" and schema.encoding == "jsonschema":
-            json.loads(schema.data)
             value = json.loads(message.data)
+            # Each message against its channel's own schema, which must
+            # describe its fields (not a bare "object").
+            s = json.loads(schema.data)
+            assert s.get("properties"), f"{channel.topic}: a schema without properties"
+            jsonschema.validate(value, s)
         else:
             sys.exit(f"{channel.topic}: no decoder for {channel.message_encoding!r} / "
                      f"{schema.encoding if schema else None!r}")
@@ -245,6 +251,23 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
     let dir = test_support::scratch_dir("interop-log");
     let path = dir.path().join("run.mcap");
     let mut w = LogWriter::create(&path).unwrap();
+    // The configuration names the robot whose links the views place.
+    let world = hw_sim::WorldConfig::default();
+    let config = learner_node::log::config::RunConfig::new(
+        learner_node::log::config::RunMode::Fast,
+        world.clone(),
+        learner_node::mix::EpisodePolicy::Heuristic,
+        3,
+        41,
+    );
+    w.config(0, &config).unwrap();
+    w.event(
+        0,
+        &learner_node::log::events::Event::Stage {
+            stage: hw_sim::Stage::Touched,
+        },
+    )
+    .unwrap();
     let mut frames = Vec::new();
     for k in 0..120u64 {
         let mut f = *SensorFrame::boxed_zeroed();
@@ -362,11 +385,59 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
     assert_eq!(depth, c.depth_m[..n]);
     // The views and the JSON channels decode too (their contents are
     // learner/tests/log.rs's).
-    for topic in [topics::VIEW_RGB, topics::VIEW_TF, topics::VIEW_WRENCH] {
+    for topic in [
+        topics::VIEW_RGB,
+        topics::VIEW_TF,
+        topics::VIEW_WRENCH,
+        topics::EVENTS,
+        topics::CONFIG,
+    ] {
         assert!(
             log[topic].as_array().is_some_and(|m| !m.is_empty()),
             "{topic}"
         );
+    }
+    assert_eq!(log[topics::CONFIG][0]["robot"], world.robot.as_str());
+    // Every link of the robot, placed at the frame's joint angles: the
+    // last frame's flange where the model puts it.
+    let tf = log[topics::VIEW_TF]
+        .as_array()
+        .unwrap()
+        .iter()
+        .rev()
+        .find(|m| m["transforms"].as_array().unwrap().len() > 1)
+        .expect("a transform message with the arm's links");
+    let links: Vec<&str> = tf["transforms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["child_frame_id"].as_str().unwrap())
+        .collect();
+    let model = robot_model::descriptions::load(&world.robot).unwrap();
+    for f in &model.frames {
+        if f.kind == robot_model::FrameKind::Link {
+            assert!(
+                links.contains(&f.name.as_str()),
+                "{} missing from {links:?}",
+                f.name
+            );
+        }
+    }
+    assert!(links.len() >= 10, "{links:?}");
+    let mut data = model.create_data();
+    let last = frames.last().unwrap();
+    robot_model::forward_kinematics(&model, &mut data, &last.q[..7]);
+    let want = robot_model::frame_placement(&model, &data, model.frame_id("flange").unwrap());
+    let flange = tf["transforms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["child_frame_id"] == "flange")
+        .unwrap();
+    assert_eq!(flange["parent_frame_id"], "base");
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let got = flange["translation"][axis].as_f64().unwrap();
+        assert!((got - want.translation.vector[k]).abs() < 1e-12, "{axis}");
     }
     let ours = learner_node::log::LogReader::open(&path).unwrap();
     assert_eq!(

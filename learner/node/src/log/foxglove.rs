@@ -3,7 +3,9 @@
 //! images, transforms and plots without any extension. Field names and
 //! types follow the published schemas (docs.foxglove.dev, "Schemas"):
 //! `foxglove.RawImage`, `foxglove.CameraCalibration`,
-//! `foxglove.FrameTransforms` and `foxglove.PoseInFrame`. Byte fields are
+//! `foxglove.FrameTransforms` and `foxglove.PoseInFrame`; and the JSON
+//! schemas of our own JSON channels (`vision_touch.Wrench`, `.Event`,
+//! `.Config`), so that every channel describes itself. Byte fields are
 //! base64 strings and times are `{"sec", "nsec"}` objects, as Foxglove's
 //! JSON encoding wants them.
 //!
@@ -51,6 +53,37 @@ pub const WRENCH: &str = r#"{"title":"vision_touch.Wrench","type":"object","prop
 "force":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
 "torque":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
 "force_norm":{"type":"number"}}}"#;
+
+/// `/events`' messages (`log::events::Event`), one schema for the three
+/// kinds, told apart by `event`.
+pub const EVENT: &str = r#"{"title":"vision_touch.Event","type":"object","required":["event"],
+"description":"An episode event: reset (what it started from), stage (a better stage reached), outcome (how it ended)",
+"properties":{
+"event":{"enum":["reset","stage","outcome"]},
+"episode":{"type":"integer","minimum":0},"seed":{"type":"integer","minimum":0},
+"peg":{"enum":["square","triangle","semicircle","hexagon"]},
+"policy":{"enum":["heuristic","random","learned","imported"]},
+"lockstep":{"type":"boolean"},
+"world":{"type":"object","description":"hw-sim's WorldConfig sent with a live reset (docs/hw-sim.md)"},
+"hole_pos_m":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,"description":"hole top centre, base frame, m"},
+"hole_quat_xyzw":{"type":"array","items":{"type":"number"},"minItems":4,"maxItems":4},
+"hole_depth_m":{"type":"number"},
+"stage":{"enum":["failed","touched","inserted","completed"]},
+"duration_s":{"type":"number"},"actions":{"type":"integer","minimum":0},
+"states":{"type":"integer","minimum":0},"interrupted":{"type":"boolean"}}}"#;
+
+/// `/config`'s messages (`log::config::RunConfig`).
+pub const CONFIG: &str = r#"{"title":"vision_touch.Config","type":"object",
+"required":["mode","world","robot","policy","episode","seed"],
+"description":"The configuration one episode ran with",
+"properties":{
+"mode":{"enum":["live","fast"]},
+"world":{"type":"object","description":"hw-sim's WorldConfig (docs/hw-sim.md)"},
+"robot":{"type":"string","description":"robot description: a built-in name or a URDF path"},
+"policy":{"enum":["heuristic","random","learned","imported"]},
+"episode":{"type":"integer","minimum":0},"seed":{"type":"integer","minimum":0},
+"lockstep":{"type":"boolean"},"namespace":{"type":"string"},
+"controller":{"type":"object","description":"rt-controller's ControllerConfig (fast mode)"}}}"#;
 
 /// Base frame name in the transforms.
 pub const BASE_FRAME: &str = "base";

@@ -17,6 +17,7 @@
 //! writer killed mid-run leaves every earlier chunk readable, and
 //! [`recover`] turns such a file into a valid one. See docs/data.md.
 
+pub mod arm;
 pub mod config;
 pub mod events;
 pub mod foxglove;
@@ -159,6 +160,10 @@ pub struct LogWriter {
     last_view_ns: Option<u64>,
     json: Vec<u8>,
     buf: Vec<u8>,
+    /// The arm whose links the views place (the robot `/config` names;
+    /// `Err`: that robot did not load, said once, and the views go on
+    /// without the links).
+    arm: Option<Result<arm::ArmFrames, String>>,
 }
 
 /// One channel of a log: its stream, schema and encodings.
@@ -191,18 +196,22 @@ fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
         topic,
         message_encoding: "json",
     };
-    let object = r#"{"type":"object"}"#;
     let mut specs = vec![
         raw(Stream::Sensor, &ros2::SENSOR_FRAME, topics::SENSOR),
         raw(Stream::Action, &ros2::POLICY_ACTION, topics::ACTION),
         raw(Stream::Status, &ros2::CONTROLLER_STATUS, topics::STATUS),
         raw(Stream::Episode, &ros2::EPISODE_REPORT, topics::EPISODE),
         raw(Stream::Camera, &ros2::CAMERA_FRAME, topics::CAMERA),
-        json(Stream::Events, "vision_touch.Event", object, topics::EVENTS),
+        json(
+            Stream::Events,
+            "vision_touch.Event",
+            foxglove::EVENT,
+            topics::EVENTS,
+        ),
         json(
             Stream::Config,
             "vision_touch.Config",
-            object,
+            foxglove::CONFIG,
             topics::CONFIG,
         ),
     ];
@@ -295,6 +304,7 @@ impl LogWriter {
             last_view_ns: None,
             json: Vec::new(),
             buf: Vec::new(),
+            arm: None,
         })
     }
 
@@ -376,17 +386,25 @@ impl LogWriter {
         self.write_json(Stream::EePose, t, p)?;
         foxglove::wrench(&mut self.json, t, &m.wrench);
         self.write_json(Stream::Wrench, t, p)?;
-        foxglove::frame_transforms(
-            &mut self.json,
-            t,
-            &[foxglove::Transform {
-                parent: foxglove::BASE_FRAME,
-                child: foxglove::EE_FRAME,
-                translation: m.ee_pos_m,
-                rotation_xyzw: m.ee_quat_xyzw,
-            }],
-        );
-        self.write_json(Stream::Tf, t, p)
+        let mut tfs = vec![foxglove::Transform {
+            parent: foxglove::BASE_FRAME,
+            child: foxglove::EE_FRAME,
+            translation: m.ee_pos_m,
+            rotation_xyzw: m.ee_quat_xyzw,
+        }];
+        if let Some(Ok(arm)) = &mut self.arm {
+            let n = (m.n_joints as usize).min(m.q.len());
+            if n == arm.nq()
+                && let Some(links) = arm.transforms(&m.q[..n])
+            {
+                tfs.extend(links);
+            }
+        }
+        foxglove::frame_transforms(&mut self.json, t, &tfs);
+        let json = std::mem::take(&mut self.json);
+        let r = self.write(Stream::Tf, t, p, &json);
+        self.json = json;
+        r
     }
 
     /// Logs an action (`t_hw_ns`: the observation's hardware time).
@@ -497,9 +515,32 @@ impl LogWriter {
 
     /// Logs the configuration in force at `t_hw_ns`.
     pub fn config(&mut self, t_hw_ns: u64, config: &RunConfig) -> Result<(), LogError> {
+        if self.opts.foxglove {
+            self.load_arm(&config.robot);
+        }
         let text = serde_json::to_string(config).expect("configurations serialise");
         let now = shared_mem_schema::process::mono_now_ns();
         self.write(Stream::Config, t_hw_ns, now, text.as_bytes())
+    }
+
+    /// Makes `robot` the arm the views place, loading it unless it is the
+    /// one already loaded (or already failed).
+    fn load_arm(&mut self, robot: &str) {
+        let same = match &self.arm {
+            Some(Ok(a)) => a.robot == robot,
+            Some(Err(r)) => r == robot,
+            None => false,
+        };
+        if !same {
+            self.arm = Some(arm::ArmFrames::load(robot).map_err(|e| {
+                eprintln!(
+                    "learner: {}: the robot {robot:?} did not load ({e}); the views go on \
+                     without the arm's links",
+                    self.path.display()
+                );
+                robot.to_string()
+            }));
+        }
     }
 
     /// Writes the summary and index; the file is complete after this.

@@ -1,0 +1,105 @@
+//! The arm's links for Foxglove's 3D panel: every URDF link's pose in the
+//! base frame at the measured joint angles, as `foxglove.FrameTransforms`
+//! entries named after the links, so that the panel's URDF layer (the
+//! shipped layout, deploy/foxglove/) draws the arm as it moved. The robot
+//! is the one the log's `/config` names ([`super::LogWriter::config`]).
+
+use super::foxglove::{BASE_FRAME, Transform};
+use robot_model::algorithms::kinematics::{forward_kinematics, frame_placement};
+use robot_model::{Data, FrameKind, Model};
+
+/// A robot's link frames and the buffers their poses are computed in.
+pub struct ArmFrames {
+    /// The robot description it was loaded from (name or path).
+    pub robot: String,
+    model: Model,
+    data: Data,
+    /// Frame index and link name of every link.
+    links: Vec<(usize, String)>,
+    q: Vec<f64>,
+}
+
+impl ArmFrames {
+    /// Loads `robot` (a built-in name or a URDF path, as the world's
+    /// `robot` field).
+    pub fn load(robot: &str) -> Result<Self, robot_model::ModelError> {
+        let model = robot_model::descriptions::load(robot)?;
+        let links = model
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.kind == FrameKind::Link)
+            .map(|(i, f)| (i, f.name.clone()))
+            .collect();
+        Ok(Self {
+            robot: robot.to_string(),
+            data: model.create_data(),
+            q: vec![0.0; model.nq()],
+            model,
+            links,
+        })
+    }
+
+    /// Joint positions the model takes.
+    pub fn nq(&self) -> usize {
+        self.model.nq()
+    }
+
+    /// The base → link transform of every link at joint positions `q`
+    /// (its first `nq()` values; `None` when it holds fewer or a value
+    /// that is not finite).
+    pub fn transforms(&mut self, q: &[f64]) -> Option<Vec<Transform<'_>>> {
+        let q = q.get(..self.q.len())?;
+        if q.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        self.q.copy_from_slice(q);
+        forward_kinematics(&self.model, &mut self.data, &self.q);
+        Some(
+            self.links
+                .iter()
+                .map(|(i, name)| {
+                    let iso = frame_placement(&self.model, &self.data, *i);
+                    let t = iso.translation.vector;
+                    let r = iso.rotation;
+                    Transform {
+                        parent: BASE_FRAME,
+                        child: name,
+                        translation: [t.x, t.y, t.z],
+                        rotation_xyzw: [r.i, r.j, r.k, r.w],
+                    }
+                })
+                .collect(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_link_of_the_panda_is_placed_and_the_tip_is_where_the_model_puts_it() {
+        let mut arm = ArmFrames::load("panda").unwrap();
+        let q = [0.0, -0.3, 0.0, -2.0, 0.0, 1.6, 0.8];
+        let tfs = arm.transforms(&q).unwrap();
+        let names: Vec<&str> = tfs.iter().map(|t| t.child).collect();
+        assert!(
+            names.contains(&"panda_link0") && names.contains(&"panda_link7"),
+            "{names:?}"
+        );
+        assert!(names.contains(&"peg_tip"), "{names:?}");
+        // The tip by the model directly.
+        let model = robot_model::descriptions::load("panda").unwrap();
+        let mut data = model.create_data();
+        forward_kinematics(&model, &mut data, &q);
+        let want = frame_placement(&model, &data, model.frame_id("peg_tip").unwrap());
+        let tip = tfs.iter().find(|t| t.child == "peg_tip").unwrap();
+        for k in 0..3 {
+            assert!((tip.translation[k] - want.translation.vector[k]).abs() < 1e-12);
+        }
+        // Too few angles, or a NaN, give nothing rather than a wrong arm.
+        assert!(arm.transforms(&q[..6]).is_none());
+        assert!(arm.transforms(&[f64::NAN; 7]).is_none());
+    }
+}
