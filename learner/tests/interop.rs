@@ -263,6 +263,21 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
     w.config(0, &config).unwrap();
     w.event(
         0,
+        &learner_node::log::events::Event::Reset(Box::new(learner_node::log::events::Reset {
+            episode: 3,
+            seed: 41,
+            peg: world.task.peg,
+            policy: learner_node::mix::EpisodePolicy::Heuristic,
+            lockstep: None,
+            world: None,
+            hole_pos_m: [0.6, 0.05, 0.1],
+            hole_quat_xyzw: [0.0, 0.0, 0.0, 1.0],
+            hole_depth_m: 0.03,
+        })),
+    )
+    .unwrap();
+    w.event(
+        0,
         &learner_node::log::events::Event::Stage {
             stage: hw_sim::Stage::Touched,
         },
@@ -391,6 +406,7 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
         topics::VIEW_WRENCH,
         topics::EVENTS,
         topics::CONFIG,
+        topics::VIEW_SCENE,
     ] {
         assert!(
             log[topic].as_array().is_some_and(|m| !m.is_empty()),
@@ -398,6 +414,27 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
         );
     }
     assert_eq!(log[topics::CONFIG][0]["robot"], world.robot.as_str());
+    // The scene: the arm's links and the peg at the configuration, the
+    // box at the reset, each frame-locked to a frame /tf gives.
+    let scene = log[topics::VIEW_SCENE].as_array().unwrap();
+    assert_eq!(scene.len(), 2);
+    let ids = |m: &serde_json::Value| -> Vec<String> {
+        m["entities"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e["id"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let first = ids(&scene[0]);
+    assert!(first.contains(&"peg".to_string()), "{first:?}");
+    assert!(
+        first.iter().filter(|i| i.starts_with("arm/")).count() >= 8,
+        "{first:?}"
+    );
+    assert_eq!(ids(&scene[1]), ["box"]);
+    let walls = scene[1]["entities"][0]["cubes"].as_array().unwrap();
+    assert_eq!(walls.len(), 5, "four walls and the hole's floor");
     // Every link of the robot, placed at the frame's joint angles: the
     // last frame's flange where the model puts it.
     let tf = log[topics::VIEW_TF]
@@ -439,10 +476,67 @@ fn the_official_mcap_reader_decodes_every_channel_of_a_log() {
         let got = flange["translation"][axis].as_f64().unwrap();
         assert!((got - want.translation.vector[k]).abs() < 1e-12, "{axis}");
     }
+    shipped_layout_reads_this_log(&log);
     let ours = learner_node::log::LogReader::open(&path).unwrap();
     assert_eq!(
         ours.read_raw::<SensorFrame>(topics::SENSOR, None).unwrap(),
         frames
     );
     assert_eq!(ours.read_camera(None).unwrap()[0].depth_m, c.depth_m[..n]);
+}
+
+/// The shipped Foxglove layout (deploy/foxglove/vision-touch.json) fits a
+/// log as the official reader decodes it (`log`: topic → messages): every
+/// panel of its tree is configured, and every topic and message path its
+/// panels name leads to a value in the log's first message on that topic.
+fn shipped_layout_reads_this_log(log: &serde_json::Value) {
+    let layout: serde_json::Value =
+        serde_json::from_str(include_str!("../../deploy/foxglove/vision-touch.json")).unwrap();
+    let configs = layout["configById"].as_object().unwrap();
+    fn panels(node: &serde_json::Value, out: &mut Vec<String>) {
+        match node {
+            serde_json::Value::String(id) => out.push(id.clone()),
+            n => {
+                panels(&n["first"], out);
+                panels(&n["second"], out);
+            }
+        }
+    }
+    let mut ids = Vec::new();
+    panels(&layout["layout"], &mut ids);
+    assert_eq!(ids.len(), configs.len());
+    for id in &ids {
+        assert!(configs.contains_key(id), "{id} has no configuration");
+    }
+    fn paths(v: &serde_json::Value, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, x) in m {
+                    match (k.as_str(), x) {
+                        (
+                            "value" | "topicPath" | "imageTopic" | "calibrationTopic",
+                            serde_json::Value::String(p),
+                        ) => out.push(p.clone()),
+                        ("topics", serde_json::Value::Object(t)) => out.extend(t.keys().cloned()),
+                        _ => paths(x, out),
+                    }
+                }
+            }
+            serde_json::Value::Array(a) => a.iter().for_each(|x| paths(x, out)),
+            _ => {}
+        }
+    }
+    let mut all = Vec::new();
+    paths(&layout["configById"], &mut all);
+    assert!(all.len() >= 10, "{all:?}");
+    for p in all {
+        let (topic, fields) = p.split_once('.').unwrap_or((&p, ""));
+        let first = &log[topic][0];
+        assert!(!first.is_null(), "{p}: the log has no {topic}");
+        let mut v = first;
+        for f in fields.split('.').filter(|f| !f.is_empty()) {
+            v = &v[f];
+            assert!(!v.is_null(), "{p}: no field {f} in {topic}'s messages");
+        }
+    }
 }

@@ -40,6 +40,26 @@ impl ArmFrames {
         })
     }
 
+    /// The robot's model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The wrist sensor's origin in the peg tip's frame (the peg runs
+    /// between them), when the model has both frames.
+    pub fn tip_to_sensor(&self) -> Option<nalgebra::Vector3<f64>> {
+        let tip = self.model.frame_id("peg_tip").ok()?;
+        let sensor = self.model.frame_id("ft_sensor").ok()?;
+        let mut data = self.model.create_data();
+        forward_kinematics(&self.model, &mut data, &vec![0.0; self.model.nq()]);
+        let t = frame_placement(&self.model, &data, tip);
+        let s = frame_placement(&self.model, &data, sensor);
+        Some(
+            t.inverse_transform_point(&s.translation.vector.into())
+                .coords,
+        )
+    }
+
     /// Joint positions the model takes.
     pub fn nq(&self) -> usize {
         self.model.nq()

@@ -97,13 +97,13 @@ pub const SENSOR_FRAME: &str = "ft_sensor";
 
 /// A time as Foxglove's JSON encoding wants it.
 #[derive(Serialize)]
-struct Time {
+pub(crate) struct Time {
     sec: u64,
     nsec: u64,
 }
 
 impl Time {
-    fn of(t_ns: u64) -> Self {
+    pub(crate) fn of(t_ns: u64) -> Self {
         Self {
             sec: t_ns / 1_000_000_000,
             nsec: t_ns % 1_000_000_000,

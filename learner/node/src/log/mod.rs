@@ -24,6 +24,7 @@ pub mod foxglove;
 pub mod gaps;
 mod read;
 pub mod ros2;
+pub mod scene;
 mod walk;
 
 pub use config::{RunConfig, RunMode};
@@ -79,6 +80,8 @@ pub mod topics {
     pub const VIEW_EE_POSE: &str = "/ee/pose";
     /// Foxglove view: wrist wrench.
     pub const VIEW_WRENCH: &str = "/ft/wrench";
+    /// View: the arm, the peg and the box as `foxglove.SceneUpdate`.
+    pub const VIEW_SCENE: &str = "/scene";
 }
 
 /// A logging failure, naming the file.
@@ -145,9 +148,10 @@ enum Stream {
     Tf,
     EePose,
     Wrench,
+    Scene,
 }
 
-const STREAMS: usize = 13;
+const STREAMS: usize = 14;
 
 /// Writes one log (an episode of the live stack, or a collection shard).
 pub struct LogWriter {
@@ -164,6 +168,8 @@ pub struct LogWriter {
     /// `Err`: that robot did not load, said once, and the views go on
     /// without the links).
     arm: Option<Result<arm::ArmFrames, String>>,
+    /// The task of the last `/config`, whose box the reset draws.
+    task: Option<hw_sim::config::TaskConfig>,
 }
 
 /// One channel of a log: its stream, schema and encodings.
@@ -253,6 +259,12 @@ fn channel_specs(opts: &LogOptions) -> Vec<ChannelSpec> {
                 foxglove::WRENCH,
                 topics::VIEW_WRENCH,
             ),
+            json(
+                Stream::Scene,
+                "foxglove.SceneUpdate",
+                scene::SCENE_UPDATE,
+                topics::VIEW_SCENE,
+            ),
         ]);
     }
     specs
@@ -305,6 +317,7 @@ impl LogWriter {
             json: Vec::new(),
             buf: Vec::new(),
             arm: None,
+            task: None,
         })
     }
 
@@ -401,10 +414,7 @@ impl LogWriter {
             }
         }
         foxglove::frame_transforms(&mut self.json, t, &tfs);
-        let json = std::mem::take(&mut self.json);
-        let r = self.write(Stream::Tf, t, p, &json);
-        self.json = json;
-        r
+        self.write_json(Stream::Tf, t, p)
     }
 
     /// Logs an action (`t_hw_ns`: the observation's hardware time).
@@ -510,16 +520,58 @@ impl LogWriter {
     pub fn event(&mut self, t_hw_ns: u64, event: &Event) -> Result<(), LogError> {
         let text = serde_json::to_string(event).expect("events serialise");
         let now = shared_mem_schema::process::mono_now_ns();
-        self.write(Stream::Events, t_hw_ns, now, text.as_bytes())
+        self.write(Stream::Events, t_hw_ns, now, text.as_bytes())?;
+        // The box where this episode put it.
+        if let (true, Event::Reset(r)) = (self.opts.foxglove, event) {
+            let task = r.world.as_ref().map(|w| &w.task).or(self.task.as_ref());
+            if let Some(task) = task.filter(|t| t.enabled) {
+                let [x, y, z] = r.hole_pos_m;
+                let [qx, qy, qz, qw] = r.hole_quat_xyzw;
+                let hole = nalgebra::Isometry3::from_parts(
+                    nalgebra::Translation3::new(x, y, z),
+                    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                        qw, qx, qy, qz,
+                    )),
+                );
+                let b = scene::box_with_hole(
+                    t_hw_ns,
+                    &hole,
+                    task.peg_width_m + task.clearance_m,
+                    r.hole_depth_m,
+                    task.box_side_m,
+                    task.box_height_m,
+                );
+                scene::scene_update(&mut self.json, &[b]);
+                self.write_json(Stream::Scene, t_hw_ns, now)?;
+            }
+        }
+        Ok(())
     }
 
     /// Logs the configuration in force at `t_hw_ns`.
     pub fn config(&mut self, t_hw_ns: u64, config: &RunConfig) -> Result<(), LogError> {
+        let now = shared_mem_schema::process::mono_now_ns();
         if self.opts.foxglove {
             self.load_arm(&config.robot);
+            self.task = Some(config.world.task.clone());
+            // The arm's links and the peg, drawn in the frames /tf moves.
+            if let Some(Ok(arm)) = &self.arm {
+                let mut entities = scene::arm(arm.model(), t_hw_ns);
+                if config.world.task.enabled
+                    && let Some(v) = arm.tip_to_sensor()
+                {
+                    entities.push(scene::peg(
+                        t_hw_ns,
+                        "peg_tip",
+                        v,
+                        config.world.task.peg_width_m,
+                    ));
+                }
+                scene::scene_update(&mut self.json, &entities);
+                self.write_json(Stream::Scene, t_hw_ns, now)?;
+            }
         }
         let text = serde_json::to_string(config).expect("configurations serialise");
-        let now = shared_mem_schema::process::mono_now_ns();
         self.write(Stream::Config, t_hw_ns, now, text.as_bytes())
     }
 
