@@ -22,15 +22,7 @@ fn policy_checkpoint(
     config.env.action.max_step_m = 0.005;
     let c = Checkpoint {
         config,
-        state: TrainerState {
-            policy,
-            baseline: Baseline::default(),
-            iteration: 0,
-            env_steps: 0,
-            episodes_started: 0,
-            seed: 1,
-            adam: Default::default(),
-        },
+        state: TrainerState::fresh(policy, Baseline::default(), 1),
         history: Vec::new(),
         best: None,
         validations: Vec::new(),
