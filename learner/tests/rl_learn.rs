@@ -369,15 +369,20 @@ fn critic_config(algorithm: Algorithm) -> PolicyConfig {
 #[test]
 fn an_asymmetric_critic_sees_the_privileged_state_and_the_policy_learns() {
     for algorithm in [Algorithm::Ppo, Algorithm::Trpo] {
-        let mut trainer =
-            Trainer::new(Reach::with_critic(10), critic_config(algorithm), 7).unwrap();
+        // Batches of 250 steps cut episodes of 20 (10 environments): the
+        // cut segments' critic states bootstrap and carry on.
+        let cfg = PolicyConfig {
+            batch_steps: 250,
+            ..critic_config(algorithm)
+        };
+        let mut trainer = Trainer::new(Reach::with_critic(10), cfg, 7).unwrap();
         let value_inputs = match &trainer.state.baseline {
             learner::rl::Baseline::Network(v) => v.sizes[0],
             other => panic!("{other:?}"),
         };
         // The critic's three values and the episode's time.
         assert_eq!(value_inputs, 3 + 1, "{algorithm:?}");
-        for _ in 0..30 {
+        for _ in 0..48 {
             trainer.iterate().unwrap();
         }
         let norm = trainer
@@ -385,7 +390,7 @@ fn an_asymmetric_critic_sees_the_privileged_state_and_the_policy_learns() {
             .critic_norm
             .as_ref()
             .expect("critic statistics");
-        assert_eq!(norm.count, 30 * 400, "{algorithm:?}");
+        assert_eq!(norm.count, 48 * 250, "{algorithm:?}");
         // The marker reached the critic's statistics and nothing of the
         // actor's: its normalisation holds the observation's two values.
         assert!(
@@ -422,4 +427,32 @@ fn an_asymmetric_critic_without_a_privileged_state_is_refused() {
         .err()
         .unwrap();
     assert!(e.to_string().contains("policy.critic"), "{e}");
+}
+
+/// `freeze_obs_norm` keeps the observation statistics as they were while
+/// the policy learns; without it they take in every batch.
+#[test]
+fn frozen_observation_statistics_stay_put() {
+    for freeze in [true, false] {
+        let cfg = PolicyConfig {
+            algorithm: Algorithm::Ppo,
+            batch_steps: 200,
+            freeze_obs_norm: freeze,
+            ..Default::default()
+        };
+        let mut trainer = Trainer::new(Reach::new(10), cfg, 3).unwrap();
+        trainer.iterate().unwrap();
+        let norm = trainer.state.policy.obs_norm.clone();
+        let net = trainer.state.policy.net.clone();
+        trainer.iterate().unwrap();
+        assert_ne!(
+            trainer.state.policy.net, net,
+            "the policy learns either way"
+        );
+        assert_eq!(
+            trainer.state.policy.obs_norm == norm,
+            freeze,
+            "freeze {freeze}"
+        );
+    }
 }

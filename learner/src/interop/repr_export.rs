@@ -17,8 +17,8 @@ pub const SPEC_FILE: &str = "representation-spec.json";
 /// The spec's format line.
 pub const FORMAT: &str = "vision-touch representation, safetensors";
 
-/// The spec of `net` built for `model`, its inputs normalised by
-/// `normaliser`.
+/// The spec of a network built for `model` whose parameters are `tensors`,
+/// its inputs normalised by `normaliser`; `source` says where it came from.
 pub fn spec(
     model: &ModelConfig,
     normaliser: &Normaliser,

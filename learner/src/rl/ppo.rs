@@ -40,9 +40,9 @@ pub struct PpoConfig {
     /// The gradient is scaled down to at most this Euclidean norm (0: no
     /// cap).
     pub max_grad_norm: f64,
-    /// The update stops early, before the minibatch that would follow,
-    /// once the mean KL divergence of the new policy from the old over the
-    /// last minibatch's states exceeds 1.5 × this (0: never; Stable
+    /// The update stops early, before a minibatch's step, once the mean KL
+    /// divergence of the current policy from the old over that minibatch's
+    /// states exceeds 1.5 × this (0: never; Stable
     /// Baselines3's `target_kl`). The clip alone does not bound the step:
     /// a policy of small σ moved ~1 σ per update (KL 0.1–0.5) in the
     /// fine-tune of docs/rl.md.
@@ -252,7 +252,10 @@ pub fn ppo_update(
             clipped += c.clip_fraction * idx.len() as f64;
             seen += idx.len();
         }
-        clip_fraction = clipped / seen.max(1) as f64;
+        // An epoch stopped before its first step keeps the last one's.
+        if seen > 0 {
+            clip_fraction = clipped / seen as f64;
+        }
     }
     let after = clipped_surrogate(policy, batch, &old_log_prob, &all, f64::INFINITY).objective;
     let new_means = policy.net_means(&batch.obs);

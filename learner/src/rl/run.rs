@@ -323,6 +323,18 @@ pub fn train(
             .into(),
         );
     }
+    if cfg.init_from.is_none()
+        && let Some(l) = cfg.policy.init_from_log_std
+    {
+        return Err(
+            RlEnvError::Config(shared_mem_schema::config::FieldError::new(
+                "policy.init_from_log_std",
+                l,
+                "applies to a run started from init_from; set init_log_std for a fresh one",
+            ))
+            .into(),
+        );
+    }
     let (observer, ramp) = training_observer(&cfg)?;
     let mut env = VecEnv::new(&cfg.env, cfg.num_envs, observer, cfg.threads)?;
     if cfg.policy.critic == super::train::CriticInput::GroundTruth {
@@ -382,12 +394,18 @@ pub fn train(
                 });
             }
             // The baseline does not change what the policy does: one that
-            // is not this configuration's is replaced by a fresh one.
+            // is not this configuration's (its kind, shape, or what it
+            // observes) is replaced by a fresh one; one that is keeps its
+            // critic's statistics.
             let mut baseline = c.state.baseline;
-            if !baseline.fits(cfg.policy.baseline, critic_dim, &cfg.policy.value) {
+            let mut critic_norm = c.state.critic_norm;
+            if c.config.policy.critic != cfg.policy.critic
+                || !baseline.fits(cfg.policy.baseline, critic_dim, &cfg.policy.value)
+            {
+                critic_norm = None;
                 eprintln!(
                     "learner: init_from {}: its value baseline is not this run's \
-                     (policy.baseline, policy.value.hidden); a fresh one is fitted",
+                     (policy.baseline, policy.value.hidden, policy.critic); a fresh one is fitted",
                     from.display()
                 );
                 let mut rng = stack_common::rng::seeded(cfg.seed, 901);
@@ -398,7 +416,10 @@ pub fn train(
             if let Some(l) = cfg.policy.init_from_log_std {
                 policy.log_std.iter_mut().for_each(|x| *x = l);
             }
-            Some(TrainerState::fresh(policy, baseline, cfg.seed))
+            Some(TrainerState {
+                critic_norm,
+                ..TrainerState::fresh(policy, baseline, cfg.seed)
+            })
         }
         (None, None) => None,
     };

@@ -78,6 +78,11 @@ pub struct PolicyConfig {
     pub normalise_observations: bool,
     /// Normalised observations are clipped to ±this (pytorch-trpo: 5).
     pub observation_clip: f64,
+    /// Keep the observation statistics as they are (no running update):
+    /// for fine-tuning a policy whose inputs were normalised by the data it
+    /// learned from, where a drifting normalisation changes what it does
+    /// with no gradient step (and no KL bound) behind it.
+    pub freeze_obs_norm: bool,
     /// The value baseline: `linear` (rllab's features) or `network`
     /// (pytorch-trpo's value MLP).
     pub baseline: BaselineKind,
@@ -112,6 +117,7 @@ impl Default for PolicyConfig {
             init_log_std: 0.0,
             normalise_observations: true,
             observation_clip: 5.0,
+            freeze_obs_norm: false,
             baseline: BaselineKind::Linear,
             baseline_ridge: 1e-5,
             value: ValueConfig::default(),
@@ -605,6 +611,7 @@ impl<E: BatchEnv> Trainer<E> {
         let warming = self.state.iteration < self.cfg.value_warmup_updates;
         if let Some(n) = &mut self.state.policy.obs_norm
             && !warming
+            && !self.cfg.freeze_obs_norm
         {
             n.update(&raw);
         }

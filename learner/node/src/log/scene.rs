@@ -170,10 +170,15 @@ pub fn arm(model: &Model, t_ns: u64) -> Vec<Entity> {
         .iter()
         .filter(|g| g.role == GeometryRole::Visual)
     {
-        if out.last().is_none_or(|e| e.frame_id != g.link) {
-            out.push(Entity::new(t_ns, &g.link, &format!("arm/{}", g.link)));
-        }
-        let e = out.last_mut().expect("just pushed");
+        // One entity per link, wherever its visuals stand in the list.
+        let k = match out.iter().position(|e| e.frame_id == g.link) {
+            Some(k) => k,
+            None => {
+                out.push(Entity::new(t_ns, &g.link, &format!("arm/{}", g.link)));
+                out.len() - 1
+            }
+        };
+        let e = &mut out[k];
         let pose = g.origin.to_isometry();
         let color = g.rgba.unwrap_or(GREY);
         match &g.shape {
