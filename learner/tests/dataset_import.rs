@@ -34,8 +34,7 @@ fn write(py: &Path, out: &Path, episode: usize, storage: &str, fault: Option<&st
     if let Some(f) = fault {
         cmd.arg(f);
     }
-    let o = cmd.output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    interop_venv::run_ok(&mut cmd);
 }
 
 /// Sample `s` of episode `e` as the writer's formulas give it (numpy's

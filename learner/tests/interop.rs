@@ -27,17 +27,8 @@ fn run_python<T: serde::de::DeserializeOwned>(
     script: &str,
     args: &[&std::ffi::OsStr],
 ) -> T {
-    let run = Command::new(py)
-        .args(["-c", script])
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    serde_json::from_slice(&run.stdout).unwrap()
+    let out = interop_venv::run_ok(Command::new(py).args(["-c", script]).args(args));
+    serde_json::from_slice(&out).unwrap()
 }
 
 const READ: &str = r#"

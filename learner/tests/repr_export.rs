@@ -158,19 +158,14 @@ fn agree_in_the_twin(
     write(&case_file, &case, &BTreeMap::new()).unwrap();
 
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let run = std::process::Command::new(py)
-        .arg(root.join("tests/data/torch_twin.py"))
-        .arg(root.join("../bench-anchors/torch-repr"))
-        .arg(&export)
-        .arg(&case_file)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    let out = interop_venv::run_ok(
+        std::process::Command::new(py)
+            .arg(root.join("tests/data/torch_twin.py"))
+            .arg(root.join("../bench-anchors/torch-repr"))
+            .arg(&export)
+            .arg(&case_file),
     );
-    let mut diffs: BTreeMap<String, Diff> = serde_json::from_slice(&run.stdout).unwrap();
+    let mut diffs: BTreeMap<String, Diff> = serde_json::from_slice(&out).unwrap();
     println!("{diffs:#?}");
     assert_eq!(diffs.len(), 7);
     for (k, v) in &diffs {
@@ -200,17 +195,12 @@ fn the_command_writes_the_weights_and_their_spec() {
     let dir = test_support::scratch_dir("repr-export-cli");
     let model =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../lab/results/full-near-repro/model");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
-        .args(["repr", "export", "--model"])
-        .arg(&model)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    interop_venv::run_ok(
+        std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
+            .args(["repr", "export", "--model"])
+            .arg(&model)
+            .arg("--out")
+            .arg(dir.path()),
     );
     let spec: serde_json::Value = serde_json::from_slice(
         &std::fs::read(dir.path().join("representation-spec.json")).unwrap(),

@@ -5,7 +5,7 @@
 //! encoder computes, so a Python user can build the model, load the weights
 //! and feed it observations as we do (docs/representation.md).
 
-use super::safetensors::{Tensor, write};
+use super::safetensors::{Tensor, write_with_spec};
 use crate::models::named::torch_named;
 use crate::models::{ModelConfig, Normaliser, ReprNet};
 use std::path::{Path, PathBuf};
@@ -66,13 +66,7 @@ pub fn write_representation(
         .map(|t| Tensor::f32(t.name, &t.shape, t.values))
         .collect();
     let spec = spec(model, normaliser, source, &tensors);
-    let metadata = std::collections::BTreeMap::from([("spec".to_string(), spec.to_string())]);
-    let st = dir.join(SAFETENSORS_FILE);
-    write(&st, &tensors, &metadata)?;
-    let sp = dir.join(SPEC_FILE);
-    let text = serde_json::to_string_pretty(&spec).expect("a spec serialises");
-    crate::write_atomic(&sp, text.as_bytes())?;
-    Ok([st, sp])
+    write_with_spec(dir, SAFETENSORS_FILE, SPEC_FILE, &tensors, &spec)
 }
 
 /// Exports the model `learner repr train` wrote into `model_dir` (a run's

@@ -106,6 +106,25 @@ pub fn write(
     crate::write_atomic(path, &encode(tensors, metadata))
 }
 
+/// Writes `tensors` as `dir/weights` with `spec` in its metadata (key
+/// `spec`), and `spec` again, pretty, as `dir/spec_file`: what an export
+/// for other tools consists of. Returns both paths.
+pub fn write_with_spec(
+    dir: &Path,
+    weights: &str,
+    spec_file: &str,
+    tensors: &[Tensor],
+    spec: &serde_json::Value,
+) -> std::io::Result<[std::path::PathBuf; 2]> {
+    let metadata = BTreeMap::from([("spec".to_string(), spec.to_string())]);
+    let st = dir.join(weights);
+    write(&st, tensors, &metadata)?;
+    let sp = dir.join(spec_file);
+    let text = serde_json::to_string_pretty(spec).expect("a spec serialises");
+    crate::write_atomic(&sp, text.as_bytes())?;
+    Ok([st, sp])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

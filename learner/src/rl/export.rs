@@ -145,7 +145,7 @@ pub const SPEC_FILE: &str = "policy-spec.json";
 /// normalisation's clip, the activations, the action's scale. Returns both
 /// paths.
 pub fn write_safetensors(policy: &PolicyFile, dir: &Path) -> std::io::Result<[PathBuf; 2]> {
-    use crate::interop::safetensors::{Tensor, write};
+    use crate::interop::safetensors::{Tensor, write_with_spec};
     let mut tensors = Vec::new();
     for (i, l) in policy.layers.iter().enumerate() {
         let w = &l.weight;
@@ -188,13 +188,7 @@ pub fn write_safetensors(policy: &PolicyFile, dir: &Path) -> std::io::Result<[Pa
         "peg": policy.peg,
         "tensors": tensors.iter().map(|t| (t.name.clone(), t.shape.clone())).collect::<Vec<_>>(),
     });
-    let metadata = std::collections::BTreeMap::from([("spec".to_string(), spec.to_string())]);
-    let st = dir.join(SAFETENSORS_FILE);
-    write(&st, &tensors, &metadata)?;
-    let sp = dir.join(SPEC_FILE);
-    let text = serde_json::to_string_pretty(&spec).expect("a spec serialises");
-    crate::write_atomic(&sp, text.as_bytes())?;
-    Ok([st, sp])
+    write_with_spec(dir, SAFETENSORS_FILE, SPEC_FILE, &tensors, &spec)
 }
 
 /// Whether `path` is a deployed policy file (rather than a training

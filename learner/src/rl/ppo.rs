@@ -360,25 +360,32 @@ mod tests {
         }
     }
 
-    #[test]
-    fn an_update_improves_the_surrogate_and_stays_near_the_old_policy() {
+    /// A policy of initial log σ `log_std` on 200 two-value observations,
+    /// its sampled actions rewarded above the mean where the first
+    /// observation is positive (a direction the policy can follow), and
+    /// the random stream after the sampling.
+    fn followable(log_std: f64) -> (GaussianPolicy, RolloutBatch, SimRng) {
         let mut rng = stack_common::rng::seeded(5, 0);
-        let mut p = GaussianPolicy::new(2, &[8], 1, 0.0, &mut rng);
+        let p = GaussianPolicy::new(2, &[8], 1, log_std, &mut rng);
         let obs: Vec<f64> = (0..400).map(|k| (k as f64 * 0.37).sin()).collect();
         let actions = p.sample(&obs, &mut rng);
-        // Reward actions above the mean where the first observation is
-        // positive: a direction the policy can follow.
         let means = p.means(&obs);
         let advantages = obs
             .chunks(2)
             .zip(actions.iter().zip(&means))
             .map(|(o, (a, m))| (a - m) * o[0].signum())
             .collect();
-        let mut batch = RolloutBatch {
+        let batch = RolloutBatch {
             obs,
             actions,
             advantages,
         };
+        (p, batch, rng)
+    }
+
+    #[test]
+    fn an_update_improves_the_surrogate_and_stays_near_the_old_policy() {
+        let (mut p, mut batch, mut rng) = followable(0.0);
         let mut adam = Adam::default();
         let cfg = PpoConfig::default();
         let s = ppo_update(&mut p, &mut batch, &cfg, &mut adam, &mut rng);
@@ -393,21 +400,7 @@ mod tests {
     #[test]
     fn target_kl_stops_the_update_early() {
         let run = |target_kl: f64| {
-            let mut rng = stack_common::rng::seeded(5, 0);
-            let mut p = GaussianPolicy::new(2, &[8], 1, -2.0, &mut rng);
-            let obs: Vec<f64> = (0..400).map(|k| (k as f64 * 0.37).sin()).collect();
-            let actions = p.sample(&obs, &mut rng);
-            let means = p.means(&obs);
-            let advantages = obs
-                .chunks(2)
-                .zip(actions.iter().zip(&means))
-                .map(|(o, (a, m))| (a - m) * o[0].signum())
-                .collect();
-            let mut batch = RolloutBatch {
-                obs,
-                actions,
-                advantages,
-            };
+            let (mut p, mut batch, mut rng) = followable(-2.0);
             let mut adam = Adam::default();
             let cfg = PpoConfig {
                 target_kl,

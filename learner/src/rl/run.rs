@@ -11,7 +11,7 @@ pub use super::run_config::{TrainConfig, ValidationConfig};
 use super::run_config::{hole_error_share, outcome_scalars, training_observer};
 use super::train::{Trainer, TrainerState};
 use super::value::Baseline;
-use super::vec::{BatchEnv, VecEnv, all_cores, par_map};
+use super::vec::{VecEnv, all_cores, par_map};
 use learner_node::progress::Progress;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -340,10 +340,7 @@ pub fn train(
     if cfg.policy.critic == super::train::CriticInput::GroundTruth {
         env = env.with_critic(std::sync::Arc::new(super::observe::GroundTruth));
     }
-    let critic_dim = match cfg.policy.critic {
-        super::train::CriticInput::Policy => env.obs_dim(),
-        super::train::CriticInput::GroundTruth => env.critic_dim(),
-    };
+    let critic_dim = cfg.policy.critic_dim(&env);
     let state = match (state, &cfg.init_from) {
         (Some(s), _) => Some(s),
         (None, Some(from)) => {

@@ -129,6 +129,14 @@ impl Default for PolicyConfig {
 }
 
 impl PolicyConfig {
+    /// Values per state its value baseline sees in `env`.
+    pub fn critic_dim<E: BatchEnv>(&self, env: &E) -> usize {
+        match self.critic {
+            CriticInput::Policy => env.obs_dim(),
+            CriticInput::GroundTruth => env.critic_dim(),
+        }
+    }
+
     /// Checks every value, naming the first bad one.
     pub fn validate(&self) -> Result<(), FieldError> {
         for (name, v) in [
@@ -392,12 +400,7 @@ impl<E: BatchEnv> Trainer<E> {
             policy.obs_norm = Some(ObsNorm::new(env.obs_dim(), cfg.observation_clip));
         }
         let mut rng = stack_common::rng::seeded(seed, 901);
-        let baseline = Baseline::new(
-            cfg.baseline,
-            critic_dim_of(&env, &cfg),
-            &cfg.value,
-            &mut rng,
-        );
+        let baseline = Baseline::new(cfg.baseline, cfg.critic_dim(&env), &cfg.value, &mut rng);
         let state = TrainerState::fresh(policy, baseline, seed);
         Self::resume(env, cfg, state)
     }
@@ -412,7 +415,7 @@ impl<E: BatchEnv> Trainer<E> {
                 "these environments give the value baseline no state of its own",
             )));
         }
-        let critic_dim = critic_dim_of(&env, &cfg);
+        let critic_dim = cfg.critic_dim(&env);
         let n = env.num_envs();
         if state.policy.sizes.first() != Some(&env.obs_dim())
             || state.policy.act_dim() != env.act_dim()
@@ -675,13 +678,5 @@ impl<E: BatchEnv> Trainer<E> {
             mean_std: ls.iter().map(|l| l.exp()).sum::<f64>() / ls.len() as f64,
             baseline_explained,
         })
-    }
-}
-
-/// Values per state the baseline of `cfg` sees in `env`.
-fn critic_dim_of<E: BatchEnv>(env: &E, cfg: &PolicyConfig) -> usize {
-    match cfg.critic {
-        CriticInput::Policy => env.obs_dim(),
-        CriticInput::GroundTruth => env.critic_dim(),
     }
 }

@@ -1,7 +1,8 @@
 //! The interpreters of the repository's interop and PyTorch virtual
 //! environments (scripts/interop-venv.sh, scripts/torch-venv.sh), shared by
 //! the tests that run other tools' Python code (interop.rs,
-//! dataset_import.rs, repr_export.rs).
+//! dataset_import.rs, repr_export.rs), and the check that a command they
+//! run succeeded.
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -64,4 +65,16 @@ fn venv_python(
         );
     }
     ok.then_some(py)
+}
+
+/// Runs `cmd` and returns its stdout; fails the test with its stderr when
+/// it does not succeed.
+pub fn run_ok(cmd: &mut Command) -> Vec<u8> {
+    let run = cmd.output().unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    run.stdout
 }

@@ -4,7 +4,7 @@
 //! shipped layout, deploy/foxglove/) draws the arm as it moved. The robot
 //! is the one the log's `/config` names ([`super::LogWriter::config`]).
 
-use super::foxglove::{BASE_FRAME, Transform};
+use super::foxglove::{BASE_FRAME, Transform, parts};
 use robot_model::algorithms::kinematics::{forward_kinematics, frame_placement};
 use robot_model::{Data, FrameKind, Model};
 
@@ -60,17 +60,11 @@ impl ArmFrames {
         )
     }
 
-    /// Joint positions the model takes.
-    pub fn nq(&self) -> usize {
-        self.model.nq()
-    }
-
     /// The base → link transform of every link at joint positions `q`
-    /// (its first `nq()` values; `None` when it holds fewer or a value
-    /// that is not finite).
+    /// (`None` when `q` is not one finite value per joint of the model: a
+    /// frame of another robot draws no arm rather than a wrong one).
     pub fn transforms(&mut self, q: &[f64]) -> Option<Vec<Transform<'_>>> {
-        let q = q.get(..self.q.len())?;
-        if q.iter().any(|x| !x.is_finite()) {
+        if q.len() != self.q.len() || q.iter().any(|x| !x.is_finite()) {
             return None;
         }
         self.q.copy_from_slice(q);
@@ -79,14 +73,13 @@ impl ArmFrames {
             self.links
                 .iter()
                 .map(|(i, name)| {
-                    let iso = frame_placement(&self.model, &self.data, *i);
-                    let t = iso.translation.vector;
-                    let r = iso.rotation;
+                    let (translation, rotation_xyzw) =
+                        parts(&frame_placement(&self.model, &self.data, *i));
                     Transform {
                         parent: BASE_FRAME,
                         child: name,
-                        translation: [t.x, t.y, t.z],
-                        rotation_xyzw: [r.i, r.j, r.k, r.w],
+                        translation,
+                        rotation_xyzw,
                     }
                 })
                 .collect(),
@@ -118,8 +111,10 @@ mod tests {
         for k in 0..3 {
             assert!((tip.translation[k] - want.translation.vector[k]).abs() < 1e-12);
         }
-        // Too few angles, or a NaN, give nothing rather than a wrong arm.
+        // Too few or too many angles, or a NaN, give nothing rather than a
+        // wrong arm.
         assert!(arm.transforms(&q[..6]).is_none());
+        assert!(arm.transforms(&[0.0; 8]).is_none());
         assert!(arm.transforms(&[f64::NAN; 7]).is_none());
     }
 }

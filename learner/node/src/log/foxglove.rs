@@ -111,15 +111,16 @@ impl Time {
     }
 }
 
+/// A vector as Foxglove's JSON encoding wants it.
 #[derive(Serialize)]
-struct Xyz {
+pub(crate) struct Xyz {
     x: f64,
     y: f64,
     z: f64,
 }
 
 impl Xyz {
-    fn of(v: &[f64]) -> Self {
+    pub(crate) fn of(v: &[f64]) -> Self {
         Self {
             x: v[0],
             y: v[1],
@@ -128,8 +129,9 @@ impl Xyz {
     }
 }
 
+/// A rotation (quaternion) as Foxglove's JSON encoding wants it.
 #[derive(Serialize)]
-struct Quat {
+pub(crate) struct Quat {
     x: f64,
     y: f64,
     z: f64,
@@ -137,10 +139,17 @@ struct Quat {
 }
 
 impl Quat {
-    fn of(q: &[f64; 4]) -> Self {
+    pub(crate) fn of(q: &[f64; 4]) -> Self {
         let [x, y, z, w] = *q;
         Self { x, y, z, w }
     }
+}
+
+/// An isometry's translation and its rotation `[x, y, z, w]`.
+pub(crate) fn parts(iso: &nalgebra::Isometry3<f64>) -> ([f64; 3], [f64; 4]) {
+    let t = iso.translation.vector;
+    let r = iso.rotation;
+    ([t.x, t.y, t.z], [r.i, r.j, r.k, r.w])
 }
 
 /// Serialises `msg` into `out` (cleared first). Non-finite numbers become

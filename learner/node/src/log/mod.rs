@@ -405,13 +405,10 @@ impl LogWriter {
             translation: m.ee_pos_m,
             rotation_xyzw: m.ee_quat_xyzw,
         }];
-        if let Some(Ok(arm)) = &mut self.arm {
-            let n = (m.n_joints as usize).min(m.q.len());
-            if n == arm.nq()
-                && let Some(links) = arm.transforms(&m.q[..n])
-            {
-                tfs.extend(links);
-            }
+        if let Some(Ok(arm)) = &mut self.arm
+            && let Some(links) = arm.transforms(&m.q[..(m.n_joints as usize).min(m.q.len())])
+        {
+            tfs.extend(links);
         }
         foxglove::frame_transforms(&mut self.json, t, &tfs);
         self.write_json(Stream::Tf, t, p)
@@ -525,13 +522,9 @@ impl LogWriter {
         if let (true, Event::Reset(r)) = (self.opts.foxglove, event) {
             let task = r.world.as_ref().map(|w| &w.task).or(self.task.as_ref());
             if let Some(task) = task.filter(|t| t.enabled) {
-                let [x, y, z] = r.hole_pos_m;
-                let [qx, qy, qz, qw] = r.hole_quat_xyzw;
                 let hole = nalgebra::Isometry3::from_parts(
-                    nalgebra::Translation3::new(x, y, z),
-                    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-                        qw, qx, qy, qz,
-                    )),
+                    nalgebra::Translation3::from(nalgebra::Vector3::from(r.hole_pos_m)),
+                    hw_sim::convert::unit_quaternion(r.hole_quat_xyzw),
                 );
                 let b = scene::box_with_hole(
                     t_hw_ns,

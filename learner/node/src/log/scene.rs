@@ -8,7 +8,7 @@
 //! plus clearance, and the hole's floor. The drawing is for people; the
 //! simulator's true shapes (a triangle's hole, for one) are its own.
 
-use super::foxglove::{BASE_FRAME, Time};
+use super::foxglove::{BASE_FRAME, Quat, Time, Xyz, parts};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robot_model::{GeometryRole, Model, Shape};
 use serde::Serialize;
@@ -34,22 +34,7 @@ pub const SCENE_UPDATE: &str = r##"{"title":"foxglove.SceneUpdate","type":"objec
 "size":{"$ref":"#/$defs/xyz"},
 "color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}}}"##;
 
-#[derive(Serialize, Clone, Copy)]
-struct Xyz {
-    x: f64,
-    y: f64,
-    z: f64,
-}
-
-#[derive(Serialize, Clone, Copy)]
-struct Quat {
-    x: f64,
-    y: f64,
-    z: f64,
-    w: f64,
-}
-
-#[derive(Serialize, Clone, Copy)]
+#[derive(Serialize)]
 struct Pose {
     position: Xyz,
     orientation: Quat,
@@ -57,25 +42,15 @@ struct Pose {
 
 impl Pose {
     fn of(iso: &Isometry3<f64>) -> Self {
-        let t = iso.translation.vector;
-        let r = iso.rotation;
+        let (t, r) = parts(iso);
         Self {
-            position: Xyz {
-                x: t.x,
-                y: t.y,
-                z: t.z,
-            },
-            orientation: Quat {
-                x: r.i,
-                y: r.j,
-                z: r.k,
-                w: r.w,
-            },
+            position: Xyz::of(&t),
+            orientation: Quat::of(&r),
         }
     }
 }
 
-#[derive(Serialize, Clone, Copy)]
+#[derive(Serialize)]
 struct Rgba {
     r: f64,
     g: f64,
@@ -108,11 +83,7 @@ struct Primitive {
 fn primitive(pose: &Isometry3<f64>, size: [f64; 3], color: [f64; 4]) -> Primitive {
     Primitive {
         pose: Pose::of(pose),
-        size: Xyz {
-            x: size[0],
-            y: size[1],
-            z: size[2],
-        },
+        size: Xyz::of(&size),
         color: Rgba::of(color),
         bottom_scale: None,
         top_scale: None,
