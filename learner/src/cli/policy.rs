@@ -27,6 +27,18 @@ pub enum PolicyCmd {
         #[arg(long)]
         last: bool,
     },
+    /// Copies a checkpoint and the representation it observes through into
+    /// DIR (DIR/checkpoint.json naming DIR/model/, and the run's run.json),
+    /// a directory that works wherever it is put: how `artifacts/` is made
+    /// (docs/rl.md, "Packaging a policy"). DIR must be absent or empty.
+    Package {
+        /// The training run's checkpoint.json.
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Trains with TRPO or PPO (`policy.algorithm`); writes
     /// checkpoint.json, curve.csv, return.png and outcomes.png into `--out`.
     Train {
@@ -160,6 +172,10 @@ pub fn run(cmd: PolicyCmd) -> Result<()> {
                 let [st, spec] = crate::interop::repr_export::export_model_dir(&model, &out)?;
                 println!("{} and {} written", st.display(), spec.display());
             }
+        }
+        PolicyCmd::Package { checkpoint, out } => {
+            let path = crate::rl::package::package(&checkpoint, &out)?;
+            println!("{} written", path.display());
         }
         PolicyCmd::Eval {
             checkpoint,

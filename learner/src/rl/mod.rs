@@ -20,6 +20,7 @@ pub mod gaussian;
 pub mod mlp;
 pub mod obs_norm;
 pub mod observe;
+pub mod package;
 pub mod ppo;
 pub mod probe;
 pub mod represent;

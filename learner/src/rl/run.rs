@@ -203,9 +203,12 @@ pub fn read_config(path: &Path) -> Result<TrainConfig, RunError> {
     read_toml(path)
 }
 
-/// Reads a checkpoint.
+/// Reads a checkpoint; a relative representation path is taken beside the
+/// checkpoint when the model is there (a package's, [`super::package`]).
 pub fn read_checkpoint(path: &Path) -> Result<Checkpoint, RunError> {
-    read_json(path)
+    let mut c = read_json(path)?;
+    super::package::resolve_beside(path, &mut c);
+    Ok(c)
 }
 
 /// A TOML file's value; the error names the file.
