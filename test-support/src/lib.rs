@@ -10,6 +10,7 @@
 
 pub mod alloc;
 pub mod franky_sim;
+pub mod venv;
 
 pub use rand::RngExt;
 use rand::SeedableRng;

@@ -52,6 +52,8 @@ pub struct CalibratedConfig {
     pub log_dir: PathBuf,
     /// Log options.
     pub log: LogOptions,
+    /// Every episode's log is also served live here (`--foxglove-ws`).
+    pub live_view: Option<std::sync::Arc<crate::log::ws::Hub>>,
 }
 
 /// What one episode showed.
@@ -143,6 +145,9 @@ fn episode(
     let stream = first.header.episode;
     let path = cfg.log_dir.join(format!("episode-{n:04}.mcap"));
     let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
+    if let Some(hub) = &cfg.live_view {
+        log.serve_live(hub.clone());
+    }
     let mut world = WorldConfig {
         robot: cfg.robot.clone(),
         ..Default::default()

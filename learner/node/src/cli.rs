@@ -48,6 +48,16 @@ pub struct EpisodeArgs {
     /// converts it.
     #[arg(long)]
     pub policy: Option<PathBuf>,
+    /// Also serve every channel the node logs, live, over the Foxglove
+    /// WebSocket protocol on this port (0: any free one; the address is
+    /// printed). Off by default. Foxglove: Open connection → Foxglove
+    /// WebSocket → ws://127.0.0.1:PORT.
+    #[arg(long)]
+    pub foxglove_ws: Option<u16>,
+    /// The address --foxglove-ws listens on: loopback by default; any other
+    /// shows the robot's data to that network, unauthenticated.
+    #[arg(long, default_value = "127.0.0.1", requires = "foxglove_ws")]
+    pub foxglove_ws_host: std::net::IpAddr,
     /// With a training checkpoint as --policy (`learner` only): its last
     /// policy (a distillation's last round, as `policy eval --last`) instead
     /// of its best validated or best logged one.
@@ -184,6 +194,42 @@ pub struct StackArgs {
     pub franky_sim_python: Option<PathBuf>,
 }
 
+impl EpisodeArgs {
+    /// The live view's server when `--foxglove-ws` asks for one, serving
+    /// the channels of logs written with `log`.
+    pub fn live_view(&self, log: &LogOptions) -> Result<Option<Arc<crate::log::ws::Hub>>> {
+        let Some(port) = self.foxglove_ws else {
+            return Ok(None);
+        };
+        let server = crate::log::ws::LiveServer::start((self.foxglove_ws_host, port), log)
+            .with_context(|| {
+                format!(
+                    "--foxglove-ws: listening on {}:{port}",
+                    self.foxglove_ws_host
+                )
+            })?;
+        eprintln!(
+            "node: Foxglove WebSocket on ws://{} (Foxglove: Open connection → Foxglove \
+             WebSocket)",
+            server.local_addr()
+        );
+        Ok(Some(server.hub()))
+    }
+
+    /// The arguments that pass `--foxglove-ws` on to the node `stack` starts.
+    fn live_view_args(&self) -> Vec<String> {
+        match self.foxglove_ws {
+            Some(port) => vec![
+                "--foxglove-ws".into(),
+                port.to_string(),
+                "--foxglove-ws-host".into(),
+                self.foxglove_ws_host.to_string(),
+            ],
+            None => Vec::new(),
+        }
+    }
+}
+
 /// The world of a run: `--world` (or the default) with the task on and
 /// `--peg`'s peg.
 pub fn world_config(a: &EpisodeArgs) -> Result<WorldConfig> {
@@ -239,6 +285,7 @@ pub fn run(r: RunArgs, policy: Option<DeployedPolicy>) -> Result<()> {
     cfg.target_states = c.states;
     cfg.log.foxglove = !c.no_foxglove;
     cfg.log.view_rate_hz = c.view_rate_hz;
+    cfg.live_view = a.live_view(&cfg.log)?;
     if let Some(p) = policy {
         anyhow::ensure!(
             cfg.mix.is_none(),
@@ -314,6 +361,7 @@ pub fn stack(s: StackArgs) -> Result<()> {
         run_args.push("--world".into());
         run_args.push(w.display().to_string());
     }
+    run_args.extend(a.live_view_args());
     if let Some(p) = deployed_policy(a)? {
         p.check_world(&world)?;
         run_args.push("--policy".into());
@@ -413,6 +461,11 @@ fn run_calibrated(
             view_rate_hz: c.view_rate_hz,
             ..Default::default()
         },
+        live_view: None,
+    };
+    let cfg = CalibratedConfig {
+        live_view: a.live_view(&cfg.log)?,
+        ..cfg
     };
     std::fs::create_dir_all(&cfg.log_dir)
         .with_context(|| format!("creating {}", cfg.log_dir.display()))?;
@@ -502,7 +555,7 @@ fn stack_franky_sim(
     stack::franky_sim_controller_config(&template, &franky.address, &a.namespace, &written)?;
     let daemon = rt_controller_daemon::config::DaemonConfig::from_file(&written)?;
     let p = task.hole_pose.translation.vector;
-    let run_args = vec![
+    let mut run_args = vec![
         "--episodes".to_string(),
         a.episodes.to_string(),
         "--peg".into(),
@@ -519,6 +572,7 @@ fn stack_franky_sim(
         "--controller-wait-s".into(),
         (daemon.timing.startup_timeout_s.ceil() as u64 + 60).to_string(),
     ];
+    run_args.extend(a.live_view_args());
     let exit = stack::run(&StackConfig {
         hardware: stack::Hardware::FrankySim(franky),
         node: std::env::current_exe().context("locating this executable")?,

@@ -2,6 +2,7 @@
 //! and the policy node, over real shared memory. The test process plays the
 //! learner (or a misbehaving peer) where a test needs to see inside.
 
+mod foxglove_ws;
 mod garbage;
 mod insertion;
 mod lockstep;

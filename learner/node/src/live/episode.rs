@@ -63,6 +63,9 @@ impl LiveEpisode {
             .log_dir
             .join(format!("episode-{episode:04}-seed-{seed}.mcap"));
         let mut log = LogWriter::create_with(&path, cfg.log.clone())?;
+        if let Some(hub) = &cfg.live_view {
+            log.serve_live(hub.clone());
+        }
         let task = task_geometry(&first, &world);
         let mixed = cfg.mix.as_ref().map(|m| MixedPolicy::new(m, seed));
         let policy = match (&cfg.policy, &mixed) {

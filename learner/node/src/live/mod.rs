@@ -120,6 +120,8 @@ pub struct LiveConfig {
     pub log: LogOptions,
     /// A deployed policy acts instead of the heuristic (`--policy`).
     pub policy: Option<Arc<DeployedPolicy>>,
+    /// Every episode's log is also served live here (`--foxglove-ws`).
+    pub live_view: Option<Arc<crate::log::ws::Hub>>,
 }
 
 impl LiveConfig {
@@ -140,6 +142,7 @@ impl LiveConfig {
             target_states: None,
             log: LogOptions::default(),
             policy: None,
+            live_view: None,
         }
     }
 }

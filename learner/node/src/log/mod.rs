@@ -26,6 +26,7 @@ mod read;
 pub mod ros2;
 pub mod scene;
 mod walk;
+pub mod ws;
 
 pub use config::{RunConfig, RunMode};
 pub use events::Event;
@@ -133,7 +134,7 @@ impl Default for LogOptions {
 }
 
 /// The log's channels.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq, Eq)]
 enum Stream {
     Sensor,
     Action,
@@ -170,6 +171,8 @@ pub struct LogWriter {
     arm: Option<Result<arm::ArmFrames, String>>,
     /// The task of the last `/config`, whose box the reset draws.
     task: Option<hw_sim::config::TaskConfig>,
+    /// The live view every written message also goes to.
+    live: Option<std::sync::Arc<ws::Hub>>,
 }
 
 /// One channel of a log: its stream, schema and encodings.
@@ -318,7 +321,14 @@ impl LogWriter {
             buf: Vec::new(),
             arm: None,
             task: None,
+            live: None,
         })
+    }
+
+    /// Also hands every message written from now on to `hub` (a
+    /// [`ws::LiveServer`]'s, serving the same channels; it never blocks).
+    pub fn serve_live(&mut self, hub: std::sync::Arc<ws::Hub>) {
+        self.live = Some(hub);
     }
 
     /// The file.
@@ -345,6 +355,9 @@ impl LogWriter {
         self.w
             .write_to_known_channel(&header, data)
             .map_err(|e| self.err(e))?;
+        if let Some(live) = &self.live {
+            live.publish(s, log_ns, data);
+        }
         let period_ns = (self.opts.flush_period_s * 1e9) as u64;
         if log_ns.abs_diff(self.last_flush_ns) >= period_ns {
             self.last_flush_ns = log_ns;
