@@ -416,3 +416,128 @@ fn an_experiment_distils_from_each_variants_own_probe() {
     let e = run(&missing, &out, &only_reused, &|| false).unwrap_err();
     assert!(e.to_string().contains("nowhere"), "{e}");
 }
+
+/// The learned route (`[policy] distill` with a checkpoint teacher on the
+/// ground truth, then `finetune`): every variant's student learns from the
+/// same teacher on its own z, PPO then fine-tunes it from there on the same
+/// z, and the fine-tune's policy is evaluated; a second invocation redoes
+/// nothing; a teacher that observes a representation is refused before
+/// anything runs.
+#[test]
+fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
+    use learner::experiment::{ExperimentConfig, RunOptions, run};
+    use learner::rl::ObservationKind;
+    let dir = test_support::scratch_dir("experiment-learned");
+    let repr = tiny_repr_config(&dir);
+    // The teacher: a short PPO run on the ground truth.
+    let teacher = dir.join("teacher");
+    let tcfg: learner::rl::run::TrainConfig = toml::from_str(
+        "seed = 3\nnum_envs = 1\nthreads = 1\nenv_steps = 20\n\
+         [env]\nmax_steps = 20\n[policy]\nalgorithm = \"ppo\"\nbatch_steps = 20\nhidden = [8]\n",
+    )
+    .unwrap();
+    learner::rl::run::train(tcfg, &teacher, false, &|| false).unwrap();
+    let teacher_ckpt = teacher.join("checkpoint.json");
+    let distill = dir.join("distill.toml");
+    let distill_text = format!(
+        "teacher = {teacher_ckpt:?}\n\n[camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+         [student]\nnum_envs = 2\nthreads = 2\n\n[student.policy]\nhidden = [8]\n\n\
+         [student.validation]\nepisodes = 1\n\n\
+         [dagger]\nrounds = 5\nsteps_per_round = 40\nepochs = 2\n"
+    );
+    std::fs::write(&distill, &distill_text).unwrap();
+    let finetune = dir.join("finetune.toml");
+    std::fs::write(
+        &finetune,
+        format!(
+            "num_envs = 2\nthreads = 2\nenv_steps = 80\n\n\
+             [env]\nmax_steps = 20\n\n[env.world.camera]\nwidth = {SIDE}\nheight = {SIDE}\n\n\
+             [policy]\nalgorithm = \"ppo\"\nbatch_steps = 40\nhidden = [8]\nbaseline = \"network\"\n\
+             critic = \"ground_truth\"\nfreeze_obs_norm = true\ninit_from_log_std = -2.0\n\n\
+             [validation]\nevery = 1\nepisodes = 1\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
+             [policy]\ndistill = {distill:?}\ndagger_rounds = 2\nfinetune = {finetune:?}\n\n\
+             [eval]\nepisodes = 2\n\n\
+             [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n\n\
+             [[variant]]\nname = \"ground-truth\"\n",
+            dataset(),
+        ),
+    )
+    .unwrap();
+    let cfg = ExperimentConfig::from_file(&cfg_path).unwrap();
+    let opts = RunOptions::default();
+    let rows = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(rows.len(), 2);
+    let read = |p: std::path::PathBuf| learner::rl::run::read_checkpoint(&p).unwrap();
+    for (v, dim) in [
+        ("Full", 16),
+        ("ground-truth", learner::rl::observe::GROUND_TRUTH_DIM),
+    ] {
+        // The student: the experiment's two rounds, not the file's five,
+        // on the variant's own observation.
+        let student = read(out.join(v).join("policy/checkpoint.json"));
+        assert_eq!(student.state.iteration, 2, "{v}");
+        assert_eq!(student.state.policy.sizes[0], dim, "{v}");
+        // The fine-tune: from that student, on the same observation, its
+        // critic on the truth.
+        let ft = read(out.join(v).join("finetune/checkpoint.json"));
+        assert_eq!(ft.state.env_steps, 80, "{v}");
+        assert_eq!(ft.config.observation, student.config.observation, "{v}");
+        assert_eq!(
+            ft.config.init_from.as_deref(),
+            Some(out.join(v).join("policy/checkpoint.json").as_path()),
+            "{v}"
+        );
+        assert_eq!(ft.state.policy.sizes[0], dim, "{v}");
+        // Its best validated policy was evaluated.
+        let e: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join(v).join("eval-square.json")).unwrap())
+                .unwrap();
+        assert_eq!(e["run_env_steps"], 80, "{v}");
+        assert_eq!(
+            e["policy_iteration"],
+            ft.chosen_policy(false).iteration,
+            "{v}"
+        );
+    }
+    let full = read(out.join("Full/policy/checkpoint.json"));
+    assert_eq!(
+        full.config.observation,
+        ObservationKind::Representation(out.join("Full/repr/model"))
+    );
+    let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
+    // Full: representation, DAgger, fine-tune, evaluation; the ground
+    // truth: DAgger, fine-tune, evaluation.
+    assert_eq!(stages.lines().count(), 4 + 3, "{stages}");
+    assert_eq!(stages.matches("fine-tune of the student").count(), 2);
+    let again = run(&cfg, &out, &opts, &|| false).unwrap();
+    assert_eq!(again, rows);
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        stages
+    );
+    // A teacher on a representation is refused before anything runs.
+    let mut on_z = read(teacher_ckpt.clone());
+    on_z.config.observation = ObservationKind::Representation(out.join("Full/repr/model"));
+    let z_teacher = dir.join("z-teacher.json");
+    std::fs::write(&z_teacher, serde_json::to_vec(&on_z).unwrap()).unwrap();
+    let bad = dir.join("bad-distill.toml");
+    std::fs::write(
+        &bad,
+        distill_text.replace(&format!("{teacher_ckpt:?}"), &format!("{z_teacher:?}")),
+    )
+    .unwrap();
+    let mut c = cfg.clone();
+    c.policy.distill = Some(bad);
+    let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
+    assert!(e.to_string().contains("observes a representation"), "{e}");
+    assert!(!dir.join("refused/Full").exists(), "nothing ran");
+}

@@ -88,7 +88,21 @@ pub struct PolicyStage {
     /// it. For the ground-truth variant the probe is dropped: the search is
     /// told the hole with the configuration's `hole_error_m`. The policy
     /// evaluated is the last round's (DAgger has no best-logged update).
+    ///
+    /// Or the learned route: a distillation whose `teacher` is a trained
+    /// checkpoint on the ground truth (a learned searching teacher,
+    /// privileged, in the teacher only), the same teacher for every
+    /// variant, each variant's student on its own z. A teacher that
+    /// observes a representation is refused (it would read its own model,
+    /// not the variant's).
     pub distill: Option<PathBuf>,
+    /// With `distill`: DAgger's rounds (overrides the distillation's).
+    pub dagger_rounds: Option<u64>,
+    /// With `distill`: a `learner policy train` configuration (PPO) that
+    /// then fine-tunes each variant's student on its own z, starting from
+    /// it (`init_from`; the observation replaced by the variant's). The
+    /// policy evaluated is then the fine-tune's best validated one.
+    pub finetune: Option<PathBuf>,
 }
 
 /// The evaluation of every policy.
@@ -155,7 +169,16 @@ impl ExperimentConfig {
                 "policy.distill: give either a distillation (distill = …, its length its \
                  dagger.rounds) or a training configuration (config, env_steps), not both"
             );
+        } else {
+            ensure!(
+                self.policy.dagger_rounds.is_none() && self.policy.finetune.is_none(),
+                "policy.dagger_rounds, policy.finetune: they follow a distillation (distill = …)"
+            );
         }
+        ensure!(
+            self.policy.dagger_rounds != Some(0),
+            "policy.dagger_rounds: must be at least 1"
+        );
         for (i, v) in self.variant.iter().enumerate() {
             ensure!(
                 !v.name.is_empty()
@@ -227,7 +250,10 @@ mod tests {
             if let Some(f) = &cfg.policy.distill {
                 distill::read_config(&root.join(f)).unwrap_or_else(|e| panic!("{}: {e}", at(f)));
             }
-            if let Some(f) = &cfg.policy.config {
+            for f in [&cfg.policy.config, &cfg.policy.finetune]
+                .into_iter()
+                .flatten()
+            {
                 policy_run::read_config(&root.join(f)).unwrap_or_else(|e| panic!("{}: {e}", at(f)));
             }
             if let Some(f) = &cfg.data.collect_world {
@@ -276,6 +302,11 @@ mod tests {
                 "policy.distill",
             ),
             ("", "variant[0].model"),
+            ("[policy]\nfinetune = \"f.toml\"\n", "policy.finetune"),
+            (
+                "[policy]\ndistill = \"a.toml\"\ndagger_rounds = 0\n",
+                "policy.dagger_rounds",
+            ),
         ] {
             let mut text = format!("{extra}{base}");
             if extra.is_empty() {

@@ -5,11 +5,12 @@
 //! policy on each evaluation peg; then one results table and bar charts of
 //! the completed-insertion share next to the paper's numbers.
 //!
-//! The policy learns one of two ways: by `learner policy train` (TRPO or
-//! PPO on z, the paper's), or by `learner policy distill` (DAgger from the
-//! touch search whose belief of the opening is a linear probe of the same
-//! z, the route that completes insertions here; docs/results.md). Both
-//! take the variant's representation in place of their configuration's.
+//! The policy learns one of three ways: by `learner policy train` (TRPO or
+//! PPO on z, the paper's); by `learner policy distill` from the touch
+//! search whose belief of the opening is a linear probe of the same z; or
+//! the learned route: DAgger from a trained teacher on the ground truth,
+//! then optionally PPO on z from the student (docs/results.md). Each takes
+//! the variant's representation in place of its configuration's.
 //!
 //! Every stage leaves its output in the experiment's directory and is
 //! skipped when that output is complete, so an interrupted experiment
@@ -30,7 +31,9 @@ use crate::rl::observe::ObservationKind;
 use crate::rl::run as policy_run;
 use anyhow::{Context, Result, bail, ensure};
 use results::{StoredEval, read_eval, with_others};
-use stages::{Route, StageLog, distill_policy, ensure_dataset, representation, train_policy};
+use stages::{
+    Route, StageLog, distill_policy, ensure_dataset, finetune_policy, representation, train_policy,
+};
 use std::path::Path;
 
 /// Options of one invocation.
@@ -60,37 +63,57 @@ pub fn run(
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut log = StageLog::open(out);
-    let route = match &cfg.policy.distill {
+    // Everything the route reads is checked now rather than when a
+    // variant's turn comes, hours in.
+    let (route, env) = match &cfg.policy.distill {
         Some(p) => {
-            let d = distill::read_config(p)?;
-            ensure!(
-                d.search_teacher.is_some() && d.teacher.is_none(),
-                "policy.distill {}: the experiment distils from the touch search \
-                 ([search_teacher]); a checkpoint teacher observes its own representation, not the \
-                 variant's",
-                p.display()
-            );
-            // Refused now rather than when the variant's turn comes, hours in.
-            let probe = d.search_teacher.as_ref().and_then(|t| t.probe.as_ref());
-            ensure!(
-                probe.is_some() || cfg.variant.iter().all(|v| v.representation.is_none()),
-                "policy.distill {}: no [search_teacher.probe]: every variant's teacher would be \
-                 told the hole by the truth rather than by its own z",
-                p.display()
-            );
-            Route::Distill(Box::new(d))
+            let mut d = distill::read_config(p)?;
+            if let Some(r) = cfg.policy.dagger_rounds {
+                d.dagger.rounds = r;
+            }
+            // The world the students act in: the teacher's for a checkpoint
+            // teacher (with the distillation's camera), else their own.
+            let mut env = d.student.env.clone();
+            if let Some(t) = &d.teacher {
+                let c = policy_run::read_checkpoint(t)
+                    .with_context(|| format!("policy.distill {}: its teacher", p.display()))?;
+                ensure!(
+                    !matches!(c.config.observation, ObservationKind::Representation(_)),
+                    "policy.distill {}: its teacher {} observes a representation, its own and \
+                     not the variant's; the learned route's teacher observes the ground truth",
+                    p.display(),
+                    t.display()
+                );
+                env = c.config.env;
+                if let Some(camera) = &d.camera {
+                    env.world.camera = camera.clone();
+                }
+            } else {
+                let probe = d.search_teacher.as_ref().and_then(|t| t.probe.as_ref());
+                ensure!(
+                    probe.is_some() || cfg.variant.iter().all(|v| v.representation.is_none()),
+                    "policy.distill {}: no [search_teacher.probe]: every variant's teacher would \
+                     be told the hole by the truth rather than by its own z",
+                    p.display()
+                );
+            }
+            let finetune = match &cfg.policy.finetune {
+                Some(f) => Some(Box::new(policy_run::read_config(f)?)),
+                None => None,
+            };
+            (Route::Distill(Box::new(d), finetune), env)
         }
-        None => Route::Train(Box::new(match &cfg.policy.config {
-            Some(p) => policy_run::read_config(p)?,
-            None => policy_run::TrainConfig::default(),
-        })),
-    };
-    let env = match &route {
-        Route::Train(t) => &t.env,
-        Route::Distill(d) => &d.student.env,
+        None => {
+            let t = match &cfg.policy.config {
+                Some(p) => policy_run::read_config(p)?,
+                None => policy_run::TrainConfig::default(),
+            };
+            let env = t.env.clone();
+            (Route::Train(Box::new(t)), env)
+        }
     };
     let uses_representation = cfg.variant.iter().any(|v| v.representation.is_some());
-    let data = ensure_dataset(&cfg.data, env, uses_representation, out, &mut log, stop)?;
+    let data = ensure_dataset(&cfg.data, &env, uses_representation, out, &mut log, stop)?;
     let mut rows = Vec::new();
     for v in &cfg.variant {
         if !opts.only.is_empty() && !opts.only.contains(&v.name) {
@@ -113,15 +136,22 @@ pub fn run(
                 train_policy(cfg, base, v, observation, &policy_dir, &mut log, stop)?,
                 false,
             ),
-            Route::Distill(base) => (
+            Route::Distill(base, None) => (
                 distill_policy(base, v, observation, &policy_dir, &mut log, stop)?,
                 true,
             ),
+            Route::Distill(base, Some(ft)) => {
+                distill_policy(base, v, observation.clone(), &policy_dir, &mut log, stop)?;
+                let student = policy_run::checkpoint_path(&policy_dir);
+                let dir = dir.join("finetune");
+                let c = finetune_policy(ft, v, observation, &student, &dir, &mut log, stop)?;
+                (c, false)
+            }
         };
         let trained_peg = ckpt.config.env.world.task.peg;
-        // TRPO/PPO: the best validated policy when the policy configuration
-        // validates, otherwise the best logged in training (the paper's
-        // protocol). DAgger: the last round's.
+        // TRPO/PPO (a fine-tune too): the best validated policy when the
+        // policy configuration validates, otherwise the best logged in
+        // training (the paper's protocol). DAgger: the last round's.
         let chosen = ckpt.chosen_policy(last);
         let pegs = if cfg.eval.pegs.is_empty() {
             vec![trained_peg]

@@ -20,8 +20,9 @@ use std::time::Instant;
 pub(super) enum Route {
     /// `learner policy train` from this base configuration.
     Train(Box<policy_run::TrainConfig>),
-    /// `learner policy distill` from this base configuration.
-    Distill(Box<DistillConfig>),
+    /// `learner policy distill` from this base configuration, then, when
+    /// given, `learner policy train` from its student.
+    Distill(Box<DistillConfig>, Option<Box<policy_run::TrainConfig>>),
 }
 
 /// Trains (or resumes, or finds finished) a variant's policy by TRPO/PPO
@@ -100,7 +101,38 @@ pub(super) fn distill_policy(
     )
 }
 
-/// A variant's policy stage, either route: the checkpoint in `dir` as it is
+/// Fine-tunes (or resumes, or finds finished) a variant's distilled
+/// student (`student`, its checkpoint) by `base` (PPO) on the variant's
+/// `observation`; returns the fine-tune's checkpoint.
+pub(super) fn finetune_policy(
+    base: &policy_run::TrainConfig,
+    v: &Variant,
+    observation: ObservationKind,
+    student: &Path,
+    dir: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<policy_run::Checkpoint> {
+    let mut p = base.clone();
+    p.observation = observation;
+    p.init_from = Some(student.to_path_buf());
+    let what = format!(
+        "{}: fine-tune of the student ({} steps)",
+        v.name, p.env_steps
+    );
+    let target = p.env_steps;
+    policy_stage(
+        v,
+        dir,
+        what,
+        target,
+        |c| c.state.env_steps,
+        log,
+        || policy_run::train(p, dir, true, stop),
+    )
+}
+
+/// A variant's policy stage, any route: the checkpoint in `dir` as it is
 /// when its `progress` has reached `target`; otherwise `what` is logged and
 /// `run` trains (or resumes) it, and a run stopped short of `target` is
 /// reported as stopped.
