@@ -418,10 +418,10 @@ fn an_experiment_distils_from_each_variants_own_probe() {
 }
 
 /// The learned route (`[policy] distill` with a checkpoint teacher on the
-/// ground truth, then `finetune`): every variant's student learns from the
-/// same teacher on its own z, PPO then fine-tunes it from there on the same
-/// z, and the fine-tune's policy is evaluated; a second invocation redoes
-/// nothing; a teacher that observes a representation is refused before
+/// ground truth, then `finetune`), two training seeds: every variant's
+/// student learns from the same teacher on its own z, PPO then fine-tunes
+/// it from there on the same z, the fine-tunes' policies are evaluated and
+/// pooled into one row; a second invocation redoes nothing; a teacher that observes a representation is refused before
 /// anything runs.
 #[test]
 fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
@@ -464,7 +464,8 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
         &cfg_path,
         format!(
             "[data]\ndataset = {:?}\n\n[representation]\nepochs = 1\n\n\
-             [policy]\ndistill = {distill:?}\ndagger_rounds = 2\nfinetune = {finetune:?}\n\n\
+             [policy]\ndistill = {distill:?}\ndagger_rounds = 2\nfinetune = {finetune:?}\n\
+             seeds = [1, 2]\n\n\
              [eval]\nepisodes = 2\n\n\
              [[variant]]\nname = \"Full\"\nrepresentation = {repr:?}\n\n\
              [[variant]]\nname = \"ground-truth\"\n",
@@ -476,31 +477,54 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     let opts = RunOptions::default();
     let rows = run(&cfg, &out, &opts, &|| false).unwrap();
     assert_eq!(rows.len(), 2);
+    // Each row pools the two training seeds' evaluations of the same
+    // episodes, each seed's count beside.
+    for r in &rows {
+        assert_eq!(r.report.episodes, 4, "{}", r.variant);
+        let seeds: Vec<u64> = r.per_seed.iter().map(|s| s.seed).collect();
+        assert_eq!(seeds, [1, 2]);
+        assert_eq!(
+            r.per_seed.iter().map(|s| s.completed).sum::<usize>(),
+            (r.report.outcomes[3] * 4.0).round() as usize
+        );
+    }
+    let table = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(
+        table.contains(" of 4 (") && table.contains("s1: "),
+        "{table}"
+    );
     let read = |p: std::path::PathBuf| learner::rl::run::read_checkpoint(&p).unwrap();
-    for (v, dim) in [
-        ("Full", 16),
-        ("ground-truth", learner::rl::observe::GROUND_TRUTH_DIM),
+    for (v, dim, seed) in [
+        ("Full", 16, 1),
+        ("Full", 16, 2),
+        ("ground-truth", learner::rl::observe::GROUND_TRUTH_DIM, 2),
     ] {
+        let (policy, finetune, eval) = (
+            format!("policy-s{seed}/checkpoint.json"),
+            format!("finetune-s{seed}/checkpoint.json"),
+            format!("eval-square-s{seed}.json"),
+        );
         // The student: the experiment's two rounds, not the file's five,
         // on the variant's own observation.
-        let student = read(out.join(v).join("policy/checkpoint.json"));
+        let student = read(out.join(v).join(&policy));
+        assert_eq!(student.config.seed, seed, "{v}");
         assert_eq!(student.state.iteration, 2, "{v}");
         assert_eq!(student.state.policy.sizes[0], dim, "{v}");
         // The fine-tune: from that student, on the same observation, its
         // critic on the truth.
-        let ft = read(out.join(v).join("finetune/checkpoint.json"));
+        let ft = read(out.join(v).join(&finetune));
+        assert_eq!(ft.config.seed, seed, "{v}");
         assert_eq!(ft.state.env_steps, 80, "{v}");
         assert_eq!(ft.config.observation, student.config.observation, "{v}");
         assert_eq!(
             ft.config.init_from.as_deref(),
-            Some(out.join(v).join("policy/checkpoint.json").as_path()),
+            Some(out.join(v).join(&policy).as_path()),
             "{v}"
         );
         assert_eq!(ft.state.policy.sizes[0], dim, "{v}");
         // Its best validated policy was evaluated.
         let e: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join(v).join("eval-square.json")).unwrap())
-                .unwrap();
+            serde_json::from_slice(&std::fs::read(out.join(v).join(&eval)).unwrap()).unwrap();
         assert_eq!(e["run_env_steps"], 80, "{v}");
         assert_eq!(
             e["policy_iteration"],
@@ -508,16 +532,17 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
             "{v}"
         );
     }
-    let full = read(out.join("Full/policy/checkpoint.json"));
+    let full = read(out.join("Full/policy-s1/checkpoint.json"));
     assert_eq!(
         full.config.observation,
         ObservationKind::Representation(out.join("Full/repr/model"))
     );
     let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
-    // Full: representation, DAgger, fine-tune, evaluation; the ground
-    // truth: DAgger, fine-tune, evaluation.
-    assert_eq!(stages.lines().count(), 4 + 3, "{stages}");
-    assert_eq!(stages.matches("fine-tune of the student").count(), 2);
+    // Full: representation, then per seed DAgger, fine-tune, evaluation;
+    // the ground truth: per seed DAgger, fine-tune, evaluation.
+    assert_eq!(stages.lines().count(), 1 + 3 * 2 + 3 * 2, "{stages}");
+    assert_eq!(stages.matches("fine-tune of the student").count(), 4);
+    assert_eq!(stages.matches(", seed 2)").count(), 4, "{stages}");
     let again = run(&cfg, &out, &opts, &|| false).unwrap();
     assert_eq!(again, rows);
     assert_eq!(

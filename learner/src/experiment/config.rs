@@ -103,6 +103,11 @@ pub struct PolicyStage {
     /// it (`init_from`; the observation replaced by the variant's). The
     /// policy evaluated is then the fine-tune's best validated one.
     pub finetune: Option<PathBuf>,
+    /// Training seeds: each variant's policy is trained (distilled,
+    /// fine-tuned) once per seed, each evaluated on the same episodes, and
+    /// the row pools them with each seed's count beside. Empty: once, with
+    /// the policy configuration's own seed.
+    pub seeds: Vec<u64>,
 }
 
 /// The evaluation of every policy.
@@ -179,6 +184,12 @@ impl ExperimentConfig {
             self.policy.dagger_rounds != Some(0),
             "policy.dagger_rounds: must be at least 1"
         );
+        for (i, s) in self.policy.seeds.iter().enumerate() {
+            ensure!(
+                !self.policy.seeds[..i].contains(s),
+                "policy.seeds: {s} is given twice"
+            );
+        }
         for (i, v) in self.variant.iter().enumerate() {
             ensure!(
                 !v.name.is_empty()

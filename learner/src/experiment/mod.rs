@@ -20,20 +20,23 @@
 //! machine, one for a GPU machine at the paper's scale.
 
 mod config;
+mod evaluate;
 mod results;
 mod stages;
 
 pub use config::{DataStage, EvalStage, ExperimentConfig, PolicyStage, ReprStage, Variant};
-pub use results::{ResultRow, write_results};
+pub use evaluate::wilson;
+pub use results::{ResultRow, SeedRow, write_results};
 
 use crate::rl::distill;
 use crate::rl::observe::ObservationKind;
 use crate::rl::run as policy_run;
+use crate::rl::run::EvalReport;
 use anyhow::{Context, Result, bail, ensure};
-use results::{StoredEval, read_eval, with_others};
-use stages::{
-    Route, StageLog, distill_policy, ensure_dataset, finetune_policy, representation, train_policy,
-};
+use evaluate::{evaluate_policy, pool};
+use hw_sim::PegShape;
+use results::with_others;
+use stages::{Route, StageLog, ensure_dataset, representation, train_route};
 use std::path::Path;
 
 /// Options of one invocation.
@@ -130,77 +133,48 @@ pub fn run(
         if stop() {
             bail!("stopped; run the same command again to resume");
         }
-        let policy_dir = dir.join("policy");
-        let (ckpt, last) = match &route {
-            Route::Train(base) => (
-                train_policy(cfg, base, v, observation, &policy_dir, &mut log, stop)?,
-                false,
-            ),
-            Route::Distill(base, None) => (
-                distill_policy(base, v, observation, &policy_dir, &mut log, stop)?,
-                true,
-            ),
-            Route::Distill(base, Some(ft)) => {
-                distill_policy(base, v, observation.clone(), &policy_dir, &mut log, stop)?;
-                let student = policy_run::checkpoint_path(&policy_dir);
-                let dir = dir.join("finetune");
-                let c = finetune_policy(ft, v, observation, &student, &dir, &mut log, stop)?;
-                (c, false)
-            }
-        };
-        let trained_peg = ckpt.config.env.world.task.peg;
-        // TRPO/PPO (a fine-tune too): the best validated policy when the
-        // policy configuration validates, otherwise the best logged in
-        // training (the paper's protocol). DAgger: the last round's.
-        let chosen = ckpt.chosen_policy(last);
-        let pegs = if cfg.eval.pegs.is_empty() {
-            vec![trained_peg]
+        let seeds: Vec<Option<u64>> = if cfg.policy.seeds.is_empty() {
+            vec![None]
         } else {
-            cfg.eval.pegs.clone()
+            cfg.policy.seeds.iter().map(|&s| Some(s)).collect()
         };
-        for peg in pegs {
-            let path = dir.join(format!("eval-{}.json", peg.name()));
-            let wanted = |e: &StoredEval| {
-                e.policy_iteration == chosen.iteration
-                    && e.run_env_steps == ckpt.state.env_steps
-                    && e.seed == cfg.eval.seed
-                    && e.report.episodes == cfg.eval.episodes
-            };
-            let report = match read_eval(&path)?.filter(wanted) {
-                Some(e) => e.report,
-                None => {
-                    log.start(&format!(
-                        "{}: evaluation of {chosen} on the {} peg ({} episodes)",
-                        v.name,
-                        peg.name(),
-                        cfg.eval.episodes
-                    ));
-                    let mut ecfg = ckpt.config.clone();
-                    ecfg.env.world.task.peg = peg;
-                    let report = policy_run::evaluate(
-                        chosen.policy,
-                        &ecfg,
-                        cfg.eval.episodes,
-                        cfg.eval.seed,
-                        stop,
-                    )?;
-                    let e = StoredEval {
-                        policy_iteration: chosen.iteration,
-                        run_env_steps: ckpt.state.env_steps,
-                        seed: cfg.eval.seed,
-                        report,
-                    };
-                    std::fs::write(&path, serde_json::to_vec_pretty(&e)?)
-                        .with_context(|| format!("writing {}", path.display()))?;
-                    log.end()?;
-                    e.report
+        // Each peg's evaluations, one per training seed.
+        let mut by_peg: Vec<(PegShape, Vec<(u64, EvalReport)>)> = Vec::new();
+        let mut trained_peg = None;
+        for seed in seeds {
+            let (ckpt, last) = train_route(
+                &route,
+                cfg,
+                v,
+                observation.clone(),
+                seed,
+                &dir,
+                &mut log,
+                stop,
+            )?;
+            trained_peg = Some(ckpt.config.env.world.task.peg);
+            let tag = seed.map_or(String::new(), |s| format!("-s{s}"));
+            let evals = evaluate_policy(cfg, v, &ckpt, last, &dir, &tag, &mut log, stop)?;
+            for (peg, report) in evals {
+                let s = seed.unwrap_or(ckpt.config.seed);
+                match by_peg.iter_mut().find(|(p, _)| *p == peg) {
+                    Some((_, reports)) => reports.push((s, report)),
+                    None => by_peg.push((peg, vec![(s, report)])),
                 }
+            }
+        }
+        for (peg, reports) in by_peg {
+            let (report, per_seed) = if cfg.policy.seeds.is_empty() {
+                (reports[0].1.clone(), Vec::new())
+            } else {
+                pool(&reports)
             };
             rows.push(ResultRow {
                 variant: v.name.clone(),
                 peg,
                 report,
-                paper_completed: v.paper_completed.filter(|_| peg == trained_peg),
+                paper_completed: v.paper_completed.filter(|_| Some(peg) == trained_peg),
+                per_seed,
             });
         }
         // The table so far after each variant: a run of many hours shows

@@ -36,6 +36,21 @@ pub struct ResultRow {
     /// The paper's completed-insertion share (on the training peg only:
     /// the paper's ablation numbers are not transfer numbers).
     pub paper_completed: Option<f64>,
+    /// With several training seeds (`policy.seeds`): each one's count;
+    /// `report` pools them.
+    #[serde(default)]
+    pub per_seed: Vec<SeedRow>,
+}
+
+/// One training seed's completed insertions in a pooled row.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeedRow {
+    /// The training seed.
+    pub seed: u64,
+    /// Completed insertions.
+    pub completed: usize,
+    /// Of this many episodes.
+    pub episodes: usize,
 }
 
 /// `rows` of this invocation, and for a partial one (`--only`) the other
@@ -98,21 +113,37 @@ pub(super) fn read_eval(path: &Path) -> Result<Option<StoredEval>> {
 pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
     let pct = |x: f64| format!("{:.0}%", 100.0 * x);
     let mut md = String::from(
-        "| variant | peg | episodes | completed insertion | inserted into hole | touched the box | failed | normalised reward | paper: completed |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+        "| variant | peg | episodes | completed insertion (95 % interval) | per training seed | inserted into hole | touched the box | failed | normalised reward | paper: completed |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut csv = String::from(
-        "variant,peg,episodes,completed_insertion,inserted_into_hole,touched_the_box,failed,normalised_reward,paper_completed\n",
+        "variant,peg,episodes,completed_insertion,inserted_into_hole,touched_the_box,failed,normalised_reward,paper_completed,completed_interval_low,completed_interval_high\n",
     );
     for r in rows {
         let o = r.report.outcomes;
         let c = |x: Outcome| o[x.index()];
+        let k = super::evaluate::completed(&r.report);
+        let (lo, hi) = super::evaluate::wilson(k, r.report.episodes);
+        let seeds = r
+            .per_seed
+            .iter()
+            .map(|s| format!("s{}: {} of {}", s.seed, s.completed, s.episodes))
+            .collect::<Vec<_>>()
+            .join(", ");
         md += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.3} | {} |\n",
+            "| {} | {} | {} | {k} of {} ({:.0} %, {:.0}–{:.0}) | {} | {} | {} | {} | {:.3} | {} |\n",
             r.variant,
             r.peg.name(),
             r.report.episodes,
-            pct(c(Outcome::CompletedInsertion)),
+            r.report.episodes,
+            100.0 * c(Outcome::CompletedInsertion),
+            100.0 * lo,
+            100.0 * hi,
+            if seeds.is_empty() {
+                "–".into()
+            } else {
+                seeds
+            },
             pct(c(Outcome::InsertedIntoHole)),
             pct(c(Outcome::TouchedBox)),
             pct(c(Outcome::Failed)),
@@ -120,7 +151,7 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
             r.paper_completed.map_or("–".into(), pct)
         );
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{lo},{hi}\n",
             r.variant,
             r.peg.name(),
             r.report.episodes,

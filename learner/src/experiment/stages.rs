@@ -27,16 +27,21 @@ pub(super) enum Route {
 
 /// Trains (or resumes, or finds finished) a variant's policy by TRPO/PPO
 /// on `observation`; returns its checkpoint.
-pub(super) fn train_policy(
+#[allow(clippy::too_many_arguments)] // the stage's whole context
+fn train_policy(
     cfg: &ExperimentConfig,
     base: &policy_run::TrainConfig,
     v: &Variant,
     observation: ObservationKind,
+    seed: Option<u64>,
     dir: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<policy_run::Checkpoint> {
     let mut pcfg = base.clone();
+    if let Some(s) = seed {
+        pcfg.seed = s;
+    }
     // The ground truth's channels are scaled by hand, and normalised
     // its free-space wrench noise is as loud as the position (docs/rl.md,
     // "Observation normalisation"): the reference runs without it.
@@ -47,7 +52,12 @@ pub(super) fn train_policy(
     if let Some(n) = cfg.policy.env_steps {
         pcfg.env_steps = n;
     }
-    let what = format!("{}: policy ({} steps)", v.name, pcfg.env_steps);
+    let what = format!(
+        "{}: policy ({} steps{})",
+        v.name,
+        pcfg.env_steps,
+        seed_note(seed)
+    );
     let target = pcfg.env_steps;
     policy_stage(
         v,
@@ -64,15 +74,19 @@ pub(super) fn train_policy(
 /// the touch search told by a probe of the variant's representation (the
 /// truth with the configured error for the ground truth); returns its
 /// checkpoint.
-pub(super) fn distill_policy(
+fn distill_policy(
     base: &DistillConfig,
     v: &Variant,
     observation: ObservationKind,
+    seed: Option<u64>,
     dir: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<policy_run::Checkpoint> {
     let mut d = base.clone();
+    if let Some(s) = seed {
+        d.student.seed = s;
+    }
     if let Some(search) = d.search_teacher.as_mut() {
         match &observation {
             ObservationKind::Representation(model) => {
@@ -85,8 +99,11 @@ pub(super) fn distill_policy(
     }
     d.student.observation = observation;
     let what = format!(
-        "{}: policy (DAgger, {} rounds of {} steps)",
-        v.name, d.dagger.rounds, d.dagger.steps_per_round
+        "{}: policy (DAgger, {} rounds of {} steps{})",
+        v.name,
+        d.dagger.rounds,
+        d.dagger.steps_per_round,
+        seed_note(seed)
     );
     let rounds = d.dagger.rounds;
     let resume = policy_run::checkpoint_path(dir).exists();
@@ -104,21 +121,28 @@ pub(super) fn distill_policy(
 /// Fine-tunes (or resumes, or finds finished) a variant's distilled
 /// student (`student`, its checkpoint) by `base` (PPO) on the variant's
 /// `observation`; returns the fine-tune's checkpoint.
-pub(super) fn finetune_policy(
+#[allow(clippy::too_many_arguments)] // the stage's whole context
+fn finetune_policy(
     base: &policy_run::TrainConfig,
     v: &Variant,
     observation: ObservationKind,
+    seed: Option<u64>,
     student: &Path,
     dir: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<policy_run::Checkpoint> {
     let mut p = base.clone();
+    if let Some(s) = seed {
+        p.seed = s;
+    }
     p.observation = observation;
     p.init_from = Some(student.to_path_buf());
     let what = format!(
-        "{}: fine-tune of the student ({} steps)",
-        v.name, p.env_steps
+        "{}: fine-tune of the student ({} steps{})",
+        v.name,
+        p.env_steps,
+        seed_note(seed)
     );
     let target = p.env_steps;
     policy_stage(
@@ -130,6 +154,48 @@ pub(super) fn finetune_policy(
         log,
         || policy_run::train(p, dir, true, stop),
     )
+}
+
+/// `, seed N` for a stage of one of several training seeds.
+fn seed_note(seed: Option<u64>) -> String {
+    seed.map_or(String::new(), |s| format!(", seed {s}"))
+}
+
+/// Trains (or resumes, or finds finished) a variant's policy by `route` on
+/// `observation`, with training seed `seed` (None: the configuration's),
+/// under `dir` (`policy<tag>/`, and `finetune<tag>/` after a
+/// distillation); returns its checkpoint and whether its last policy is
+/// the one to evaluate (DAgger's).
+#[allow(clippy::too_many_arguments)] // the stage's whole context
+pub(super) fn train_route(
+    route: &Route,
+    cfg: &ExperimentConfig,
+    v: &Variant,
+    observation: ObservationKind,
+    seed: Option<u64>,
+    dir: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<(policy_run::Checkpoint, bool)> {
+    let tag = seed.map_or(String::new(), |s| format!("-s{s}"));
+    let policy_dir = dir.join(format!("policy{tag}"));
+    Ok(match route {
+        Route::Train(base) => (
+            train_policy(cfg, base, v, observation, seed, &policy_dir, log, stop)?,
+            false,
+        ),
+        Route::Distill(base, None) => (
+            distill_policy(base, v, observation, seed, &policy_dir, log, stop)?,
+            true,
+        ),
+        Route::Distill(base, Some(ft)) => {
+            distill_policy(base, v, observation.clone(), seed, &policy_dir, log, stop)?;
+            let student = policy_run::checkpoint_path(&policy_dir);
+            let ft_dir = dir.join(format!("finetune{tag}"));
+            let c = finetune_policy(ft, v, observation, seed, &student, &ft_dir, log, stop)?;
+            (c, false)
+        }
+    })
 }
 
 /// A variant's policy stage, any route: the checkpoint in `dir` as it is
