@@ -16,14 +16,14 @@ use base64::Engine;
 use serde::Serialize;
 
 /// `foxglove.RawImage`.
-pub const RAW_IMAGE: &str = r#"{"title":"foxglove.RawImage","type":"object","properties":{
+pub const RAW_IMAGE: &str = r#"{"title":"foxglove.RawImage","type":"object","required":["timestamp","frame_id","width","height","encoding","step","data"],"properties":{
 "timestamp":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
 "frame_id":{"type":"string"},"width":{"type":"integer"},"height":{"type":"integer"},
 "encoding":{"type":"string"},"step":{"type":"integer"},
 "data":{"type":"string","contentEncoding":"base64"}}}"#;
 
 /// `foxglove.CameraCalibration`.
-pub const CAMERA_CALIBRATION: &str = r#"{"title":"foxglove.CameraCalibration","type":"object","properties":{
+pub const CAMERA_CALIBRATION: &str = r#"{"title":"foxglove.CameraCalibration","type":"object","required":["timestamp","frame_id","width","height","distortion_model","D","K","R","P"],"properties":{
 "timestamp":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
 "frame_id":{"type":"string"},"width":{"type":"integer"},"height":{"type":"integer"},
 "distortion_model":{"type":"string"},"D":{"type":"array","items":{"type":"number"}},
@@ -32,17 +32,17 @@ pub const CAMERA_CALIBRATION: &str = r#"{"title":"foxglove.CameraCalibration","t
 "P":{"type":"array","items":{"type":"number"},"minItems":12,"maxItems":12}}}"#;
 
 /// `foxglove.FrameTransforms`.
-pub const FRAME_TRANSFORMS: &str = r#"{"title":"foxglove.FrameTransforms","type":"object","properties":{
-"transforms":{"type":"array","items":{"type":"object","properties":{
+pub const FRAME_TRANSFORMS: &str = r#"{"title":"foxglove.FrameTransforms","type":"object","required":["transforms"],"properties":{
+"transforms":{"type":"array","items":{"type":"object","required":["timestamp","parent_frame_id","child_frame_id","translation","rotation"],"properties":{
 "timestamp":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
 "parent_frame_id":{"type":"string"},"child_frame_id":{"type":"string"},
 "translation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
 "rotation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}}}}}"#;
 
 /// `foxglove.PoseInFrame`.
-pub const POSE_IN_FRAME: &str = r#"{"title":"foxglove.PoseInFrame","type":"object","properties":{
+pub const POSE_IN_FRAME: &str = r#"{"title":"foxglove.PoseInFrame","type":"object","required":["timestamp","frame_id","pose"],"properties":{
 "timestamp":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
-"frame_id":{"type":"string"},"pose":{"type":"object","properties":{
+"frame_id":{"type":"string"},"pose":{"type":"object","required":["position","orientation"],"properties":{
 "position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
 "orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}}}}"#;
 

@@ -15,12 +15,13 @@ use serde::Serialize;
 
 /// `foxglove.SceneUpdate`, the parts written here (published schema:
 /// docs.foxglove.dev, "SceneUpdate").
-pub const SCENE_UPDATE: &str = r##"{"title":"foxglove.SceneUpdate","type":"object","properties":{
-"deletions":{"type":"array","items":{"type":"object"}},
-"entities":{"type":"array","items":{"type":"object","properties":{
+pub const SCENE_UPDATE: &str = r##"{"title":"foxglove.SceneUpdate","type":"object","required":["deletions","entities"],"properties":{
+"deletions":{"type":"array","items":{"type":"object","required":["timestamp","type","id"]}},
+"entities":{"type":"array","items":{"type":"object","required":["timestamp","frame_id","id","lifetime","frame_locked","metadata","arrows","cubes","spheres","cylinders","lines","triangles","texts","models"],"properties":{
 "timestamp":{"$ref":"#/$defs/time"},"frame_id":{"type":"string"},"id":{"type":"string"},
 "lifetime":{"$ref":"#/$defs/time"},"frame_locked":{"type":"boolean"},
 "metadata":{"type":"array","items":{"type":"object","properties":{"key":{"type":"string"},"value":{"type":"string"}}}},
+"arrows":{"type":"array"},"lines":{"type":"array"},"triangles":{"type":"array"},"texts":{"type":"array"},"models":{"type":"array"},
 "cubes":{"type":"array","items":{"$ref":"#/$defs/primitive"}},
 "spheres":{"type":"array","items":{"$ref":"#/$defs/primitive"}},
 "cylinders":{"type":"array","items":{"allOf":[{"$ref":"#/$defs/primitive"},{"type":"object","properties":{
@@ -28,7 +29,7 @@ pub const SCENE_UPDATE: &str = r##"{"title":"foxglove.SceneUpdate","type":"objec
 "$defs":{
 "time":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
 "xyz":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"primitive":{"type":"object","properties":{
+"primitive":{"type":"object","required":["pose","size","color"],"properties":{
 "pose":{"type":"object","properties":{"position":{"$ref":"#/$defs/xyz"},
 "orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}},
 "size":{"$ref":"#/$defs/xyz"},
@@ -99,9 +100,15 @@ pub struct Entity {
     lifetime: Time,
     frame_locked: bool,
     metadata: Vec<()>,
+    // Foxglove's schema requires every primitive list, these always empty.
+    arrows: [(); 0],
     cubes: Vec<Primitive>,
     spheres: Vec<Primitive>,
     cylinders: Vec<Primitive>,
+    lines: [(); 0],
+    triangles: [(); 0],
+    texts: [(); 0],
+    models: [(); 0],
 }
 
 impl Entity {
@@ -113,9 +120,14 @@ impl Entity {
             lifetime: Time::of(0),
             frame_locked: true,
             metadata: Vec::new(),
+            arrows: [],
             cubes: Vec::new(),
             spheres: Vec::new(),
             cylinders: Vec::new(),
+            lines: [],
+            triangles: [],
+            texts: [],
+            models: [],
         }
     }
 
