@@ -356,11 +356,18 @@ impl DeployedPolicy {
         let mut n = observer.dim();
         for (i, l) in p.layers.iter().enumerate() {
             size(format!("layers[{i}].inputs"), n, l.inputs)?;
-            size(
-                format!("layers[{i}].weight"),
-                l.inputs * l.outputs,
-                l.weight.len(),
-            )?;
+            // A damaged file's sizes may not even multiply.
+            let weights = l
+                .inputs
+                .checked_mul(l.outputs)
+                .ok_or_else(|| DeployError::Format {
+                    path: path.to_path_buf(),
+                    detail: format!(
+                        "layers[{i}]: {} inputs × {} outputs is more weights than can exist",
+                        l.inputs, l.outputs
+                    ),
+                })?;
+            size(format!("layers[{i}].weight"), weights, l.weight.len())?;
             size(format!("layers[{i}].bias"), l.outputs, l.bias.len())?;
             n = l.outputs;
         }
@@ -586,6 +593,16 @@ mod tests {
         let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
         assert!(
             e.contains("layers[1].outputs has 3 values, expected 4"),
+            "{e}"
+        );
+        // Sizes whose product overflows (found by fuzz_readers.rs): refused,
+        // not a panic.
+        let mut f = ground_truth_policy();
+        f.layers[0].outputs = usize::MAX / 4;
+        let bad = write(dir.path(), "huge.json", &serde_json::to_string(&f).unwrap());
+        let e = DeployedPolicy::load(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("huge.json") && e.contains("more weights than can exist"),
             "{e}"
         );
         // Cut short, another format, another version.
