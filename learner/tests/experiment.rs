@@ -542,13 +542,29 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     // the ground truth: per seed DAgger, fine-tune, evaluation.
     assert_eq!(stages.lines().count(), 1 + 3 * 2 + 3 * 2, "{stages}");
     assert_eq!(stages.matches("fine-tune of the student").count(), 4);
-    assert_eq!(stages.matches(", seed 2)").count(), 4, "{stages}");
+    assert_eq!(stages.matches(", seed 2)").count(), 6, "{stages}");
     let again = run(&cfg, &out, &opts, &|| false).unwrap();
     assert_eq!(again, rows);
     assert_eq!(
         std::fs::read_to_string(out.join("stages.log")).unwrap(),
         stages
     );
+    // A fine-tune in another world than the students' is refused before
+    // anything runs.
+    let elsewhere = dir.join("finetune-elsewhere.toml");
+    std::fs::write(
+        &elsewhere,
+        std::fs::read_to_string(&finetune).unwrap().replace(
+            "[env]\nmax_steps = 20\n",
+            "[env]\nmax_steps = 20\n[env.action]\nmax_step_m = 0.004\n",
+        ),
+    )
+    .unwrap();
+    let mut c = cfg.clone();
+    c.policy.finetune = Some(elsewhere);
+    let e = run(&c, &dir.join("refused-ft"), &opts, &|| false).unwrap_err();
+    assert!(e.to_string().contains("not the students'"), "{e}");
+    assert!(!dir.join("refused-ft/Full").exists(), "nothing ran");
     // A teacher on a representation is refused before anything runs.
     let mut on_z = read(teacher_ckpt.clone());
     on_z.config.observation = ObservationKind::Representation(out.join("Full/repr/model"));

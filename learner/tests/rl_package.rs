@@ -128,14 +128,22 @@ fn a_packaged_policy_evaluates_wherever_it_is_moved() {
         .unwrap());
     assert!(e.contains("not empty") && e.contains("shipped"), "{e}");
 
-    // Without its model, the package's checkpoint names what it looked for.
+    // Without its model, the package's checkpoint names where it looked,
+    // and does not take a `model` of the working directory instead.
     std::fs::remove_dir_all(moved.join("model")).unwrap();
+    std::fs::create_dir_all(cwd.join("model")).unwrap();
+    for f in ["model.bpk", "model.json"] {
+        std::fs::copy(model.join(f), cwd.join("model").join(f)).unwrap();
+    }
     let e = err(learner(&cwd)
         .args(["policy", "eval", "--episodes", "1", "--checkpoint"])
         .arg(moved.join("checkpoint.json"))
         .output()
         .unwrap());
-    assert!(e.contains("model"), "{e}");
+    assert!(
+        e.contains(&moved.join("model").display().to_string()),
+        "{e}"
+    );
 
     // A checkpoint whose representation is not a model directory is
     // refused, naming it, and nothing is written.

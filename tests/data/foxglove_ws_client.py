@@ -3,7 +3,8 @@
 Connects to argv[1] offering foxglove.websocket.v1, subscribes to every
 advertised channel and decodes every message it receives with the channel's
 own schema: CDR through mcap-ros2-support from the `ros2msg` text, JSON
-validated by jsonschema. Also plays the misbehaving viewer: a client without
+validated by jsonschema; then joins again as a late viewer. Also plays the
+misbehaving viewer: a client without
 the subprotocol, a request that is not JSON, a subscription to a channel
 that does not exist, an oversized message. Stops once every topic in argv[2]
 (comma-separated) has at least one message from the running stack and the
@@ -135,6 +136,24 @@ with connect(URL, subprotocols=[SUB], open_timeout=10, max_size=None, ping_inter
     summary["sensor_after_unsubscribe"] = after
     summary["others_after_unsubscribe"] = others
     summary["first_seconds"] = first_times
+
+# A viewer that joins mid-episode: the episode's configuration, scene (the
+# arm among it) and events come first, before anything newer.
+with connect(URL, subprotocols=[SUB], open_timeout=10, max_size=None, ping_interval=None) as late:
+    late.recv(timeout=10)
+    chans = {c["topic"]: c for c in json.loads(late.recv(timeout=10))["channels"]}
+    want = ["/config", "/scene", "/events"]
+    late.send(json.dumps({"op": "subscribe", "subscriptions": [
+        {"id": i, "channelId": chans[t]["id"]} for i, t in enumerate(want)]}))
+    first = []
+    while len(first) < 4:
+        m = late.recv(timeout=30)
+        if isinstance(m, str):
+            continue
+        _, sub, _ = struct.unpack_from("<BIQ", m)
+        first.append((want[sub], m[13:]))
+    summary["late_first_topics"] = [t for t, _ in first]
+    summary["late_arm"] = any(t == "/scene" and b'"arm/' in p for t, p in first)
 
 # An oversized message ends that client's session only, with close code
 # 1009 (message too big): seen while still sending it or after.

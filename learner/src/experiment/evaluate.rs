@@ -48,10 +48,12 @@ pub(super) fn evaluate_policy(
             Some(e) => e.report,
             None => {
                 log.start(&format!(
-                    "{}: evaluation of {chosen} on the {} peg ({} episodes)",
+                    "{}: evaluation of {chosen} on the {} peg ({} episodes{})",
                     v.name,
                     peg.name(),
-                    cfg.eval.episodes
+                    cfg.eval.episodes,
+                    tag.strip_prefix("-s")
+                        .map_or(String::new(), |s| format!(", seed {s}"))
                 ));
                 let mut ecfg = ckpt.config.clone();
                 ecfg.env.world.task.peg = peg;

@@ -101,7 +101,18 @@ pub fn run(
                 );
             }
             let finetune = match &cfg.policy.finetune {
-                Some(f) => Some(Box::new(policy_run::read_config(f)?)),
+                Some(f) => {
+                    let ft = policy_run::read_config(f)?;
+                    // It goes on in the students' world (its training aids
+                    // are its own).
+                    ensure!(
+                        ft.env.world == env.world && ft.env.action == env.action,
+                        "policy.finetune {}: its [env.world] or [env.action] is not the students' \
+                         (the teacher's, with the distillation's camera)",
+                        f.display()
+                    );
+                    Some(Box::new(ft))
+                }
                 None => None,
             };
             (Route::Distill(Box::new(d), finetune), env)

@@ -23,15 +23,16 @@ pub const MODEL_DIR: &str = "model";
 const MODEL_MARK: &str = "model.json";
 
 /// Makes `c`'s relative representation path, when a model is found there
-/// relative to `checkpoint`'s directory, that path; anything else is left
-/// as it is.
+/// relative to `checkpoint`'s directory, that path; a package's (`model`)
+/// always, so that a missing one is named there and never taken from the
+/// working directory. Anything else is left as it is.
 pub fn resolve_beside(checkpoint: &Path, c: &mut Checkpoint) {
     if let ObservationKind::Representation(model) = &mut c.config.observation
         && model.is_relative()
     {
         let dir = checkpoint.parent().unwrap_or(Path::new(""));
         let beside = dir.join(&*model);
-        if beside.join(MODEL_MARK).is_file() {
+        if beside.join(MODEL_MARK).is_file() || *model == Path::new(MODEL_DIR) {
             *model = beside;
         }
     }

@@ -101,14 +101,10 @@ fn a_foxglove_websocket_client_decodes_every_channel_of_the_running_stack() {
         let n = s["counts"][t].as_u64().unwrap_or(0);
         assert!(n >= 2, "{t}: {n} messages\n{s}");
     }
-    // The configuration, scene and reset of the episode under way came at
-    // once, not at the next episode.
-    for t in ["/config", "/scene", "/events"] {
-        assert!(
-            s["first_seconds"][t].as_f64().is_some_and(|x| x < 5.0),
-            "{t}\n{s}"
-        );
-    }
+    // A viewer joining mid-episode got the episode's configuration and its
+    // scene with the arm first, not at the next episode.
+    assert_eq!(s["late_first_topics"][0], "/config", "{s}");
+    assert_eq!(s["late_arm"], true, "{s}");
     let statuses: Vec<&str> = s["statuses"]
         .as_array()
         .unwrap()

@@ -557,6 +557,10 @@ impl LogWriter {
     /// Logs the configuration in force at `t_hw_ns`.
     pub fn config(&mut self, t_hw_ns: u64, config: &RunConfig) -> Result<(), LogError> {
         let now = shared_mem_schema::process::mono_now_ns();
+        // The configuration first: it opens an episode's messages for the
+        // live view's late viewers ([`ws`]), the scene below among them.
+        let text = serde_json::to_string(config).expect("configurations serialise");
+        self.write(Stream::Config, t_hw_ns, now, text.as_bytes())?;
         if self.opts.foxglove {
             self.load_arm(&config.robot);
             self.task = Some(config.world.task.clone());
@@ -577,8 +581,7 @@ impl LogWriter {
                 self.write_json(Stream::Scene, t_hw_ns, now)?;
             }
         }
-        let text = serde_json::to_string(config).expect("configurations serialise");
-        self.write(Stream::Config, t_hw_ns, now, text.as_bytes())
+        Ok(())
     }
 
     /// Makes `robot` the arm the views place, loading it unless it is the

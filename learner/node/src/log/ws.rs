@@ -87,6 +87,8 @@ struct Client {
     tx: SyncSender<Outgoing>,
     /// Subscribed, by channel id.
     wanted: Arc<[AtomicBool]>,
+    /// Messages dropped for it (its queue full).
+    dropped: Arc<AtomicU64>,
 }
 
 /// What the node's log writers publish into and the connections read from.
@@ -142,7 +144,10 @@ impl Hub {
             return;
         }
         let data: Arc<[u8]> = data.into();
-        if let Some(&(s, n)) = keep {
+        // A latched channel's message is kept and handed out under one
+        // lock, which a new subscriber takes to subscribe and copy what is
+        // kept: it gets each message once, kept or queued.
+        let _latched = keep.map(|&(s, n)| {
             let mut latched = lock(&self.latched);
             // A new episode's configuration starts its messages afresh.
             if s == Stream::Config {
@@ -153,7 +158,8 @@ impl Hub {
                 kept.remove(0);
             }
             kept.push((log_ns, data.clone()));
-        }
+            latched
+        });
         for c in lock(&self.clients).iter() {
             if !c.wanted[channel as usize].load(Ordering::Acquire) {
                 continue;
@@ -165,8 +171,18 @@ impl Hub {
             };
             if let Err(TrySendError::Full(_)) = c.tx.try_send(m) {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
+                c.dropped.fetch_add(1, Ordering::Relaxed);
             }
         }
+    }
+
+    /// Subscribes a connection to `channel` and returns the messages kept
+    /// for it (none for an unlatched channel), as one step against
+    /// [`Hub::publish`].
+    fn subscribe(&self, wanted: &[AtomicBool], channel: u32) -> Vec<Kept> {
+        let latched = lock(&self.latched);
+        wanted[channel as usize].store(true, Ordering::Release);
+        latched.get(&channel).cloned().unwrap_or_default()
     }
 
     /// Messages dropped for subscribers that fell behind, so far.
@@ -174,18 +190,25 @@ impl Hub {
         self.dropped.load(Ordering::Relaxed)
     }
 
-    fn register(&self) -> (u64, Receiver<Outgoing>, Arc<[AtomicBool]>) {
+    fn register(&self) -> Registered {
         let (tx, rx) = std::sync::mpsc::sync_channel(QUEUE);
         let wanted: Arc<[AtomicBool]> = (0..=STREAMS).map(|_| AtomicBool::new(false)).collect();
+        let dropped = Arc::new(AtomicU64::new(0));
         let id = self.next_client.fetch_add(1, Ordering::Relaxed);
         let mut clients = lock(&self.clients);
         clients.push(Client {
             id,
             tx,
             wanted: wanted.clone(),
+            dropped: dropped.clone(),
         });
         self.subscribers.store(clients.len(), Ordering::Release);
-        (id, rx, wanted)
+        Registered {
+            id,
+            rx,
+            wanted,
+            dropped,
+        }
     }
 
     fn unregister(&self, id: u64) {
@@ -193,6 +216,14 @@ impl Hub {
         clients.retain(|c| c.id != id);
         self.subscribers.store(clients.len(), Ordering::Release);
     }
+}
+
+/// A connection's side of its registration.
+struct Registered {
+    id: u64,
+    rx: Receiver<Outgoing>,
+    wanted: Arc<[AtomicBool]>,
+    dropped: Arc<AtomicU64>,
 }
 
 /// The server: listening, with its hub.
@@ -235,6 +266,7 @@ fn accept_loop(listener: TcpListener, hub: Arc<Hub>) {
         if hub.sessions.fetch_add(1, Ordering::AcqRel) >= MAX_CLIENTS {
             hub.sessions.fetch_sub(1, Ordering::AcqRel);
             eprintln!("node: Foxglove WebSocket: {peer} refused, {MAX_CLIENTS} already connected");
+            refuse_busy(stream);
             continue;
         }
         let h = hub.clone();
@@ -250,6 +282,20 @@ fn accept_loop(listener: TcpListener, hub: Arc<Hub>) {
             hub.sessions.fetch_sub(1, Ordering::AcqRel);
         }
     }
+}
+
+/// Answers a connection past [`MAX_CLIENTS`] with HTTP 503 and why (at
+/// most a short blocking write; the accept thread goes on).
+fn refuse_busy(mut stream: TcpStream) {
+    use std::io::Write;
+    let body = format!("{MAX_CLIENTS} viewers are already connected; try again later\n");
+    let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+    let _ = write!(
+        stream,
+        "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: {}\r\n\
+         Connection: close\r\n\r\n{body}",
+        body.len()
+    );
 }
 
 /// Accepts the handshake when the client offers [`SUBPROTOCOL`].
@@ -318,9 +364,20 @@ fn serve(stream: TcpStream, hub: &Hub) -> Result<(), ServeError> {
     ws.send(Message::text(info.to_string()))?;
     let advertise = serde_json::json!({ "op": "advertise", "channels": hub.channels });
     ws.send(Message::text(advertise.to_string()))?;
-    let (id, rx, wanted) = hub.register();
-    let r = session(&mut ws, hub, &rx, &wanted);
-    hub.unregister(id);
+    let reg = hub.register();
+    let r = session(&mut ws, hub, &reg.rx, &reg.wanted);
+    hub.unregister(reg.id);
+    let dropped = reg.dropped.load(Ordering::Relaxed);
+    if dropped > 0 {
+        let peer = ws
+            .get_ref()
+            .peer_addr()
+            .map_or_else(|_| "?".into(), |a| a.to_string());
+        eprintln!(
+            "node: Foxglove WebSocket: {peer}: {dropped} messages were dropped for this viewer, \
+             which fell behind"
+        );
+    }
     r
 }
 
@@ -341,10 +398,9 @@ fn session(
                 for s in statuses {
                     ws.write(Message::text(s))?;
                 }
-                // The latched channels' messages for a new subscriber.
+                // Subscribed now, the latched channels' kept messages first.
                 for ch in fresh {
-                    let kept = lock(&hub.latched).get(&ch).cloned().unwrap_or_default();
-                    for (t, data) in kept {
+                    for (t, data) in hub.subscribe(wanted, ch) {
                         ws.write(data_frame(subs[&ch], t, &data))?;
                     }
                 }
@@ -431,7 +487,7 @@ fn status_text(level: u8, message: &str) -> String {
 }
 
 /// Handles one client request: the status messages to answer with, and the
-/// channels newly subscribed.
+/// channels newly subscribed (for [`Hub::subscribe`] to turn on).
 fn request(
     text: &str,
     hub: &Hub,
@@ -470,7 +526,6 @@ fn request(
                     ));
                 } else if let std::collections::btree_map::Entry::Vacant(e) = subs.entry(ch) {
                     e.insert(sub);
-                    wanted[ch as usize].store(true, Ordering::Release);
                     fresh.push(ch);
                 } else {
                     statuses.push(status_text(
@@ -524,8 +579,16 @@ mod tests {
     #[test]
     fn a_stalled_subscriber_never_blocks_the_publisher() {
         let hub = Hub::new(&LogOptions::default());
-        let (id, rx, wanted) = hub.register();
-        wanted[channel_id(Stream::Sensor) as usize].store(true, Ordering::Release);
+        let Registered {
+            id,
+            rx,
+            wanted,
+            dropped,
+        } = hub.register();
+        assert!(
+            hub.subscribe(&wanted, channel_id(Stream::Sensor))
+                .is_empty()
+        );
         let extra = 25;
         for i in 0..(QUEUE + extra) as u64 {
             hub.publish(Stream::Sensor, i, &[1, 2, 3]);
@@ -533,6 +596,7 @@ mod tests {
             hub.publish(Stream::Action, i, &[4]);
         }
         assert_eq!(hub.dropped(), extra as u64);
+        assert_eq!(dropped.load(Ordering::Relaxed), extra as u64);
         let got: Vec<_> = rx.try_iter().collect();
         assert_eq!(got.len(), QUEUE);
         assert!(got.iter().all(|m| m.channel == channel_id(Stream::Sensor)));
@@ -568,6 +632,47 @@ mod tests {
         assert!(kept(Stream::Scene).is_empty() && kept(Stream::Events).is_empty());
     }
 
+    /// Through the real writer: an episode's configuration, then its arm
+    /// and peg, are what a viewer subscribing to `/config` and `/scene`
+    /// gets first; subscribing hands out the kept messages and queues the
+    /// later ones, each once.
+    #[test]
+    fn a_late_viewer_gets_the_episodes_config_and_arm() {
+        let dir = test_support::scratch_dir("ws-latched");
+        let opts = LogOptions::default();
+        let hub = Arc::new(Hub::new(&opts));
+        let mut log = super::super::LogWriter::create_with(&dir.join("a.mcap"), opts).unwrap();
+        log.serve_live(hub.clone());
+        let mut world = hw_sim::WorldConfig::default();
+        world.task.enabled = true;
+        let config = super::super::RunConfig::new(
+            super::super::RunMode::Live,
+            world,
+            crate::mix::EpisodePolicy::Heuristic,
+            1,
+            5,
+        );
+        log.config(1_000, &config).unwrap();
+        let reg = hub.register();
+        let kept_config = hub.subscribe(&reg.wanted, channel_id(Stream::Config));
+        let kept_scene = hub.subscribe(&reg.wanted, channel_id(Stream::Scene));
+        assert_eq!(kept_config.len(), 1);
+        assert_eq!(kept_scene.len(), 1, "the arm and peg");
+        let scene = String::from_utf8_lossy(&kept_scene[0].1).into_owned();
+        assert!(
+            scene.contains("\"arm/") && scene.contains("peg_tip"),
+            "{scene}"
+        );
+        // Nothing kept was queued as well; the next episode's config is.
+        assert_eq!(reg.rx.try_iter().count(), 0);
+        log.config(2_000, &config).unwrap();
+        let queued: Vec<u32> = reg.rx.try_iter().map(|m| m.channel).collect();
+        assert_eq!(
+            queued,
+            [channel_id(Stream::Config), channel_id(Stream::Scene)]
+        );
+    }
+
     /// Requests: subscribe and unsubscribe by the protocol's fields; bad
     /// ones answered with a status naming the problem.
     #[test]
@@ -584,6 +689,7 @@ mod tests {
         );
         assert!(st.is_empty(), "{st:?}");
         assert_eq!(fresh, [ch]);
+        hub.subscribe(&wanted, ch);
         assert!(wanted[ch as usize].load(Ordering::Acquire));
         for (req, says) in [
             (
