@@ -3,7 +3,8 @@
 //! `load_state_dict(strict=True)`, and the twin computes what we do on the
 //! same inputs: the z means our encoder gives the policy (the CPU fast
 //! path) within 1e-4, and the variance and every decoder's output within
-//! 1e-4 of their magnitude. Needs scripts/torch-venv.sh's environment
+//! 1e-4 of their magnitude. The shipped policy's export, likewise, acts in
+//! PyTorch as it does here. Needs scripts/torch-venv.sh's environment
 //! (scripts/test.sh installs it and requires it).
 
 use burn::prelude::*;
@@ -227,4 +228,89 @@ fn the_command_writes_the_weights_and_their_spec() {
         serde_json::from_str(header["__metadata__"]["spec"].as_str().unwrap()).unwrap();
     assert_eq!(meta, spec);
     assert_eq!(header["rgb.fc.weight"]["dtype"], "F32");
+}
+
+/// The policy's MLP in PyTorch as the spec says: float64 `nn.Linear`
+/// layers with tanh between, after the clipped normalisation.
+const TORCH_ACT: &str = r#"
+import json, sys, torch
+from safetensors.torch import load_file
+t = load_file(sys.argv[1] + "/policy.safetensors")
+spec = json.load(open(sys.argv[1] + "/policy-spec.json"))
+mods = []
+for i in range(spec["layers"]):
+    w, b = t[f"layers.{i}.weight"], t[f"layers.{i}.bias"]
+    lin = torch.nn.Linear(w.shape[1], w.shape[0], dtype=torch.float64)
+    lin.load_state_dict({"weight": w, "bias": b})
+    mods.append(lin)
+    if i + 1 < spec["layers"]:
+        mods.append(torch.nn.Tanh())
+net = torch.nn.Sequential(*mods)
+x = torch.tensor(json.loads(sys.argv[2]), dtype=torch.float64)
+c = spec["obs_norm_clip"]
+if c is not None:
+    x = ((x - t["obs_norm.shift"]) * t["obs_norm.scale"]).clamp(-c, c)
+with torch.no_grad():
+    print(json.dumps(net(x).tolist()))
+"#;
+
+/// The shipped policy through `learner policy export`: its MLP in PyTorch
+/// gives our means within 1e-9, and the encoder written beside it is
+/// `learner repr export`'s of its model, the one the twin checks above; so
+/// a PyTorch user has the whole policy on z.
+#[test]
+fn the_shipped_policy_exports_for_pytorch() {
+    let Some(py) = interop_venv::torch_python("torch, safetensors.torch", "PyTorch is") else {
+        return;
+    };
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let ckpt = root.join("artifacts/z-ppo-square/checkpoint.json");
+    let dir = test_support::scratch_dir("policy-export-torch");
+    let (policy_dir, repr_dir) = (dir.join("policy"), dir.join("repr"));
+    let learner = || std::process::Command::new(env!("CARGO_BIN_EXE_learner"));
+    interop_venv::run_ok(
+        learner()
+            .args(["policy", "export", "--checkpoint"])
+            .arg(&ckpt)
+            .arg("--out")
+            .arg(&policy_dir),
+    );
+    interop_venv::run_ok(
+        learner()
+            .args(["repr", "export", "--model"])
+            .arg(root.join("artifacts/z-ppo-square/model"))
+            .arg("--out")
+            .arg(&repr_dir),
+    );
+    let st = "representation.safetensors";
+    assert_eq!(
+        std::fs::read(policy_dir.join(st)).unwrap(),
+        std::fs::read(repr_dir.join(st)).unwrap()
+    );
+    let c = learner::rl::run::read_checkpoint(&ckpt).unwrap();
+    let policy = c.chosen_policy(false).policy;
+    let dim = policy.sizes[0];
+    assert_eq!(dim, 128);
+    // z-like inputs, some far outside the statistics.
+    let obs: Vec<Vec<f64>> = (0..4)
+        .map(|k| {
+            (0..dim)
+                .map(|i| ((k * 5 + i * 7) % 13) as f64 * 0.25 - 1.5)
+                .collect()
+        })
+        .collect();
+    let out = interop_venv::run_ok(
+        std::process::Command::new(&py)
+            .args(["-c", TORCH_ACT])
+            .arg(&policy_dir)
+            .arg(serde_json::to_string(&obs).unwrap()),
+    );
+    let theirs: Vec<Vec<f64>> = serde_json::from_slice(&out).unwrap();
+    for (o, t) in obs.iter().zip(&theirs) {
+        let ours = policy.means(o);
+        assert_eq!(ours.len(), t.len());
+        for (a, b) in ours.iter().zip(t) {
+            assert!((a - b).abs() < 1e-9, "ours {ours:?}, PyTorch's {t:?}");
+        }
+    }
 }
