@@ -544,3 +544,69 @@ fn a_blank_camera_and_an_arm_at_rest_read_back() {
         std::fs::remove_file(&path).unwrap();
     }
 }
+
+/// A frame with a NaN pose, wrench or calibration (a faulty peer) is kept
+/// in its raw channel, and no view message holds a `null` (Foxglove's
+/// schemas want numbers): its views are left out for that frame only.
+#[test]
+fn non_finite_values_stay_raw_and_out_of_the_views() {
+    let dir = test_support::scratch_dir("log-nan");
+    let path = dir.path().join("nan.mcap");
+    let mut w = LogWriter::create(&path).unwrap();
+    w.config(0, &run_config()).unwrap();
+    for i in 0..4 {
+        let mut f = sensor(i);
+        if i == 1 {
+            f.ee_pos_m[2] = f64::NAN;
+        }
+        if i == 2 {
+            f.wrench[0] = f64::INFINITY;
+        }
+        if i == 3 {
+            f.q[2] = f64::NAN;
+        }
+        w.sensor(&f).unwrap();
+    }
+    let mut c = camera(1, 8, 8);
+    c.calibration.focal_px = f64::NAN;
+    w.camera(&c).unwrap();
+    w.finish().unwrap();
+    let r = LogReader::open(&path).unwrap();
+    assert_eq!(r.read(&[topics::SENSOR], None).unwrap().len(), 4);
+    assert_eq!(r.read_camera(None).unwrap().len(), 1);
+    // Frames 1 and 2 have no pose, wrench or transforms; frame 3 (a NaN
+    // joint angle) keeps its pose and the end effector's transform.
+    let times = |topic| -> Vec<u64> {
+        r.read_json(topic, None)
+            .unwrap()
+            .into_iter()
+            .map(|(t, _)| t)
+            .collect()
+    };
+    let ms = |i: u64| i * 1_000_000;
+    assert_eq!(times(topics::VIEW_EE_POSE), [ms(0), ms(3)]);
+    assert_eq!(times(topics::VIEW_WRENCH), [ms(0), ms(3)]);
+    assert_eq!(times(topics::VIEW_TF), [ms(0), ms(3)]);
+    // The image is there; its calibration and camera transform are not.
+    assert_eq!(times(topics::VIEW_RGB).len(), 1);
+    assert!(times(topics::VIEW_CALIBRATION).is_empty());
+    fn has_null(v: &serde_json::Value) -> bool {
+        match v {
+            serde_json::Value::Null => true,
+            serde_json::Value::Array(a) => a.iter().any(has_null),
+            serde_json::Value::Object(o) => o.values().any(has_null),
+            _ => false,
+        }
+    }
+    for topic in [
+        topics::VIEW_EE_POSE,
+        topics::VIEW_WRENCH,
+        topics::VIEW_TF,
+        topics::VIEW_RGB,
+        topics::VIEW_SCENE,
+    ] {
+        for (_, v) in r.read_json(topic, None).unwrap() {
+            assert!(!has_null(&v), "{topic}: {v}");
+        }
+    }
+}

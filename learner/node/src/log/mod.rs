@@ -154,6 +154,11 @@ enum Stream {
 
 const STREAMS: usize = 14;
 
+/// Whether every value is a number (not NaN or infinite).
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
 /// Writes one log (an episode of the live stack, or a collection shard).
 pub struct LogWriter {
     path: PathBuf,
@@ -393,6 +398,12 @@ impl LogWriter {
         if !self.opts.foxglove {
             return Ok(());
         }
+        // A view holds numbers only (JSON has no NaN, and Foxglove's schemas
+        // refuse null): a frame with a non-finite pose or wrench stays in
+        // its raw channel alone.
+        if !(finite(&m.ee_pos_m) && finite(&m.ee_quat_xyzw) && finite(&m.wrench)) {
+            return Ok(());
+        }
         let (t, p) = (m.header.t_hw_ns, m.header.t_mono_ns);
         let period_ns = (1e9 / self.opts.view_rate_hz.max(1e-3)) as u64;
         if self
@@ -418,8 +429,10 @@ impl LogWriter {
             translation: m.ee_pos_m,
             rotation_xyzw: m.ee_quat_xyzw,
         }];
+        let q = &m.q[..(m.n_joints as usize).min(m.q.len())];
         if let Some(Ok(arm)) = &mut self.arm
-            && let Some(links) = arm.transforms(&m.q[..(m.n_joints as usize).min(m.q.len())])
+            && finite(q)
+            && let Some(links) = arm.transforms(q)
         {
             tfs.extend(links);
         }
@@ -478,6 +491,13 @@ impl LogWriter {
         }
         let (t, p) = (m.header.t_hw_ns, m.header.t_mono_ns);
         let r = self.write(Stream::Camera, t, p, &buf);
+        let cal = &m.calibration;
+        let placed = cal.focal_px.is_finite()
+            && finite(&cal.principal_px)
+            && finite(&cal.pose_pos_m)
+            && finite(&cal.pose_quat_xyzw);
+        // Images are bytes whatever they hold; a non-finite calibration
+        // stays in the raw channel alone (as a sensor frame's pose).
         if r.is_ok() && self.opts.foxglove {
             let depth = &buf[depth_at..];
             let rgb = &m.rgb[..n * 3];
@@ -501,6 +521,8 @@ impl LogWriter {
                 depth,
             );
             self.write_json(Stream::Depth, t, p)?;
+        }
+        if r.is_ok() && self.opts.foxglove && placed {
             foxglove::camera_calibration(
                 &mut self.json,
                 t,
@@ -534,7 +556,9 @@ impl LogWriter {
         // The box where this episode put it.
         if let (true, Event::Reset(r)) = (self.opts.foxglove, event) {
             let task = r.world.as_ref().map(|w| &w.task).or(self.task.as_ref());
-            if let Some(task) = task.filter(|t| t.enabled) {
+            let hole_finite =
+                finite(&r.hole_pos_m) && finite(&r.hole_quat_xyzw) && r.hole_depth_m.is_finite();
+            if let Some(task) = task.filter(|t| t.enabled && hole_finite) {
                 let hole = nalgebra::Isometry3::from_parts(
                     nalgebra::Translation3::from(nalgebra::Vector3::from(r.hole_pos_m)),
                     hw_sim::convert::unit_quaternion(r.hole_quat_xyzw),
