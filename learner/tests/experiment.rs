@@ -549,6 +549,20 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
         std::fs::read_to_string(out.join("stages.log")).unwrap(),
         stages
     );
+    // A student distilled further after its fine-tune: the old fine-tune
+    // is not silently reused, the message says what to delete.
+    let mut more = cfg.clone();
+    more.policy.dagger_rounds = Some(3);
+    more.policy.seeds = vec![1];
+    let only_gt = RunOptions {
+        only: vec!["ground-truth".into()],
+        ..Default::default()
+    };
+    let e = run(&more, &out, &only_gt, &|| false).unwrap_err();
+    assert!(
+        e.to_string().contains("round 2") && e.to_string().contains("now has 3"),
+        "{e}"
+    );
     // A fine-tune in another world than the students' is refused before
     // anything runs.
     let elsewhere = dir.join("finetune-elsewhere.toml");

@@ -138,6 +138,29 @@ fn finetune_policy(
     }
     p.observation = observation;
     p.init_from = Some(student.to_path_buf());
+    // The student it started from, so that a student distilled further
+    // later is not silently followed by the old fine-tune.
+    let rounds = policy_run::read_checkpoint(student)?.state.iteration;
+    let mark = dir.join("student-rounds.json");
+    match std::fs::read_to_string(&mark) {
+        Ok(text) => {
+            let then: u64 = serde_json::from_str(&text)
+                .with_context(|| format!("reading {}", mark.display()))?;
+            ensure!(
+                then == rounds,
+                "{}: this fine-tune started from the student's round {then}, and the student in {} \
+                 now has {rounds}; delete {} to fine-tune it again",
+                v.name,
+                student.display(),
+                dir.display()
+            );
+        }
+        Err(_) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            std::fs::write(&mark, rounds.to_string())
+                .with_context(|| format!("writing {}", mark.display()))?;
+        }
+    }
     let what = format!(
         "{}: fine-tune of the student ({} steps{})",
         v.name,
