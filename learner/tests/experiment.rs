@@ -197,7 +197,7 @@ fn an_experiment_runs_every_stage_and_resumes() {
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert_eq!(md.lines().count(), 2 + 4, "{md}");
     assert!(
-        md.contains("| Full | hexagon | 2 |") && md.contains("| 78% |"),
+        md.contains("| Full | TRPO from scratch | hexagon | 2 |") && md.contains("| 78% |"),
         "{md}"
     );
     let stages = std::fs::read_to_string(out.join("stages.log")).unwrap();
@@ -240,7 +240,7 @@ fn an_experiment_runs_every_stage_and_resumes() {
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert_eq!(md.lines().count(), 2 + 2, "{md}");
     assert!(
-        md.contains("| Full | square |") && !md.contains("ground-truth"),
+        md.contains("| Full | TRPO from scratch | square |") && !md.contains("ground-truth"),
         "{md}"
     );
     // The paper's number belongs to the training peg, not to transfer.
@@ -490,7 +490,9 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     }
     let table = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(
-        table.contains(" of 4 (") && table.contains("s1: "),
+        table.contains(" of 4 (")
+            && table.contains("s1: ")
+            && table.contains("| DAgger ← learned teacher, then PPO on z |"),
         "{table}"
     );
     let read = |p: std::path::PathBuf| learner::rl::run::read_checkpoint(&p).unwrap();

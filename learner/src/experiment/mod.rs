@@ -186,6 +186,7 @@ pub fn run(
                 report,
                 paper_completed: v.paper_completed.filter(|_| Some(peg) == trained_peg),
                 per_seed,
+                route: route.name(),
             });
         }
         // The table so far after each variant: a run of many hours shows

@@ -40,6 +40,9 @@ pub struct ResultRow {
     /// `report` pools them.
     #[serde(default)]
     pub per_seed: Vec<SeedRow>,
+    /// How the policy learned, as docs/results.md names routes.
+    #[serde(default)]
+    pub route: String,
 }
 
 /// One training seed's completed insertions in a pooled row.
@@ -113,11 +116,11 @@ pub(super) fn read_eval(path: &Path) -> Result<Option<StoredEval>> {
 pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
     let pct = |x: f64| format!("{:.0}%", 100.0 * x);
     let mut md = String::from(
-        "| variant | peg | episodes | completed insertion (95 % interval) | per training seed | inserted into hole | touched the box | failed | normalised reward | paper: completed |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| variant | route | peg | episodes | completed insertion (95 % interval) | per training seed | inserted into hole | touched the box | failed | normalised reward | paper: completed |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut csv = String::from(
-        "variant,peg,episodes,completed_insertion,inserted_into_hole,touched_the_box,failed,normalised_reward,paper_completed,completed_interval_low,completed_interval_high\n",
+        "variant,peg,episodes,completed_insertion,inserted_into_hole,touched_the_box,failed,normalised_reward,paper_completed,completed_interval_low,completed_interval_high,route\n",
     );
     for r in rows {
         let o = r.report.outcomes;
@@ -131,8 +134,9 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ");
         md += &format!(
-            "| {} | {} | {} | {k} of {} ({:.0} %, {:.0}–{:.0}) | {} | {} | {} | {} | {:.3} | {} |\n",
+            "| {} | {} | {} | {} | {k} of {} ({:.0} %, {:.0}–{:.0}) | {} | {} | {} | {} | {:.3} | {} |\n",
             r.variant,
+            r.route,
             r.peg.name(),
             r.report.episodes,
             r.report.episodes,
@@ -151,7 +155,7 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
             r.paper_completed.map_or("–".into(), pct)
         );
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{},{lo},{hi}\n",
+            "{},{},{},{},{},{},{},{},{},{lo},{hi},{}\n",
             r.variant,
             r.peg.name(),
             r.report.episodes,
@@ -160,7 +164,8 @@ pub fn write_results(out: &Path, rows: &[ResultRow]) -> Result<()> {
             c(Outcome::TouchedBox),
             c(Outcome::Failed),
             r.report.mean_normalised,
-            r.paper_completed.map_or(String::new(), |p| p.to_string())
+            r.paper_completed.map_or(String::new(), |p| p.to_string()),
+            r.route
         );
     }
     let write = |name: &str, text: &str| {

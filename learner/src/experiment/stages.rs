@@ -179,6 +179,36 @@ fn finetune_policy(
     )
 }
 
+impl Route {
+    /// The route as docs/results.md names it, for the results table.
+    pub(super) fn name(&self) -> String {
+        use crate::rl::train::Algorithm;
+        let rl = |a: Algorithm| match a {
+            Algorithm::Trpo => "TRPO",
+            Algorithm::Ppo => "PPO",
+        };
+        match self {
+            Route::Train(t) => match &t.init_from {
+                Some(_) => format!("{} from a start", rl(t.policy.algorithm)),
+                None => format!("{} from scratch", rl(t.policy.algorithm)),
+            },
+            Route::Distill(d, ft) => {
+                let teacher = if d.teacher.is_some() {
+                    "DAgger ← learned teacher"
+                } else if d.search_teacher.as_ref().is_some_and(|t| t.probe.is_some()) {
+                    "DAgger ← search(probe)"
+                } else {
+                    "DAgger ← search(truth)"
+                };
+                match ft {
+                    Some(f) => format!("{teacher}, then {} on z", rl(f.policy.algorithm)),
+                    None => teacher.to_string(),
+                }
+            }
+        }
+    }
+}
+
 /// `, seed N` for a stage of one of several training seeds.
 fn seed_note(seed: Option<u64>) -> String {
     seed.map_or(String::new(), |s| format!(", seed {s}"))
