@@ -492,7 +492,7 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     assert!(
         table.contains(" of 4 (")
             && table.contains("s1: ")
-            && table.contains("| DAgger ← learned teacher, then PPO on z |"),
+            && table.contains("| DAgger ← learned teacher → PPO on z |"),
         "{table}"
     );
     let read = |p: std::path::PathBuf| learner::rl::run::read_checkpoint(&p).unwrap();

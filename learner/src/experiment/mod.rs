@@ -106,9 +106,12 @@ pub fn run(
                     // It goes on in the students' world (its training aids
                     // are its own).
                     ensure!(
-                        ft.env.world == env.world && ft.env.action == env.action,
-                        "policy.finetune {}: its [env.world] or [env.action] is not the students' \
-                         (the teacher's, with the distillation's camera)",
+                        ft.env.world == env.world
+                            && ft.env.action == env.action
+                            && ft.env.controller.impedance == env.controller.impedance,
+                        "policy.finetune {}: its [env.world], [env.action] or \
+                         [env.controller.impedance] is not the students' (the teacher's, with the \
+                         distillation's camera)",
                         f.display()
                     );
                     Some(Box::new(ft))

@@ -201,7 +201,7 @@ impl Route {
                     "DAgger ← search(truth)"
                 };
                 match ft {
-                    Some(f) => format!("{teacher}, then {} on z", rl(f.policy.algorithm)),
+                    Some(f) => format!("{teacher} → {} on z", rl(f.policy.algorithm)),
                     None => teacher.to_string(),
                 }
             }

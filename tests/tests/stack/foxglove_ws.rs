@@ -102,9 +102,18 @@ fn a_foxglove_websocket_client_decodes_every_channel_of_the_running_stack() {
         assert!(n >= 2, "{t}: {n} messages\n{s}");
     }
     // A viewer joining mid-episode got the episode's configuration and its
-    // scene with the arm first, not at the next episode.
+    // scene with the arm before any live sensor frame: kept for it, not
+    // waited for until the next episode.
     assert_eq!(s["late_first_topics"][0], "/config", "{s}");
     assert_eq!(s["late_arm"], true, "{s}");
+    assert!(
+        s["late_first_topics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t == "/events"),
+        "{s}"
+    );
     let statuses: Vec<&str> = s["statuses"]
         .as_array()
         .unwrap()

@@ -176,6 +176,14 @@ impl Hub {
         }
     }
 
+    /// Unsubscribes a connection from `channel`, under the same lock as
+    /// [`Hub::subscribe`], so that a message cannot be both kept for a
+    /// later subscription and queued from this one.
+    fn unsubscribe(&self, wanted: &[AtomicBool], channel: u32) {
+        let _latched = lock(&self.latched);
+        wanted[channel as usize].store(false, Ordering::Release);
+    }
+
     /// Subscribes a connection to `channel` and returns the messages kept
     /// for it (none for an unlatched channel), as one step against
     /// [`Hub::publish`].
@@ -296,6 +304,16 @@ fn refuse_busy(mut stream: TcpStream) {
          Connection: close\r\n\r\n{body}",
         body.len()
     );
+    // Closed with its request unread, the socket would be reset and the
+    // answer lost: read what came (briefly) first.
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+    let _ = stream.set_read_timeout(Some(Duration::from_millis(100)));
+    let mut buf = [0u8; 4096];
+    while let Ok(n) = std::io::Read::read(&mut stream, &mut buf) {
+        if n == 0 {
+            break;
+        }
+    }
 }
 
 /// Accepts the handshake when the client offers [`SUBPROTOCOL`].
@@ -548,7 +566,7 @@ fn request(
                 match found {
                     Some(ch) => {
                         subs.remove(&ch);
-                        wanted[ch as usize].store(false, Ordering::Release);
+                        hub.unsubscribe(wanted, ch);
                     }
                     None => statuses.push(status_text(
                         1,
