@@ -58,7 +58,19 @@ fn train_policy(
         pcfg.env_steps,
         seed_note(seed)
     );
-    let target = pcfg.env_steps;
+    train_stage(v, pcfg, what, dir, log, stop)
+}
+
+/// A `learner policy train` stage of `p`, finished at its `env_steps`.
+fn train_stage(
+    v: &Variant,
+    p: policy_run::TrainConfig,
+    what: String,
+    dir: &Path,
+    log: &mut StageLog,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<policy_run::Checkpoint> {
+    let target = p.env_steps;
     policy_stage(
         v,
         dir,
@@ -66,14 +78,14 @@ fn train_policy(
         target,
         |c| c.state.env_steps,
         log,
-        || policy_run::train(pcfg, dir, true, stop),
+        || policy_run::train(p, dir, true, stop),
     )
 }
 
 /// Distils (or resumes, or finds finished) a variant's policy: DAgger from
-/// the touch search told by a probe of the variant's representation (the
-/// truth with the configured error for the ground truth); returns its
-/// checkpoint.
+/// the configuration's checkpoint teacher, or from the touch search told by
+/// a probe of the variant's representation (the truth with the configured
+/// error for the ground truth); returns its checkpoint.
 fn distill_policy(
     base: &DistillConfig,
     v: &Variant,
@@ -119,8 +131,9 @@ fn distill_policy(
 }
 
 /// Fine-tunes (or resumes, or finds finished) a variant's distilled
-/// student (`student`, its checkpoint) by `base` (PPO) on the variant's
-/// `observation`; returns the fine-tune's checkpoint.
+/// student (`student`, its checkpoint, distilled for `student_rounds`) by
+/// `base` (PPO) on the variant's `observation`; returns the fine-tune's
+/// checkpoint.
 #[allow(clippy::too_many_arguments)] // the stage's whole context
 fn finetune_policy(
     base: &policy_run::TrainConfig,
@@ -128,6 +141,7 @@ fn finetune_policy(
     observation: ObservationKind,
     seed: Option<u64>,
     student: &Path,
+    student_rounds: u64,
     dir: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
@@ -140,16 +154,15 @@ fn finetune_policy(
     p.init_from = Some(student.to_path_buf());
     // The student it started from, so that a student distilled further
     // later is not silently followed by the old fine-tune.
-    let rounds = policy_run::read_checkpoint(student)?.state.iteration;
     let mark = dir.join("student-rounds.json");
     match std::fs::read_to_string(&mark) {
         Ok(text) => {
             let then: u64 = serde_json::from_str(&text)
                 .with_context(|| format!("reading {}", mark.display()))?;
             ensure!(
-                then == rounds,
+                then == student_rounds,
                 "{}: this fine-tune started from the student's round {then}, and the student in {} \
-                 now has {rounds}; delete {} to fine-tune it again",
+                 now has {student_rounds}; delete {} to fine-tune it again",
                 v.name,
                 student.display(),
                 dir.display()
@@ -157,7 +170,7 @@ fn finetune_policy(
         }
         Err(_) => {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            std::fs::write(&mark, rounds.to_string())
+            std::fs::write(&mark, student_rounds.to_string())
                 .with_context(|| format!("writing {}", mark.display()))?;
         }
     }
@@ -167,16 +180,7 @@ fn finetune_policy(
         p.env_steps,
         seed_note(seed)
     );
-    let target = p.env_steps;
-    policy_stage(
-        v,
-        dir,
-        what,
-        target,
-        |c| c.state.env_steps,
-        log,
-        || policy_run::train(p, dir, true, stop),
-    )
+    train_stage(v, p, what, dir, log, stop)
 }
 
 impl Route {
@@ -242,10 +246,21 @@ pub(super) fn train_route(
             true,
         ),
         Route::Distill(base, Some(ft)) => {
-            distill_policy(base, v, observation.clone(), seed, &policy_dir, log, stop)?;
+            let s = distill_policy(base, v, observation.clone(), seed, &policy_dir, log, stop)?;
             let student = policy_run::checkpoint_path(&policy_dir);
             let ft_dir = dir.join(format!("finetune{tag}"));
-            let c = finetune_policy(ft, v, observation, seed, &student, &ft_dir, log, stop)?;
+            let rounds = s.state.iteration;
+            let c = finetune_policy(
+                ft,
+                v,
+                observation,
+                seed,
+                &student,
+                rounds,
+                &ft_dir,
+                log,
+                stop,
+            )?;
             (c, false)
         }
     })
