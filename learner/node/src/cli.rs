@@ -30,9 +30,10 @@ pub struct EpisodeArgs {
     /// its peg.
     #[arg(long)]
     pub world: Option<PathBuf>,
-    /// Episode time limit, s.
-    #[arg(long, default_value_t = 20.0)]
-    pub episode_timeout_s: f64,
+    /// Episode time limit, s [default: 20; `learner run|stack` with a
+    /// training checkpoint: its episode length].
+    #[arg(long)]
+    pub episode_timeout_s: Option<f64>,
     /// Where logs go.
     #[arg(long, default_value = "logs")]
     pub log_dir: PathBuf,
@@ -194,7 +195,26 @@ pub struct StackArgs {
     pub franky_sim_python: Option<PathBuf>,
 }
 
+/// The episode time limit without `--episode-timeout-s`, s.
+pub const DEFAULT_EPISODE_TIMEOUT_S: f64 = 20.0;
+
 impl EpisodeArgs {
+    /// `--episode-timeout-s`, or [`DEFAULT_EPISODE_TIMEOUT_S`].
+    pub fn timeout_s(&self) -> f64 {
+        self.episode_timeout_s.unwrap_or(DEFAULT_EPISODE_TIMEOUT_S)
+    }
+
+    /// [`Self::timeout_s`], refused unless finite and positive (an episode
+    /// must end).
+    pub fn checked_timeout_s(&self) -> Result<f64> {
+        let t = self.timeout_s();
+        anyhow::ensure!(
+            t.is_finite() && t > 0.0,
+            "--episode-timeout-s {t} must be positive and finite"
+        );
+        Ok(t)
+    }
+
     /// The live view's server when `--foxglove-ws` asks for one, serving
     /// the channels of logs written with `log`.
     pub fn live_view(&self, log: &LogOptions) -> Result<Option<Arc<crate::log::ws::Hub>>> {
@@ -268,7 +288,7 @@ pub fn run(r: RunArgs, policy: Option<DeployedPolicy>) -> Result<()> {
     let mut cfg = LiveConfig::new(&a.namespace, world_config(a)?, a.log_dir.clone());
     cfg.episodes = a.episodes;
     cfg.seed = a.seed;
-    cfg.episode_timeout_s = a.episode_timeout_s;
+    cfg.episode_timeout_s = a.checked_timeout_s()?;
     cfg.lockstep = a.lockstep;
     cfg.pegs = c.pegs.clone();
     cfg.mix = c.mix_heuristic_fraction.map(|f| {
@@ -355,7 +375,7 @@ pub fn stack(s: StackArgs) -> Result<()> {
         "--seed".into(),
         a.seed.to_string(),
         "--episode-timeout-s".into(),
-        a.episode_timeout_s.to_string(),
+        a.checked_timeout_s()?.to_string(),
     ];
     if let Some(w) = &a.world {
         run_args.push("--world".into());
@@ -441,18 +461,14 @@ fn run_calibrated(
     ] {
         anyhow::ensure!(!given, "--hole-pos excludes {flag}");
     }
-    anyhow::ensure!(
-        a.episode_timeout_s.is_finite() && a.episode_timeout_s > 0.0,
-        "--episode-timeout-s {} must be positive",
-        a.episode_timeout_s
-    );
+    a.checked_timeout_s()?;
     let cfg = CalibratedConfig {
         namespace: a.namespace.clone(),
         episodes: a.episodes,
         task,
         peg: a.peg,
         robot,
-        episode_timeout_s: a.episode_timeout_s,
+        episode_timeout_s: a.timeout_s(),
         settle_s: 0.5,
         controller_wait_s,
         log_dir: a.log_dir.clone(),
@@ -561,7 +577,7 @@ fn stack_franky_sim(
         "--peg".into(),
         a.peg.name().into(),
         "--episode-timeout-s".into(),
-        a.episode_timeout_s.to_string(),
+        a.checked_timeout_s()?.to_string(),
         "--hole-pos".into(),
         format!("{},{},{}", p.x, p.y, p.z),
         "--hole-depth-m".into(),

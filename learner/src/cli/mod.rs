@@ -57,9 +57,78 @@ pub fn experiment(a: ExperimentArgs) -> Result<()> {
     Ok(())
 }
 
+/// What a training checkpoint gives a live run that did not say otherwise:
+/// the world it was trained in (`--world`, written as `dir/world.toml`),
+/// its episode length (`--episode-timeout-s`) and, for the stack, its
+/// controller (`--controller-config`, written as `dir/rt-controller.toml`).
+/// A policy run in another world than its own would be evaluated on a task
+/// it never saw (and a representation's camera is refused).
+fn training_settings(
+    checkpoint: &std::path::Path,
+    a: &mut learner_node::cli::EpisodeArgs,
+    controller: Option<&mut Option<PathBuf>>,
+    dir: &std::path::Path,
+) -> Result<()> {
+    use anyhow::Context;
+    let c = crate::rl::run::read_checkpoint(checkpoint)?;
+    let env = &c.config.env;
+    let mut taken = Vec::new();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    if a.world.is_none() {
+        let path = dir.join("world.toml");
+        let text = toml::to_string(&env.world).context("printing the checkpoint's world")?;
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+        taken.push(format!("its world ({})", path.display()));
+        a.world = Some(path);
+    }
+    if a.episode_timeout_s.is_none() {
+        let s = f64::from(env.max_steps) * shared_mem_schema::rates::ACTION_PERIOD_S;
+        taken.push(format!("its episode length ({s} s)"));
+        a.episode_timeout_s = Some(s);
+    }
+    if let Some(slot @ None) = controller {
+        let daemon = rt_controller_daemon_config(&env.world.robot, &env.controller)?;
+        let path = dir.join("rt-controller.toml");
+        std::fs::write(&path, daemon).with_context(|| format!("writing {}", path.display()))?;
+        taken.push(format!("its controller ({})", path.display()));
+        *slot = Some(path);
+    }
+    if !taken.is_empty() {
+        eprintln!(
+            "learner: from the training run of {}: {} (give --world, --episode-timeout-s or \
+             --controller-config to run it otherwise)",
+            checkpoint.display(),
+            taken.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// The rt-controller daemon's configuration (TOML) with `robot` and the
+/// control law `controller`, every other setting the daemon's default (what
+/// the stack runs without `--controller-config`).
+fn rt_controller_daemon_config(
+    robot: &str,
+    controller: &rt_controller::ControllerConfig,
+) -> Result<String> {
+    let daemon = rt_controller_daemon::config::DaemonConfig {
+        robot: robot.to_string(),
+        controller: controller.clone(),
+        ..Default::default()
+    };
+    Ok(toml::to_string(&daemon)?)
+}
+
 /// `learner run`: the node's, taking a training checkpoint as well as a
-/// deployed policy.
-pub fn run_node(a: RunArgs) -> Result<()> {
+/// deployed policy (a checkpoint's world and episode length unless given).
+pub fn run_node(mut a: RunArgs) -> Result<()> {
+    if let Some(p) = &a.episodes.policy
+        && a.calibration.hole_pos.is_none()
+        && !crate::rl::export::is_deployed(p)?
+    {
+        let dir = a.episodes.log_dir.join("policy");
+        training_settings(&p.clone(), &mut a.episodes, None, &dir)?;
+    }
     let policy = match &a.episodes.policy {
         Some(p) => Some(crate::rl::export::load_for_node(p, a.episodes.last)?),
         None => None,
@@ -69,10 +138,17 @@ pub fn run_node(a: RunArgs) -> Result<()> {
 
 /// `learner stack`: the node's, a training checkpoint converted into the
 /// run's log directory first (the node the stack starts reads deployed
-/// policies only; the converted file is a record of what ran).
+/// policies only; the converted file is a record of what ran), with the
+/// checkpoint's world, episode length and controller unless given.
 pub fn stack(mut a: StackArgs) -> Result<()> {
     if let Some(p) = a.episodes.policy.take() {
         let dir = a.episodes.log_dir.join("policy");
+        if a.robot == learner_node::cli::RobotArg::Sim
+            && a.calibration.hole_pos.is_none()
+            && !crate::rl::export::is_deployed(&p)?
+        {
+            training_settings(&p, &mut a.episodes, Some(&mut a.controller_config), &dir)?;
+        }
         let file = crate::rl::export::file_for_node(&p, a.episodes.last, &dir)?;
         if file != p {
             eprintln!("learner: {} converted into {}", p.display(), file.display());

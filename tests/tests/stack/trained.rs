@@ -33,19 +33,22 @@ fn policy_checkpoint(
     path
 }
 
-/// Runs one lockstep episode of `seed` and `seconds` through the stack
-/// with the policy `checkpoint`; returns the episode's log.
+/// Runs one lockstep episode of `seed` and `seconds` (none: the
+/// checkpoint's episode length) through the stack with the policy
+/// `checkpoint`; returns the episode's log.
 fn policy_episode(
     dir: &std::path::Path,
     checkpoint: &std::path::Path,
     seed: u64,
-    seconds: u32,
+    seconds: Option<u32>,
 ) -> learner_node::log::LogReader {
-    let out = Command::new(tests::stack_bins().join("learner"))
-        .args(["stack", "--lockstep", "--episodes", "1", "--seed"])
-        .arg(seed.to_string())
-        .arg("--episode-timeout-s")
-        .arg(seconds.to_string())
+    let mut cmd = Command::new(tests::stack_bins().join("learner"));
+    cmd.args(["stack", "--lockstep", "--episodes", "1", "--seed"])
+        .arg(seed.to_string());
+    if let Some(s) = seconds {
+        cmd.arg("--episode-timeout-s").arg(s.to_string());
+    }
+    let out = cmd
         .arg("--namespace")
         .arg(tests::unique_namespace("policy"))
         .arg("--policy")
@@ -92,12 +95,23 @@ fn centring_policy(dir: &std::path::Path, seed: u64) -> std::path::PathBuf {
         log_std: vec![0.0; act],
         obs_norm: None,
     };
-    policy_checkpoint(
+    let path = policy_checkpoint(
         dir,
         "centring.json",
         policy,
         learner::rl::observe::ObservationKind::GroundTruth,
-    )
+    );
+    // A training world, controller and episode length unlike the stack's
+    // defaults, which a run without --world, --controller-config or
+    // --episode-timeout-s takes from the checkpoint: another camera (the
+    // ground-truth policy does not look), ten times stiffer tilts, 3 s.
+    let mut c = learner::rl::run::read_checkpoint(&path).unwrap();
+    c.config.env.world.camera.eye_m = [0.901, -0.241, 0.773];
+    c.config.env.controller.impedance.kp[3] = 3000.0;
+    c.config.env.controller.impedance.kp[4] = 3000.0;
+    c.config.env.max_steps = 60;
+    std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+    path
 }
 
 #[test]
@@ -106,18 +120,33 @@ fn a_trained_policy_drives_the_stack_live() {
     let _g = tests::exclusive();
     let dir = test_support::scratch_dir("stack-policy");
     let policy = centring_policy(dir.path(), 4);
-    let reader = policy_episode(dir.path(), &policy, 4, 3);
+    let reader = policy_episode(dir.path(), &policy, 4, None);
     let config = reader.read_config(None).unwrap();
     assert_eq!(
         config[0].1.policy,
         learner_node::mix::EpisodePolicy::Learned,
         "the log names the policy"
     );
+    // The run took the checkpoint's world, controller and episode length.
+    let trained = learner::rl::run::read_checkpoint(&policy)
+        .unwrap()
+        .config
+        .env;
+    assert_eq!(config[0].1.world.camera, trained.world.camera, "the world");
+    let daemon = rt_controller_daemon::config::DaemonConfig::from_file(
+        &dir.path().join("policy/rt-controller.toml"),
+    )
+    .unwrap();
+    assert_eq!(daemon.controller, trained.controller, "the controller");
     let actions = reader
         .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
-    // 3 s at 20 Hz, the first action after one policy period.
-    assert!(actions.len() >= 55, "{} actions", actions.len());
+    // 3 s (60 steps) at 20 Hz, the first action after one policy period.
+    assert!(
+        (55..=61).contains(&actions.len()),
+        "{} actions",
+        actions.len()
+    );
     for a in &actions {
         assert_eq!(a.delta_pos_m[2], 0.0, "no descent");
         assert_eq!(a.delta_roll_rad, 0.0, "no roll");
@@ -263,7 +292,7 @@ fn a_representation_policy_drives_the_stack_live() {
         stderr.contains("is not the camera the representation was trained with"),
         "{stderr}"
     );
-    let reader = policy_episode(dir.path(), &ckpt, 2, 2);
+    let reader = policy_episode(dir.path(), &ckpt, 2, Some(2));
     let actions = reader
         .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();
