@@ -41,6 +41,11 @@ pub enum ExportError {
     /// (`--last`) was asked for.
     #[error("{}: --last picks among a training checkpoint's policies; this is a deployed policy", .0.display())]
     LastOfDeployed(PathBuf),
+    /// A policy whose observer the node does not have.
+    #[error(
+        "a policy on {0} has no deployed format (the node observes the ground truth or a representation's z)"
+    )]
+    NotDeployable(String),
 }
 
 /// The network's layers of `policy` (its flat parameters: per layer the
@@ -67,14 +72,15 @@ pub fn layers(policy: &GaussianPolicy) -> Vec<LayerSpec> {
 }
 
 /// The policy file of `policy` observing `observation` (a representation's
-/// weights file is [`ENCODER_FILE`] beside it).
+/// weights file is [`ENCODER_FILE`] beside it); refuses an observer the
+/// node does not have (the raw-input baseline).
 pub fn policy_file(
     policy: &GaussianPolicy,
     observation: &ObservationKind,
     action_scale: ActionScale,
     peg: PegShape,
     source: String,
-) -> PolicyFile {
+) -> Result<PolicyFile, ExportError> {
     // Before two observations the normalisation is the identity, unclipped.
     let obs_norm = policy.obs_norm.as_ref().filter(|n| n.count >= 2).map(|n| {
         let (shift, scale) = n.affine();
@@ -84,24 +90,31 @@ pub fn policy_file(
             clip: n.clip,
         }
     });
-    PolicyFile {
+    let observation = match observation {
+        ObservationKind::GroundTruth => ObservationSpec::GroundTruth,
+        ObservationKind::GroundTruthHoleError(std_m) => {
+            ObservationSpec::GroundTruthHoleError { std_m: *std_m }
+        }
+        ObservationKind::Representation(_) => ObservationSpec::Representation {
+            encoder: ENCODER_FILE.into(),
+        },
+        ObservationKind::Raw(spec) => {
+            return Err(ExportError::NotDeployable(format!(
+                "raw inputs (observation.raw, side {})",
+                spec.side
+            )));
+        }
+    };
+    Ok(PolicyFile {
         format: FORMAT.into(),
         version: VERSION,
         source,
-        observation: match observation {
-            ObservationKind::GroundTruth => ObservationSpec::GroundTruth,
-            ObservationKind::GroundTruthHoleError(std_m) => {
-                ObservationSpec::GroundTruthHoleError { std_m: *std_m }
-            }
-            ObservationKind::Representation(_) => ObservationSpec::Representation {
-                encoder: ENCODER_FILE.into(),
-            },
-        },
+        observation,
         obs_norm,
         layers: layers(policy),
         action_scale,
         peg,
-    }
+    })
 }
 
 /// The deployment of `checkpoint`'s best validated or best logged policy,
@@ -117,7 +130,7 @@ pub fn from_checkpoint(checkpoint: &Path, last: bool) -> Result<Deployment, Expo
         c.config.env.action.clone(),
         c.config.env.world.task.peg,
         source,
-    );
+    )?;
     let encoder = match &c.config.observation {
         ObservationKind::Representation(dir) => Some(
             Encoder::load(dir, &burn::prelude::Device::flex())
@@ -260,7 +273,8 @@ mod tests {
             scale.clone(),
             PegShape::Square,
             "test".into(),
-        );
+        )
+        .unwrap();
         let dir = test_support::scratch_dir("deploy-ground-truth");
         let path = Deployment {
             policy: file,
@@ -300,7 +314,8 @@ mod tests {
                 scale,
                 PegShape::Square,
                 "test".into(),
-            ),
+            )
+            .unwrap(),
             encoder: None,
         };
         let e = DeployedPolicy::new(bad, &path).unwrap_err().to_string();
@@ -348,7 +363,8 @@ mod tests {
                 scale.clone(),
                 PegShape::Square,
                 "test".into(),
-            ),
+            )
+            .unwrap(),
             encoder: Some(file),
         }
         .write(dir.path())

@@ -23,6 +23,7 @@ pub mod observe;
 pub mod package;
 pub mod ppo;
 pub mod probe;
+pub mod raw;
 pub mod represent;
 pub mod reward;
 pub mod run;

@@ -46,6 +46,10 @@ pub enum ObservationKind {
     /// (`observation = { ground_truth_hole_error = 0.003 }`):
     /// [`HoleError`].
     GroundTruthHoleError(f64),
+    /// The representation's inputs without the representation
+    /// (`observation = { raw = { side = 16 } }`): the raw-input baseline,
+    /// [`super::raw::RawObserver`].
+    Raw(super::raw::RawSpec),
 }
 
 impl ObservationKind {
@@ -82,6 +86,7 @@ impl ObservationKind {
                 }
                 std::sync::Arc::new(HoleError { std_m: *std_m })
             }
+            ObservationKind::Raw(spec) => std::sync::Arc::new(super::raw::RawObserver::new(*spec)?),
             ObservationKind::Representation(dir) => std::sync::Arc::new(
                 super::represent::load_on(dir, threads)
                     .map_err(|e| super::env::RlEnvError::Representation(e.to_string()))?,
