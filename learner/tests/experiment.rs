@@ -595,6 +595,10 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     let mut c = cfg.clone();
     c.policy.distill = Some(bad);
     let e = run(&c, &dir.join("refused"), &opts, &|| false).unwrap_err();
-    assert!(e.to_string().contains("observes a representation"), "{e}");
+    assert!(
+        e.to_string().contains("observes Representation(")
+            && e.to_string().contains("not the ground truth"),
+        "{e}"
+    );
     assert!(!dir.join("refused/Full").exists(), "nothing ran");
 }

@@ -20,14 +20,16 @@ pub struct EpisodeArgs {
     /// Episodes to run.
     #[arg(long, default_value_t = 3)]
     pub episodes: u32,
-    /// Peg.
-    #[arg(long, value_enum, default_value_t = PegShape::Square)]
-    pub peg: PegShape,
+    /// Peg [default: the world's (`--world`, or a training checkpoint's
+    /// with `learner run|stack`), else square].
+    #[arg(long, value_enum)]
+    pub peg: Option<PegShape>,
     /// Seed of the first episode.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// World configuration (TOML) sent with every reset; `--peg` overrides
-    /// its peg.
+    /// its peg [default: hw-sim's; `learner run|stack` with a training
+    /// checkpoint: the world it was trained in].
     #[arg(long)]
     pub world: Option<PathBuf>,
     /// Episode time limit, s [default: 20; `learner run|stack` with a
@@ -45,8 +47,9 @@ pub struct EpisodeArgs {
     pub lockstep: bool,
     /// A trained policy acts instead of the heuristic: a deployed policy
     /// (policy.json, `learner policy export`; its encoder's weights beside
-    /// it). `learner` also takes a training run's checkpoint.json and
-    /// converts it.
+    /// it). `learner` also takes a training run's checkpoint.json, converts
+    /// it and runs it in its training world, episode length and (stack)
+    /// controller unless those are given.
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// Also serve every channel the node logs, live, over the Foxglove
@@ -176,7 +179,8 @@ pub struct StackArgs {
     #[command(flatten)]
     pub episodes: EpisodeArgs,
     /// rt-controller configuration (TOML); with --robot franky-sim, the
-    /// default is the repository's configs/rt-controller/franky-sim.toml.
+    /// default is the repository's configs/rt-controller/franky-sim.toml;
+    /// `learner stack` with a training checkpoint: its controller.
     #[arg(long)]
     pub controller_config: Option<PathBuf>,
     /// What the controller drives.
@@ -199,6 +203,11 @@ pub struct StackArgs {
 pub const DEFAULT_EPISODE_TIMEOUT_S: f64 = 20.0;
 
 impl EpisodeArgs {
+    /// `--peg`, or the square (a run without a world: a robot, franky-sim).
+    pub fn peg_or_square(&self) -> PegShape {
+        self.peg.unwrap_or(PegShape::Square)
+    }
+
     /// `--episode-timeout-s`, or [`DEFAULT_EPISODE_TIMEOUT_S`].
     pub fn timeout_s(&self) -> f64 {
         self.episode_timeout_s.unwrap_or(DEFAULT_EPISODE_TIMEOUT_S)
@@ -258,7 +267,9 @@ pub fn world_config(a: &EpisodeArgs) -> Result<WorldConfig> {
         None => WorldConfig::default(),
     };
     w.task.enabled = true;
-    w.task.peg = a.peg;
+    if let Some(peg) = a.peg {
+        w.task.peg = peg;
+    }
     Ok(w)
 }
 
@@ -282,7 +293,7 @@ pub fn deployed_policy(a: &EpisodeArgs) -> Result<Option<DeployedPolicy>> {
 /// heuristic.
 pub fn run(r: RunArgs, policy: Option<DeployedPolicy>) -> Result<()> {
     let (a, c) = (&r.episodes, &r.collect);
-    if let Some(task) = r.calibration.task(a.peg)? {
+    if let Some(task) = r.calibration.task(a.peg_or_square())? {
         return run_calibrated(a, c, task, r.robot_description, r.controller_wait_s);
     }
     let mut cfg = LiveConfig::new(&a.namespace, world_config(a)?, a.log_dir.clone());
@@ -313,11 +324,11 @@ pub fn run(r: RunArgs, policy: Option<DeployedPolicy>) -> Result<()> {
         );
         p.check_world(&cfg.world)?;
         eprintln!("node: acting with {}", p.source());
-        if p.trained_peg() != a.peg {
+        if p.trained_peg() != cfg.world.task.peg {
             eprintln!(
                 "node: the policy was trained on the {} peg; running it on the {} peg",
                 p.trained_peg().name(),
-                a.peg.name()
+                cfg.world.task.peg.name()
             );
         }
         cfg.policy = Some(Arc::new(p));
@@ -371,7 +382,7 @@ pub fn stack(s: StackArgs) -> Result<()> {
         "--episodes".to_string(),
         a.episodes.to_string(),
         "--peg".into(),
-        a.peg.name().into(),
+        world.task.peg.name().into(),
         "--seed".into(),
         a.seed.to_string(),
         "--episode-timeout-s".into(),
@@ -461,14 +472,13 @@ fn run_calibrated(
     ] {
         anyhow::ensure!(!given, "--hole-pos excludes {flag}");
     }
-    a.checked_timeout_s()?;
     let cfg = CalibratedConfig {
         namespace: a.namespace.clone(),
         episodes: a.episodes,
         task,
-        peg: a.peg,
+        peg: a.peg_or_square(),
         robot,
-        episode_timeout_s: a.timeout_s(),
+        episode_timeout_s: a.checked_timeout_s()?,
         settle_s: 0.5,
         controller_wait_s,
         log_dir: a.log_dir.clone(),
@@ -543,7 +553,7 @@ fn stack_franky_sim(
     address: Option<String>,
     python: Option<PathBuf>,
 ) -> Result<()> {
-    let Some(task) = calibration.task(a.peg)? else {
+    let Some(task) = calibration.task(a.peg_or_square())? else {
         anyhow::bail!(
             "--robot franky-sim needs --hole-pos X,Y,Z: where the hole is in the robot's base \
              frame, m (franky-sim has no box; on a robot this is the box's calibration), e.g. \
@@ -575,7 +585,7 @@ fn stack_franky_sim(
         "--episodes".to_string(),
         a.episodes.to_string(),
         "--peg".into(),
-        a.peg.name().into(),
+        a.peg_or_square().name().into(),
         "--episode-timeout-s".into(),
         a.checked_timeout_s()?.to_string(),
         "--hole-pos".into(),

@@ -58,11 +58,13 @@ pub fn experiment(a: ExperimentArgs) -> Result<()> {
 }
 
 /// What a training checkpoint gives a live run that did not say otherwise:
-/// the world it was trained in (`--world`, written as `dir/world.toml`),
-/// its episode length (`--episode-timeout-s`) and, for the stack, its
-/// controller (`--controller-config`, written as `dir/rt-controller.toml`).
-/// A policy run in another world than its own would be evaluated on a task
-/// it never saw (and a representation's camera is refused).
+/// the world it was trained in (`--world`, written as `dir/world.toml`:
+/// its box ranges, camera, noise and perturbations, and its peg unless
+/// `--peg`), its episode length (`--episode-timeout-s`) and, for the stack,
+/// its controller (`--controller-config`, written as
+/// `dir/rt-controller.toml`; `learner run` acts through whichever daemon
+/// is running). A policy run in another world than its own meets a task
+/// it never saw; a representation's camera would even be refused.
 fn training_settings(
     checkpoint: &std::path::Path,
     a: &mut learner_node::cli::EpisodeArgs,
@@ -73,6 +75,7 @@ fn training_settings(
     let c = crate::rl::run::read_checkpoint(checkpoint)?;
     let env = &c.config.env;
     let mut taken = Vec::new();
+    let mut flags = vec!["--world", "--peg", "--episode-timeout-s"];
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     if a.world.is_none() {
         let path = dir.join("world.toml");
@@ -82,23 +85,28 @@ fn training_settings(
         a.world = Some(path);
     }
     if a.episode_timeout_s.is_none() {
-        let s = f64::from(env.max_steps) * shared_mem_schema::rates::ACTION_PERIOD_S;
+        // From whole nanoseconds: 500 steps print as 25 s, not 25.000000000000004.
+        let ns = u64::from(env.max_steps) * shared_mem_schema::rates::ACTION_PERIOD_NS;
+        let s = ns as f64 / 1e9;
         taken.push(format!("its episode length ({s} s)"));
         a.episode_timeout_s = Some(s);
     }
-    if let Some(slot @ None) = controller {
-        let daemon = rt_controller_daemon_config(&env.world.robot, &env.controller)?;
-        let path = dir.join("rt-controller.toml");
-        std::fs::write(&path, daemon).with_context(|| format!("writing {}", path.display()))?;
-        taken.push(format!("its controller ({})", path.display()));
-        *slot = Some(path);
+    if let Some(slot) = controller {
+        flags.push("--controller-config");
+        if slot.is_none() {
+            let daemon = rt_controller_daemon_config(&env.world.robot, &env.controller)?;
+            let path = dir.join("rt-controller.toml");
+            std::fs::write(&path, daemon).with_context(|| format!("writing {}", path.display()))?;
+            taken.push(format!("its controller ({})", path.display()));
+            *slot = Some(path);
+        }
     }
     if !taken.is_empty() {
         eprintln!(
-            "learner: from the training run of {}: {} (give --world, --episode-timeout-s or \
-             --controller-config to run it otherwise)",
+            "learner: from the training run of {}: {} (give {} to run it otherwise)",
             checkpoint.display(),
-            taken.join(", ")
+            taken.join(", "),
+            flags.join(", ")
         );
     }
     Ok(())
@@ -122,17 +130,19 @@ fn rt_controller_daemon_config(
 /// `learner run`: the node's, taking a training checkpoint as well as a
 /// deployed policy (a checkpoint's world and episode length unless given).
 pub fn run_node(mut a: RunArgs) -> Result<()> {
-    if let Some(p) = &a.episodes.policy
-        && a.calibration.hole_pos.is_none()
-        && !crate::rl::export::is_deployed(p)?
-    {
-        let dir = a.episodes.log_dir.join("policy");
-        training_settings(&p.clone(), &mut a.episodes, None, &dir)?;
-    }
+    // Loaded first: a checkpoint the node cannot act with is refused
+    // before anything is written.
     let policy = match &a.episodes.policy {
         Some(p) => Some(crate::rl::export::load_for_node(p, a.episodes.last)?),
         None => None,
     };
+    if let Some(p) = a.episodes.policy.clone()
+        && a.calibration.hole_pos.is_none()
+        && !crate::rl::export::is_deployed(&p)?
+    {
+        let dir = a.episodes.log_dir.join("policy");
+        training_settings(&p, &mut a.episodes, None, &dir)?;
+    }
     learner_node::cli::run(a, policy)
 }
 
@@ -143,15 +153,14 @@ pub fn run_node(mut a: RunArgs) -> Result<()> {
 pub fn stack(mut a: StackArgs) -> Result<()> {
     if let Some(p) = a.episodes.policy.take() {
         let dir = a.episodes.log_dir.join("policy");
-        if a.robot == learner_node::cli::RobotArg::Sim
-            && a.calibration.hole_pos.is_none()
-            && !crate::rl::export::is_deployed(&p)?
-        {
-            training_settings(&p, &mut a.episodes, Some(&mut a.controller_config), &dir)?;
-        }
+        // Converted first: a checkpoint the node cannot act with is
+        // refused before the settings are written.
         let file = crate::rl::export::file_for_node(&p, a.episodes.last, &dir)?;
         if file != p {
             eprintln!("learner: {} converted into {}", p.display(), file.display());
+            if a.robot == learner_node::cli::RobotArg::Sim && a.calibration.hole_pos.is_none() {
+                training_settings(&p, &mut a.episodes, Some(&mut a.controller_config), &dir)?;
+            }
         }
         a.episodes.policy = Some(file);
         a.episodes.last = false;

@@ -81,11 +81,16 @@ pub fn run(
                 let c = policy_run::read_checkpoint(t)
                     .with_context(|| format!("policy.distill {}: its teacher", p.display()))?;
                 ensure!(
-                    !matches!(c.config.observation, ObservationKind::Representation(_)),
-                    "policy.distill {}: its teacher {} observes a representation, its own and \
-                     not the variant's; the learned route's teacher observes the ground truth",
+                    matches!(
+                        c.config.observation,
+                        ObservationKind::GroundTruth | ObservationKind::GroundTruthHoleError(_)
+                    ),
+                    "policy.distill {}: its teacher {} observes {:?}, not the ground truth that \
+                     the learned route's teacher observes (a representation would be its own, \
+                     not the variant's)",
                     p.display(),
-                    t.display()
+                    t.display(),
+                    c.config.observation
                 );
                 env = c.config.env;
                 if let Some(camera) = &d.camera {

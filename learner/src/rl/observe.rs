@@ -1,8 +1,9 @@
 //! Which observer a training run, an evaluation or a distillation uses
-//! ([`ObservationKind`]). The observers themselves ([`GroundTruth`],
-//! [`HoleError`], the representation's z means) and the view they read
-//! ([`ObsView`]) are the node's, which deployed policies act through:
-//! [`learner_node::observe`].
+//! ([`ObservationKind`]). The observers deployed policies act through
+//! ([`GroundTruth`], [`HoleError`], the representation's z means) and the
+//! view every observer reads ([`ObsView`]) are the node's
+//! ([`learner_node::observe`]); the raw-input baseline's is training-only
+//! ([`super::raw`]).
 
 pub use learner_node::observe::{GROUND_TRUTH_DIM, GroundTruth, HoleError, ObsView, Observer};
 use serde::{Deserialize, Serialize};
@@ -30,8 +31,9 @@ pub fn check_calibration(
     })
 }
 
-/// Which observer a configuration asks for: `observation = "ground_truth"`
-/// or `observation = { representation = "runs/full/model" }`.
+/// Which observer a configuration asks for: `observation = "ground_truth"`,
+/// `{ representation = "runs/full/model" }`, `{ ground_truth_hole_error =
+/// 0.006 }` or `{ raw = { side = 16 } }`.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ObservationKind {

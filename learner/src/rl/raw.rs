@@ -15,15 +15,18 @@ use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// `observation = { raw = { side = 16 } }`: the pooled image's side, px.
+/// A side above the camera's repeats its pixels (every cell holds at
+/// least one), so no frame size leaves the image blank.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawSpec {
-    /// Side of the pooled image, px (1 to the camera's side).
+    /// Side of the pooled image, px (1 to [`MAX_SIDE`]).
     pub side: usize,
 }
 
-/// The largest pooled side accepted: the largest camera frame's.
-pub const MAX_SIDE: usize = 128;
+/// The largest pooled side accepted: the largest side of a camera frame
+/// on shared memory (256 px).
+pub const MAX_SIDE: usize = 256;
 
 /// Force scale of the wrench window, N (moments are in N·m as read).
 const FORCE_SCALE_N: f64 = 10.0;
@@ -42,7 +45,7 @@ impl RawObserver {
             return Err(shared_mem_schema::config::FieldError::new(
                 "observation.raw.side",
                 spec.side,
-                "must be a pooled image side from 1 to 128 px",
+                format!("must be a pooled image side from 1 to {MAX_SIDE} px"),
             ));
         }
         Ok(Self {
@@ -57,22 +60,26 @@ impl RawObserver {
     }
 
     /// The pooled image of `cam` into `out` (channel-first: R, G, B,
-    /// depth); `false` (and `out` untouched) for a frame smaller than the
-    /// side or shorter than its calibration says.
+    /// depth); `false` (and `out` untouched) for an empty frame or one
+    /// shorter than its calibration says.
     fn pool(&self, cam: &shared_mem_schema::CameraFrame, out: &mut [f64]) -> bool {
         let (w, h) = (
             cam.calibration.width as usize,
             cam.calibration.height as usize,
         );
         let s = self.side;
-        if w < s || h < s || cam.rgb.len() < 3 * w * h || cam.depth_m.len() < w * h {
+        if w == 0 || h == 0 || cam.rgb.len() < 3 * w * h || cam.depth_m.len() < w * h {
             return false;
         }
         let plane = s * s;
         for r in 0..s {
-            let (y0, y1) = (r * h / s, (r + 1) * h / s);
+            // Pixel row y falls in cell row ⌊y·s/h⌋; a cell no pixel falls
+            // in (s > h) takes its nearest.
+            let y0 = (r * h).div_ceil(s).min(h - 1);
+            let y1 = ((r + 1) * h).div_ceil(s).clamp(y0 + 1, h);
             for c in 0..s {
-                let (x0, x1) = (c * w / s, (c + 1) * w / s);
+                let x0 = (c * w).div_ceil(s).min(w - 1);
+                let x1 = ((c + 1) * w).div_ceil(s).clamp(x0 + 1, w);
                 let mut acc = [0.0f64; 4];
                 for y in y0..y1 {
                     for x in x0..x1 {

@@ -133,11 +133,19 @@ fn a_trained_policy_drives_the_stack_live() {
         .config
         .env;
     assert_eq!(config[0].1.world.camera, trained.world.camera, "the world");
-    let daemon = rt_controller_daemon::config::DaemonConfig::from_file(
-        &dir.path().join("policy/rt-controller.toml"),
-    )
-    .unwrap();
-    assert_eq!(daemon.controller, trained.controller, "the controller");
+    // The daemon's own account of what it ran with: the configuration it
+    // prints at start, before its first timestamped log line.
+    let log = std::fs::read_to_string(dir.path().join("rt-controller.log")).unwrap();
+    let (_, after) = log
+        .split_once("# rt-controller effective configuration\n")
+        .expect("the daemon printed its configuration");
+    let printed: Vec<&str> = after
+        .lines()
+        .take_while(|l| !l.starts_with(|c: char| c.is_ascii_digit()))
+        .collect();
+    let ran: rt_controller_daemon::config::DaemonConfig =
+        toml::from_str(&printed.join("\n")).unwrap();
+    assert_eq!(ran.controller, trained.controller, "the controller");
     let actions = reader
         .read_raw::<PolicyAction>(learner_node::log::topics::ACTION, None)
         .unwrap();

@@ -132,7 +132,7 @@ impl LiveConfig {
             episodes: 1,
             seed: 1,
             world,
-            episode_timeout_s: 20.0,
+            episode_timeout_s: crate::cli::DEFAULT_EPISODE_TIMEOUT_S,
             log_dir,
             lockstep: false,
             settle_s: 0.3,
