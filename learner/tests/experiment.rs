@@ -565,6 +565,23 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
         e.to_string().contains("round 2") && e.to_string().contains("now has 3"),
         "{e}"
     );
+    // A student distilled again into another policy at the same round
+    // (here seed 2's, its weights changed in place): refused too; and
+    // the unchanged student's fine-tune is found finished.
+    let mut two = cfg.clone();
+    two.policy.seeds = vec![2];
+    assert!(run(&two, &out, &only_gt, &|| false).is_ok());
+    let student2 = out.join("ground-truth/policy-s2/checkpoint.json");
+    let mut changed = read(student2.clone());
+    changed.state.policy.net[0] += 0.25;
+    std::fs::write(&student2, serde_json::to_vec(&changed).unwrap()).unwrap();
+    let e = run(&two, &out, &only_gt, &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("another student") && e.contains("both at round 2") && e.contains("finetune-s2"),
+        "{e}"
+    );
     // A fine-tune in another world than the students' is refused before
     // anything runs.
     let elsewhere = dir.join("finetune-elsewhere.toml");

@@ -131,9 +131,8 @@ fn distill_policy(
 }
 
 /// Fine-tunes (or resumes, or finds finished) a variant's distilled
-/// student (`student`, its checkpoint, distilled for `student_rounds`) by
-/// `base` (PPO) on the variant's `observation`; returns the fine-tune's
-/// checkpoint.
+/// student (`student`, its checkpoint `distilled`) by `base` (PPO) on the
+/// variant's `observation`; returns the fine-tune's checkpoint.
 #[allow(clippy::too_many_arguments)] // the stage's whole context
 fn finetune_policy(
     base: &policy_run::TrainConfig,
@@ -141,7 +140,7 @@ fn finetune_policy(
     observation: ObservationKind,
     seed: Option<u64>,
     student: &Path,
-    student_rounds: u64,
+    distilled: &policy_run::Checkpoint,
     dir: &Path,
     log: &mut StageLog,
     stop: &(dyn Fn() -> bool + Sync),
@@ -152,26 +151,52 @@ fn finetune_policy(
     }
     p.observation = observation;
     p.init_from = Some(student.to_path_buf());
-    // The student it started from, so that a student distilled further
-    // later is not silently followed by the old fine-tune.
+    // The student it started from (its round and its policy's
+    // fingerprint), so that a student distilled further, or distilled
+    // again into another policy, is not silently followed by the old
+    // fine-tune.
     let mark = dir.join("student-rounds.json");
+    let now = StudentMark {
+        rounds: distilled.state.iteration,
+        policy: fingerprint(&distilled.state.policy),
+    };
     match std::fs::read_to_string(&mark) {
         Ok(text) => {
-            let then: u64 = serde_json::from_str(&text)
-                .with_context(|| format!("reading {}", mark.display()))?;
+            // Marks written before the fingerprint hold the round alone.
+            let then: StudentMark = match serde_json::from_str::<u64>(&text) {
+                Ok(rounds) => StudentMark {
+                    rounds,
+                    policy: now.policy.clone(),
+                },
+                Err(_) => serde_json::from_str(&text)
+                    .with_context(|| format!("reading {}", mark.display()))?,
+            };
             ensure!(
-                then == student_rounds,
-                "{}: this fine-tune started from the student's round {then}, and the student in {} \
-                 now has {student_rounds}; delete {} to fine-tune it again",
+                then.rounds == now.rounds,
+                "{}: this fine-tune started from the student's round {}, and the student in {} \
+                 now has {}; delete {} to fine-tune it again",
+                v.name,
+                then.rounds,
+                student.display(),
+                now.rounds,
+                dir.display()
+            );
+            ensure!(
+                then.policy == now.policy,
+                "{}: this fine-tune started from another student than the one in {} (policy \
+                 {} then, {} now, both at round {}); delete {} to fine-tune it again",
                 v.name,
                 student.display(),
+                then.policy,
+                now.policy,
+                now.rounds,
                 dir.display()
             );
         }
         Err(_) => {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            std::fs::write(&mark, student_rounds.to_string())
-                .with_context(|| format!("writing {}", mark.display()))?;
+            let text = serde_json::to_string(&now).expect("a mark serialises");
+            std::fs::write(&mark, text).with_context(|| format!("writing {}", mark.display()))?;
         }
     }
     let what = format!(
@@ -181,6 +206,37 @@ fn finetune_policy(
         seed_note(seed)
     );
     train_stage(v, p, what, dir, log, stop)
+}
+
+/// What a fine-tune records of the student it started from.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct StudentMark {
+    /// The student's DAgger rounds.
+    rounds: u64,
+    /// [`fingerprint`] of its policy.
+    policy: String,
+}
+
+/// A fingerprint of `p`'s parameters (FNV-1a over the bits of its sizes,
+/// weights, log σ and observation statistics), hex: equal policies give
+/// equal fingerprints on every machine.
+fn fingerprint(p: &crate::rl::GaussianPolicy) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |x: u64| {
+        for b in x.to_le_bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    p.sizes.iter().for_each(|&n| eat(n as u64));
+    p.net
+        .iter()
+        .chain(&p.log_std)
+        .for_each(|x| eat(x.to_bits()));
+    if let Some(n) = &p.obs_norm {
+        eat(n.count);
+        n.mean.iter().chain(&n.m2).for_each(|x| eat(x.to_bits()));
+    }
+    format!("{h:016x}")
 }
 
 impl Route {
@@ -249,18 +305,7 @@ pub(super) fn train_route(
             let s = distill_policy(base, v, observation.clone(), seed, &policy_dir, log, stop)?;
             let student = policy_run::checkpoint_path(&policy_dir);
             let ft_dir = dir.join(format!("finetune{tag}"));
-            let rounds = s.state.iteration;
-            let c = finetune_policy(
-                ft,
-                v,
-                observation,
-                seed,
-                &student,
-                rounds,
-                &ft_dir,
-                log,
-                stop,
-            )?;
+            let c = finetune_policy(ft, v, observation, seed, &student, &s, &ft_dir, log, stop)?;
             (c, false)
         }
     })
