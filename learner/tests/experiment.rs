@@ -570,7 +570,25 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     // the unchanged student's fine-tune is found finished.
     let mut two = cfg.clone();
     two.policy.seeds = vec![2];
+    let before = std::fs::read_to_string(out.join("stages.log")).unwrap();
     assert!(run(&two, &out, &only_gt, &|| false).is_ok());
+    assert_eq!(
+        std::fs::read_to_string(out.join("stages.log")).unwrap(),
+        before,
+        "nothing reran"
+    );
+    // A mark of before the fingerprint (the round alone) is checked on the
+    // round alone.
+    let mark = out.join("ground-truth/finetune-s2/student-rounds.json");
+    let written = std::fs::read_to_string(&mark).unwrap();
+    std::fs::write(&mark, "2").unwrap();
+    assert!(run(&two, &out, &only_gt, &|| false).is_ok());
+    std::fs::write(&mark, "1").unwrap();
+    let e = run(&two, &out, &only_gt, &|| false)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("round 1") && e.contains("now has 2"), "{e}");
+    std::fs::write(&mark, written).unwrap();
     let student2 = out.join("ground-truth/policy-s2/checkpoint.json");
     let mut changed = read(student2.clone());
     changed.state.policy.net[0] += 0.25;
