@@ -58,6 +58,16 @@ impl WrenchHistory {
         (0..self.len).map(move |i| &self.buf[(start + i) % WRENCH_WINDOW])
     }
 
+    /// The full window, oldest first: exactly [`WRENCH_WINDOW`] readings, a
+    /// shorter history repeating its oldest in front (zeros when empty), as
+    /// the dataset's first samples of an episode do. What the encoder and
+    /// the raw-input observer read.
+    pub fn padded(&self) -> impl Iterator<Item = &[f64; 6]> {
+        const ZERO: [f64; 6] = [0.0; 6];
+        let first = self.ordered().next().unwrap_or(&ZERO);
+        std::iter::repeat_n(first, WRENCH_WINDOW - self.len).chain(self.ordered())
+    }
+
     /// Mean force over the newest `n` readings, N.
     pub fn mean_force(&self, n: usize) -> Vector3<f64> {
         let n = n.min(self.len).max(1);

@@ -124,13 +124,7 @@ impl Observer for RawObserver {
             if bad {
                 image.fill(0.0);
             }
-            // The window as the encoder's: a short history repeats its
-            // oldest reading.
-            let readings: Vec<&[f64; 6]> = v.wrench.ordered().collect();
-            let missing = WRENCH_WINDOW.saturating_sub(readings.len());
-            let first = readings.first().copied().unwrap_or(&[0.0; 6]);
-            let window = std::iter::repeat_n(first, missing).chain(readings.iter().copied());
-            for (r, slot) in window.zip(wrench.chunks_exact_mut(6)) {
+            for (r, slot) in v.wrench.padded().zip(wrench.chunks_exact_mut(6)) {
                 for (k, (x, y)) in r.iter().zip(slot.iter_mut()).enumerate() {
                     *y = if k < 3 { x / FORCE_SCALE_N } else { *x };
                 }

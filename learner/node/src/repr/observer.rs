@@ -50,15 +50,11 @@ impl Representation {
     }
 }
 
-/// The 32×6 wrench window of a view, oldest first; a history shorter than
-/// the window repeats its oldest reading, as the dataset's first samples
-/// of an episode do.
+/// The 32×6 wrench window of a view as the encoder takes it
+/// ([`crate::policy::WrenchHistory::padded`]).
 fn window(v: &ObsView<'_>) -> Vec<f32> {
-    let readings: Vec<&[f64; 6]> = v.wrench.ordered().collect();
     let mut out = Vec::with_capacity(WRENCH_WINDOW * 6);
-    let missing = WRENCH_WINDOW.saturating_sub(readings.len());
-    let first = readings.first().copied().unwrap_or(&[0.0; 6]);
-    for r in std::iter::repeat_n(first, missing).chain(readings.iter().copied()) {
+    for r in v.wrench.padded() {
         out.extend(r.iter().map(|&x| x as f32));
     }
     out
