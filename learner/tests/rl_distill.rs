@@ -2,7 +2,7 @@
 //! actions vary with the state is imitated, rounds resume from their
 //! files, a stop loses no finished round, a foreign environment is refused.
 
-use learner::rl::distill::{DistillConfig, distill, read_config};
+use learner::rl::distill::{DistillConfig, RoundPoint, Samples, distill, read_config, round_path};
 use learner::rl::run::{self, RunError, read_checkpoint};
 use learner::rl::{GaussianPolicy, ObservationKind};
 use std::path::Path;
@@ -183,6 +183,69 @@ fn the_student_learns_the_teachers_actions_and_resumes() {
     )
     .unwrap();
     assert_eq!(r.episodes, 1);
+}
+
+/// Summed over components, the mean squared error of `policy`'s means
+/// against the samples' actions.
+fn error_on(policy: &GaussianPolicy, s: &Samples) -> f64 {
+    let obs: Vec<f64> = s.obs.iter().map(|&v| v as f64).collect();
+    let means = policy.means(&obs);
+    let sq: f64 = means
+        .iter()
+        .zip(&s.actions)
+        .map(|(a, &t)| (a - t as f64).powi(2))
+        .sum();
+    sq / s.len() as f64
+}
+
+#[test]
+fn held_out_episodes_choose_each_refits_epoch() {
+    let dir = test_support::scratch_dir("rl-distill-holdout");
+    let teacher = teacher(dir.path());
+    // The second of the two environments is held out of every refit.
+    let text = student_config(&teacher, 2) + "holdout_envs = 1\n";
+    let cfg: DistillConfig = toml::from_str(&text).unwrap();
+    let out = dir.path().join("student");
+    let c = distill(cfg.clone(), &out, false, &|| false).unwrap();
+    let rounds: Vec<RoundPoint> =
+        serde_json::from_slice(&std::fs::read(out.join("distill.json")).unwrap()).unwrap();
+    let mut all = Samples {
+        obs_dim: 18,
+        act_dim: 4,
+        ..Default::default()
+    };
+    for r in 0..2 {
+        let s = Samples::read(&round_path(&out, r)).unwrap();
+        all.obs.extend_from_slice(&s.obs);
+        all.actions.extend_from_slice(&s.actions);
+    }
+    let (fitted, held) = all.split_envs(2, 1);
+    let held = held.unwrap();
+    assert_eq!((fitted.len(), held.len()), (80, 80));
+    // The kept network is the one whose held-out error was recorded, and
+    // the fitted error is on the first environment's samples alone.
+    let last = &rounds[1];
+    let h = last.holdout.expect("a held-out error per round");
+    assert!(h.epoch <= 300, "{h:?}");
+    let p = &c.state.policy;
+    assert!((error_on(p, &held) - h.error).abs() < 1e-9, "{h:?}");
+    assert!((error_on(p, &fitted) - last.error_after).abs() < 1e-9);
+    // The refit generalises to the held-out episodes at all.
+    assert!(h.error < rounds[0].error_before, "{rounds:?}");
+    // The same run without holding out fits every sample.
+    let plain: DistillConfig = toml::from_str(&student_config(&teacher, 1)).unwrap();
+    let c0 = distill(plain, &dir.path().join("plain"), false, &|| false).unwrap();
+    let r0: Vec<RoundPoint> =
+        serde_json::from_slice(&std::fs::read(dir.path().join("plain/distill.json")).unwrap())
+            .unwrap();
+    assert!(r0[0].holdout.is_none());
+    let s0 = Samples::read(&round_path(&dir.path().join("plain"), 0)).unwrap();
+    assert!((error_on(&c0.state.policy, &s0) - r0[0].error_after).abs() < 1e-9);
+    // Holding out every environment is refused by name.
+    let mut bad = cfg;
+    bad.dagger.holdout_envs = 2;
+    let e = distill(bad, &dir.path().join("bad"), false, &|| false).unwrap_err();
+    assert!(e.to_string().contains("dagger.holdout_envs"), "{e}");
 }
 
 #[test]

@@ -168,6 +168,37 @@ impl EpisodeReport {
         let n = (self.message_len as usize).min(MAX_MESSAGE_BYTES);
         String::from_utf8_lossy(&self.message[..n]).into_owned()
     }
+
+    /// What is wrong with the task's geometry this report carries, if
+    /// anything: a hole pose or size that is not finite, a rotation that is
+    /// not a unit quaternion, a depth or peg width not above zero. The
+    /// simulator is a peer like any other: a receiver whose world has a task
+    /// checks before it places the box, rewards, or records the episode by
+    /// these values (a world without one reports zeros).
+    pub fn task_problem(&self) -> Option<String> {
+        let p = self.hole_pos_m;
+        if p.iter().any(|v| !v.is_finite()) {
+            return Some(format!("hole_pos_m {p:?} is not finite"));
+        }
+        let q = self.hole_quat_xyzw;
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        // f32-rounded unit quaternions are within 1e-6; 1e-3 allows any
+        // honest conversion and nothing degenerate.
+        if !norm.is_finite() || (norm - 1.0).abs() > 1e-3 {
+            return Some(format!(
+                "hole_quat_xyzw {q:?} is not a unit quaternion (norm {norm})"
+            ));
+        }
+        for (name, v) in [
+            ("hole_depth_m", self.hole_depth_m),
+            ("peg_width_m", self.peg_width_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Some(format!("{name} {v} is not a positive finite length"));
+            }
+        }
+        None
+    }
 }
 
 message!(SimCommand, topics::SIM_COMMAND, "SimCommand");
@@ -176,3 +207,37 @@ message!(EpisodeReport, topics::EPISODE, "EpisodeReport");
 // Layouts (`Pod` rejects padding; these pin the sizes).
 const _: () = assert!(size_of::<SimCommand>() == H + 16 + MAX_CONFIG_BYTES);
 const _: () = assert!(size_of::<EpisodeReport>() == H + 24 + 24 + 8 * 13 + MAX_MESSAGE_BYTES);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sound() -> EpisodeReport {
+        let mut r = EpisodeReport::zeroed();
+        r.hole_pos_m = [0.6, 0.0, 0.1];
+        r.hole_quat_xyzw = [0.0, 0.0, 0.0, 1.0];
+        r.hole_depth_m = 0.04;
+        r.peg_width_m = 0.03;
+        r
+    }
+
+    #[test]
+    fn a_reports_task_geometry_is_checked_field_by_field() {
+        assert_eq!(sound().task_problem(), None);
+        let mut r = sound();
+        r.hole_pos_m[1] = f64::NAN;
+        assert!(r.task_problem().unwrap().contains("hole_pos_m"));
+        let mut r = sound();
+        r.hole_quat_xyzw = [0.0; 4];
+        assert!(r.task_problem().unwrap().contains("not a unit quaternion"));
+        let mut r = sound();
+        r.hole_quat_xyzw[0] = f64::INFINITY;
+        assert!(r.task_problem().unwrap().contains("hole_quat_xyzw"));
+        let mut r = sound();
+        r.hole_depth_m = 0.0;
+        assert!(r.task_problem().unwrap().contains("hole_depth_m"));
+        let mut r = sound();
+        r.peg_width_m = f64::NAN;
+        assert!(r.task_problem().unwrap().contains("peg_width_m"));
+    }
+}

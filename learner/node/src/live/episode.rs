@@ -53,6 +53,9 @@ impl LiveEpisode {
         let world_toml = toml::to_string(&world)?;
         let first = node.reset(seed, &world_toml, cfg.lockstep)?;
         let episode = first.header.episode;
+        if let Some(problem) = world.task.enabled.then(|| first.task_problem()).flatten() {
+            return Err(NodeError::BadReport { episode, problem });
+        }
         if let Some(code) = node.clear_controller_fault(episode)? {
             eprintln!(
                 "node: the controller had fault code {code} latched; reset for episode \

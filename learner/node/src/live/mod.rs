@@ -50,6 +50,16 @@ pub enum NodeError {
     /// The simulator refused a reset.
     #[error("the simulator refused the reset: {0}")]
     ResetRefused(String),
+    /// The simulator's answer to a reset carries a task geometry that
+    /// cannot be (a hostile or broken peer); nothing of the episode is
+    /// recorded or acted on.
+    #[error("the simulator's reset report for episode {episode} is malformed: {problem}")]
+    BadReport {
+        /// The episode it reported.
+        episode: u64,
+        /// What is wrong ([`EpisodeReport::task_problem`]).
+        problem: String,
+    },
     /// No answer to a reset within 15 s.
     #[error("no answer from the simulator to a reset within 15 s (is hw-sim running?)")]
     NoResetAnswer,

@@ -64,6 +64,14 @@ pub struct DaggerConfig {
     /// Seed of the first collected episode (the run's episode seeds go up
     /// from it; apart from evaluation's, from 1 000 000, and validation's).
     pub episode_seed: u64,
+    /// Environments whose samples each round holds out of the refit (the
+    /// last ones: whole episodes, never a state of one on each side). The
+    /// refit scores itself on them after every epoch and keeps the
+    /// network of the best epoch, the previous round's included (early
+    /// stopping); 0 (the default): every sample is fitted for `epochs`.
+    /// Why: a student with many inputs (raw pixels) fits its labels to
+    /// within a hundredth while its error on other episodes grows.
+    pub holdout_envs: usize,
 }
 
 impl Default for DaggerConfig {
@@ -76,6 +84,7 @@ impl Default for DaggerConfig {
             minibatch: 256,
             learning_rate: 1e-3,
             episode_seed: 5_000_000,
+            holdout_envs: 0,
         }
     }
 }

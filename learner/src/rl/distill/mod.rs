@@ -22,7 +22,7 @@ mod samples;
 mod teacher;
 
 pub use config::{DaggerConfig, DistillConfig, read_config};
-pub use record::RoundPoint;
+pub use record::{HoldoutFit, RoundPoint};
 pub use samples::{Pair, Samples, round_path, teacher_round_path};
 pub use teacher::search_teacher_of;
 
@@ -237,6 +237,16 @@ pub fn distill(
             &format!("{e}; set [camera] to the student's representation's training camera"),
         )
     })?;
+    if cfg.dagger.holdout_envs >= student_cfg.num_envs {
+        return Err(field(
+            "dagger.holdout_envs",
+            &cfg.dagger.holdout_envs,
+            &format!(
+                "must be below student.num_envs ({}): some episodes must be fitted",
+                student_cfg.num_envs
+            ),
+        ));
+    }
     let (td, sd) = (t_obs.dim(), s_obs.dim());
     let mut env = VecEnv::new(
         &student_cfg.env,
@@ -344,29 +354,20 @@ pub fn distill(
         data.obs.extend_from_slice(&new.obs);
         data.actions.extend_from_slice(&new.actions);
 
-        // Refit the normalisation and the network to everything so far.
-        let obs: Vec<f64> = data.obs.iter().map(|&v| v as f64).collect();
-        let targets: Vec<f64> = data.actions.iter().map(|&v| v as f64).collect();
+        // Refit the normalisation and the network to everything so far
+        // (the held-out episodes apart).
+        let (fitted, held) = data.split_envs(student_cfg.num_envs, d.holdout_envs);
+        drop(new);
+        let obs: Vec<f64> = fitted.obs.iter().map(|&v| v as f64).collect();
+        let targets: Vec<f64> = fitted.actions.iter().map(|&v| v as f64).collect();
+        drop(fitted);
         let mut norm = ObsNorm::new(sd, student_cfg.policy.observation_clip);
         norm.update(&obs);
         state.policy.obs_norm = Some(norm);
         let inputs = state.policy.inputs(&obs);
-        let fit = MseFit {
-            epochs: d.epochs,
-            minibatch: d.minibatch,
-            learning_rate: d.learning_rate,
-            l2: 0.0,
-        };
+        drop(obs);
         let mut frng = rng::seeded(student_cfg.seed, (4 << 32) + r);
-        let mlp = state.policy.mlp();
-        fit.run(
-            &mlp,
-            &mut state.policy.net,
-            &mut state.adam,
-            &inputs,
-            &targets,
-            &mut frng,
-        );
+        let holdout = refit(d, &mut state, &inputs, &targets, held.as_ref(), &mut frng);
         let error_after_parts = input_error(&state.policy, &inputs, &targets);
         let (error_before, error_after) = (
             error_before_parts.iter().sum::<f64>(),
@@ -400,14 +401,19 @@ pub fn distill(
             error_before_parts,
             error_after,
             error_after_parts,
+            holdout,
             validation: validation.clone(),
         };
         progress.update(
             state.iteration * d.steps_per_round as u64,
             format!(
-                "round {r} | β {beta:.3} | {} samples | error {error_before:.3} → {error_after:.3} | \
+                "round {r} | β {beta:.3} | {} samples | error {error_before:.3} → {error_after:.3}{} | \
                  validation {:.0} % completed, reward {:.3}",
                 data.len(),
+                point.holdout.as_ref().map_or(String::new(), |h| format!(
+                    ", held out {:.3} (epoch {})",
+                    h.error, h.epoch
+                )),
                 100.0 * validation.outcomes[super::Outcome::CompletedInsertion.index()],
                 validation.mean_normalised
             ),
@@ -421,12 +427,16 @@ pub fn distill(
                 policy: state.policy.clone(),
             });
         }
-        let extra = [
+        let mut extra = vec![
             ("beta", point.beta),
             ("samples", point.samples as f64),
             ("error_before", point.error_before),
             ("error_after", point.error_after),
         ];
+        if let Some(h) = &point.holdout {
+            extra.push(("holdout_error", h.error));
+            extra.push(("holdout_epoch", h.epoch as f64));
+        }
         let v = &point.validation;
         let rows =
             super::run_config::outcome_scalars("distill", v.mean_normalised, &v.outcomes, &extra);
@@ -439,6 +449,53 @@ pub fn distill(
         return Err(RunError::Stopped);
     }
     save(out, &student_cfg, &state, &rounds, &best)
+}
+
+/// The refit of one round: `d.epochs` epochs of Adam on `inputs` →
+/// `targets`; with held-out samples, scored on them after each epoch, the
+/// best epoch's network kept (epoch 0: the network as it came in) and
+/// returned with its error.
+fn refit(
+    d: &DaggerConfig,
+    state: &mut TrainerState,
+    inputs: &[f64],
+    targets: &[f64],
+    held: Option<&Samples>,
+    rng: &mut stack_common::rng::SimRng,
+) -> Option<HoldoutFit> {
+    let fit = |epochs| MseFit {
+        epochs,
+        minibatch: d.minibatch,
+        learning_rate: d.learning_rate,
+        l2: 0.0,
+    };
+    let mlp = state.policy.mlp();
+    let Some(held) = held else {
+        let net = &mut state.policy.net;
+        fit(d.epochs).run(&mlp, net, &mut state.adam, inputs, targets, rng);
+        return None;
+    };
+    let obs: Vec<f64> = held.obs.iter().map(|&v| v as f64).collect();
+    let h_inputs = state.policy.inputs(&obs);
+    drop(obs);
+    let h_targets: Vec<f64> = held.actions.iter().map(|&v| v as f64).collect();
+    let score = |p: &GaussianPolicy| input_error(p, &h_inputs, &h_targets).iter().sum::<f64>();
+    let mut best = HoldoutFit {
+        error: score(&state.policy),
+        epoch: 0,
+    };
+    let mut best_net = state.policy.net.clone();
+    for epoch in 1..=d.epochs {
+        let net = &mut state.policy.net;
+        fit(1).run(&mlp, net, &mut state.adam, inputs, targets, rng);
+        let error = score(&state.policy);
+        if error < best.error {
+            best = HoldoutFit { error, epoch };
+            best_net.clone_from(&state.policy.net);
+        }
+    }
+    state.policy.net = best_net;
+    Some(best)
 }
 
 /// The student's mean squared error against the teacher's actions of `s`,

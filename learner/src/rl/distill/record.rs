@@ -37,8 +37,24 @@ pub struct RoundPoint {
     /// it was).
     #[serde(default)]
     pub error_after_parts: Vec<f64>,
+    /// With `dagger.holdout_envs`: the kept network's error on the
+    /// held-out episodes and its epoch (absent otherwise, and in runs
+    /// recorded before it was). `error_after` is then on the fitted
+    /// samples alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<HoldoutFit>,
     /// The refitted student's validation.
     pub validation: ValidationPoint,
+}
+
+/// The network a refit kept by its error on held-out episodes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HoldoutFit {
+    /// Mean squared error on the held-out samples, summed over the
+    /// action's components.
+    pub error: f64,
+    /// The epoch it came from (0: the network the round started with).
+    pub epoch: usize,
 }
 
 /// The rounds recorded in `out`'s `distill.json` (none when it is absent).
@@ -74,13 +90,13 @@ pub(super) fn save(
     let mut csv = String::from(
         "round,beta,samples,student_steps,error_before,error_after,error_after_dx,error_after_dy,\
          error_after_dz,error_after_droll,env_steps,completed_insertion,inserted_into_hole,\
-         touched_the_box,failed,mean_normalised\n",
+         touched_the_box,failed,mean_normalised,holdout_error,holdout_epoch\n",
     );
     for p in rounds {
         let o = p.validation.outcomes;
         let part = |k: usize| p.error_after_parts.get(k).copied().unwrap_or(f64::NAN);
         csv += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             p.round,
             p.beta,
             p.samples,
@@ -96,7 +112,9 @@ pub(super) fn save(
             o[2],
             o[1],
             o[0],
-            p.validation.mean_normalised
+            p.validation.mean_normalised,
+            p.holdout.map_or(String::new(), |h| h.error.to_string()),
+            p.holdout.map_or(String::new(), |h| h.epoch.to_string()),
         );
     }
     let path = out.join("distill.csv");

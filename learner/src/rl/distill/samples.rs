@@ -80,6 +80,35 @@ impl Samples {
         self.actions.is_empty()
     }
 
+    /// The samples split by environment: rounds of a run with `num_envs`
+    /// environments hold one row per environment per step, in order, so
+    /// row i is environment i mod `num_envs`'s. The last `held` of them
+    /// go to the second part (whole episodes); None for it when `held`
+    /// is 0.
+    pub fn split_envs(&self, num_envs: usize, held: usize) -> (Samples, Option<Samples>) {
+        let part = || Samples {
+            obs_dim: self.obs_dim,
+            act_dim: self.act_dim,
+            ..Default::default()
+        };
+        if held == 0 {
+            return (self.clone(), None);
+        }
+        let (mut fitted, mut out) = (part(), part());
+        let (od, ad) = (self.obs_dim, self.act_dim);
+        for i in 0..self.len() {
+            let to = if i % num_envs >= num_envs - held {
+                &mut out
+            } else {
+                &mut fitted
+            };
+            to.obs.extend_from_slice(&self.obs[i * od..(i + 1) * od]);
+            to.actions
+                .extend_from_slice(&self.actions[i * ad..(i + 1) * ad]);
+        }
+        (fitted, Some(out))
+    }
+
     /// Writes the samples (a header, then little-endian f32s), atomically.
     pub fn write(&self, path: &Path) -> Result<(), RunError> {
         let mut b = Vec::with_capacity(32 + 4 * (self.obs.len() + self.actions.len()));
@@ -175,6 +204,25 @@ mod tests {
             assert_eq!(out.len(), views.len() * self.dim);
             out.fill(self.value);
         }
+    }
+
+    #[test]
+    fn a_split_by_environment_keeps_each_environments_rows_together() {
+        // 3 environments, 2 steps: rows 0..6, environment = row mod 3.
+        let s = Samples {
+            obs_dim: 2,
+            act_dim: 1,
+            obs: (0..12).map(|v| v as f32).collect(),
+            actions: (0..6).map(|v| v as f32).collect(),
+        };
+        let (fitted, held) = s.split_envs(3, 1);
+        let held = held.unwrap();
+        assert_eq!(fitted.actions, [0.0, 1.0, 3.0, 4.0]);
+        assert_eq!(fitted.obs, [0.0, 1.0, 2.0, 3.0, 6.0, 7.0, 8.0, 9.0]);
+        assert_eq!(held.actions, [2.0, 5.0]);
+        assert_eq!(held.obs, [4.0, 5.0, 10.0, 11.0]);
+        let (all, none) = s.split_envs(3, 0);
+        assert_eq!((all, none), (s, None));
     }
 
     /// The teacher's values first, then the student's, per environment:
