@@ -170,7 +170,7 @@ impl EpisodeReport {
     }
 
     /// What is wrong with the task's geometry this report carries, if
-    /// anything: a hole pose or size that is not finite, a rotation that is
+    /// anything: a hole pose or size that is not finite, a hole beyond 10 m, a rotation that is
     /// not a unit quaternion, a depth or peg width not above zero. The
     /// simulator is a peer like any other: a receiver whose world has a task
     /// checks before it places the box, rewards, or records the episode by
@@ -179,6 +179,10 @@ impl EpisodeReport {
         let p = self.hole_pos_m;
         if p.iter().any(|v| !v.is_finite()) {
             return Some(format!("hole_pos_m {p:?} is not finite"));
+        }
+        // No arm reaches 10 m: a box there is a corrupt report.
+        if p.iter().map(|v| v * v).sum::<f64>() > 100.0 {
+            return Some(format!("hole_pos_m {p:?} is beyond 10 m of the base"));
         }
         let q = self.hole_quat_xyzw;
         let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -227,6 +231,9 @@ mod tests {
         let mut r = sound();
         r.hole_pos_m[1] = f64::NAN;
         assert!(r.task_problem().unwrap().contains("hole_pos_m"));
+        let mut r = sound();
+        r.hole_pos_m[0] = 1e300;
+        assert!(r.task_problem().unwrap().contains("beyond 10 m"));
         let mut r = sound();
         r.hole_quat_xyzw = [0.0; 4];
         assert!(r.task_problem().unwrap().contains("not a unit quaternion"));

@@ -41,6 +41,8 @@ fn lockstep_stack_and_fast_path_give_the_same_trajectory() {
         .reset(seed, &toml::to_string(&world).unwrap(), true)
         .expect("reset through the stack");
     let episode = report.header.episode;
+    // What hw-sim reports passes the check the live node makes.
+    assert_eq!(report.task_problem(), None);
     let task = task_geometry(&report, &world);
     let mut policy = HeuristicPolicy::new(HeuristicConfig::default());
     let mut wrench = WrenchHistory::default();

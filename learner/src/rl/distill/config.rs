@@ -67,8 +67,9 @@ pub struct DaggerConfig {
     /// Environments whose samples each round holds out of the refit (the
     /// last ones: whole episodes, never a state of one on each side). The
     /// refit scores itself on them after every epoch and keeps the
-    /// network of the best epoch, the previous round's included (early
-    /// stopping); 0 (the default): every sample is fitted for `epochs`.
+    /// network of the best epoch, the round's incoming weights (under the
+    /// refitted normalisation) included: early stopping. 0 (the default):
+    /// every sample is fitted for `epochs`.
     /// Why: a student with many inputs (raw pixels) fits its labels to
     /// within a hundredth while its error on other episodes grows.
     pub holdout_envs: usize,

@@ -11,8 +11,9 @@
 //! per step and environment) and the student's mean otherwise, records the
 //! student's observation with the teacher's mean action (clipped to the
 //! action range, where the environment clips it), and refits the student to
-//! every round's samples so far. The observation normalisation is refitted
-//! to the same samples. After every round the student's mean runs the
+//! every round's samples so far (with `dagger.holdout_envs`, all but the
+//! held-out environments', on which it stops early). The observation
+//! normalisation is refitted to the same samples. After every round the student's mean runs the
 //! validation episodes; the checkpoint is `learner policy train`'s, so
 //! `policy eval`, `rl_probe` and `init_from` take it as they are.
 
@@ -71,6 +72,16 @@ pub fn distill(
     let field = |name: &str, value: &dyn std::fmt::Display, why: &str| -> RunError {
         RlEnvError::from(FieldError::new(name, value, why)).into()
     };
+    if cfg.dagger.holdout_envs >= cfg.student.num_envs {
+        return Err(field(
+            "dagger.holdout_envs",
+            &cfg.dagger.holdout_envs,
+            &format!(
+                "must be below student.num_envs ({}): some episodes must be fitted",
+                cfg.student.num_envs
+            ),
+        ));
+    }
     // Where the teacher's actions and observations come from, and its
     // exploration noise (the student's starting σ).
     let (teacher, mut t_obs, teacher_path, log_std) = match (&cfg.teacher, &cfg.search_teacher) {
@@ -237,16 +248,6 @@ pub fn distill(
             &format!("{e}; set [camera] to the student's representation's training camera"),
         )
     })?;
-    if cfg.dagger.holdout_envs >= student_cfg.num_envs {
-        return Err(field(
-            "dagger.holdout_envs",
-            &cfg.dagger.holdout_envs,
-            &format!(
-                "must be below student.num_envs ({}): some episodes must be fitted",
-                student_cfg.num_envs
-            ),
-        ));
-    }
     let (td, sd) = (t_obs.dim(), s_obs.dim());
     let mut env = VecEnv::new(
         &student_cfg.env,
@@ -453,8 +454,8 @@ pub fn distill(
 
 /// The refit of one round: `d.epochs` epochs of Adam on `inputs` →
 /// `targets`; with held-out samples, scored on them after each epoch, the
-/// best epoch's network kept (epoch 0: the network as it came in) and
-/// returned with its error.
+/// best epoch's network and Adam state kept (epoch 0: the incoming weights
+/// under the refitted normalisation) and returned with its error.
 fn refit(
     d: &DaggerConfig,
     state: &mut TrainerState,
@@ -484,17 +485,19 @@ fn refit(
         error: score(&state.policy),
         epoch: 0,
     };
-    let mut best_net = state.policy.net.clone();
+    // Adam's moments go with the network they were at: the next round
+    // goes on from the kept epoch, not from a discarded one.
+    let mut kept = (state.policy.net.clone(), state.adam.clone());
     for epoch in 1..=d.epochs {
         let net = &mut state.policy.net;
         fit(1).run(&mlp, net, &mut state.adam, inputs, targets, rng);
         let error = score(&state.policy);
         if error < best.error {
             best = HoldoutFit { error, epoch };
-            best_net.clone_from(&state.policy.net);
+            kept = (state.policy.net.clone(), state.adam.clone());
         }
     }
-    state.policy.net = best_net;
+    (state.policy.net, state.adam) = kept;
     Some(best)
 }
 

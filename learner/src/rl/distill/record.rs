@@ -31,7 +31,8 @@ pub struct RoundPoint {
     /// runs recorded before it was).
     #[serde(default)]
     pub error_before_parts: Vec<f64>,
-    /// The refitted student's error on every round's samples so far.
+    /// The refitted student's error on every round's samples so far (the
+    /// fitted ones: without the held-out environments').
     pub error_after: f64,
     /// `error_after` per action component (empty in runs recorded before
     /// it was).
@@ -140,7 +141,7 @@ pub(super) fn save(
             x(&|p| p.validation.mean_normalised),
         ))
         .write_png(out.join("distill.png"))?;
-        Chart::new(
+        let chart = Chart::new(
             "DAgger: the student's action error",
             "round",
             "mean squared action error (4 components summed)",
@@ -150,10 +151,19 @@ pub(super) fn save(
             x(&|p| p.error_before),
         ))
         .with(Series::line(
-            "on all samples so far, after the refit",
+            "on the fitted samples so far, after the refit",
             x(&|p| p.error_after),
-        ))
-        .write_png(out.join("distill-error.png"))?;
+        ));
+        let held = rounds.iter().any(|p| p.holdout.is_some());
+        let chart = if held {
+            chart.with(Series::line(
+                "on the held-out episodes so far, the kept epoch",
+                x(&|p| p.holdout.map_or(f64::NAN, |h| h.error)),
+            ))
+        } else {
+            chart
+        };
+        chart.write_png(out.join("distill-error.png"))?;
     }
     Ok(c)
 }

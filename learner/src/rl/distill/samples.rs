@@ -85,7 +85,21 @@ impl Samples {
     /// row i is environment i mod `num_envs`'s. The last `held` of them
     /// go to the second part (whole episodes); None for it when `held`
     /// is 0.
+    ///
+    /// # Panics
+    ///
+    /// If `held` exceeds `num_envs`, or the samples are not whole steps
+    /// of `num_envs` rows (then no row's environment is known).
     pub fn split_envs(&self, num_envs: usize, held: usize) -> (Samples, Option<Samples>) {
+        assert!(
+            held <= num_envs,
+            "{held} of {num_envs} environments held out"
+        );
+        assert!(
+            num_envs > 0 && self.len().is_multiple_of(num_envs),
+            "{} samples are not whole steps of {num_envs} environments",
+            self.len()
+        );
         let part = || Samples {
             obs_dim: self.obs_dim,
             act_dim: self.act_dim,
