@@ -637,3 +637,40 @@ fn an_experiment_runs_the_learned_route_through_a_fine_tune() {
     );
     assert!(!dir.join("refused/Full").exists(), "nothing ran");
 }
+
+/// `learner experiment --set` changes the file's settings before they are
+/// checked: a bad value and an unknown key are named, a good one read.
+#[test]
+fn an_experiments_settings_take_set() {
+    use learner::experiment::ExperimentConfig;
+    let dir = test_support::scratch_dir("experiment-set");
+    let cfg_path = dir.join("experiment.toml");
+    std::fs::write(
+        &cfg_path,
+        "[data]\ndataset = \"data\"\n\n[[variant]]\nname = \"Full\"\n",
+    )
+    .unwrap();
+    let sets = ["eval.episodes=7".to_string()];
+    let cfg = ExperimentConfig::from_file_with(&cfg_path, &sets).unwrap();
+    assert_eq!(cfg.eval.episodes, 7);
+    let plain = ExperimentConfig::from_file(&cfg_path).unwrap();
+    assert_ne!(plain.eval.episodes, 7);
+    for (set, named) in [
+        ("eval.episodes=0", "eval.episodes"),
+        ("eval.nosuch=1", "nosuch"),
+    ] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
+            .args(["experiment", "--config"])
+            .arg(&cfg_path)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .args(["--set", set])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{set}: {err}");
+        assert!(err.contains(named), "{set}: {err}");
+    }
+    // Nothing ran: the refusal came before any stage.
+    assert!(!dir.join("out").exists());
+}

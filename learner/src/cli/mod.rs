@@ -26,13 +26,19 @@ pub struct ExperimentArgs {
     /// Run only this variant (repeatable).
     #[arg(long)]
     pub only: Vec<String>,
+    /// Changes one setting of the experiment's file by its dotted path,
+    /// e.g. `--set policy.dagger_rounds=4 --set eval.episodes=10`
+    /// (repeatable). The stages' own resume checks still hold: a
+    /// distillation resumed under other settings is refused.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 /// Runs `learner experiment`: every variant that is not done yet, then
 /// prints the results table.
 pub fn experiment(a: ExperimentArgs) -> Result<()> {
     use crate::experiment::{ExperimentConfig, RunOptions, run};
-    let cfg = ExperimentConfig::from_file(&a.config)?;
+    let cfg = ExperimentConfig::from_file_with(&a.config, &a.set)?;
     let out = a.out.unwrap_or_else(|| {
         let stem = a
             .config

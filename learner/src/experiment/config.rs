@@ -158,7 +158,17 @@ pub struct Variant {
 impl ExperimentConfig {
     /// Reads and checks a configuration file.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let cfg: Self = shared_mem_schema::config::read_toml(path)?;
+        Self::from_file_with(path, &[])
+    }
+
+    /// [`ExperimentConfig::from_file`] with `sets` (`KEY=VALUE`, dotted
+    /// paths into the file's tables) applied before it is checked.
+    pub fn from_file_with(path: &Path, sets: &[String]) -> Result<Self> {
+        let cfg: Self = if sets.is_empty() {
+            shared_mem_schema::config::read_toml(path)?
+        } else {
+            crate::settings::read_with_overrides(Some(path), sets)?
+        };
         cfg.validate()
             .with_context(|| format!("{}", path.display()))?;
         Ok(cfg)
