@@ -357,18 +357,24 @@ pub fn distill(
 
         // Refit the normalisation and the network to everything so far
         // (the held-out episodes apart).
-        let (fitted, held) = data.split_envs(student_cfg.num_envs, d.holdout_envs);
+        // Without held-out episodes everything is fitted, read in place:
+        // a copy of a raw run's samples would be hundreds of MB a round.
         drop(new);
+        let split =
+            (d.holdout_envs > 0).then(|| data.split_envs(student_cfg.num_envs, d.holdout_envs));
+        let (fitted, held) = match &split {
+            Some((f, h)) => (f, h.as_ref()),
+            None => (&data, None),
+        };
         let obs: Vec<f64> = fitted.obs.iter().map(|&v| v as f64).collect();
         let targets: Vec<f64> = fitted.actions.iter().map(|&v| v as f64).collect();
-        drop(fitted);
         let mut norm = ObsNorm::new(sd, student_cfg.policy.observation_clip);
         norm.update(&obs);
         state.policy.obs_norm = Some(norm);
         let inputs = state.policy.inputs(&obs);
         drop(obs);
         let mut frng = rng::seeded(student_cfg.seed, (4 << 32) + r);
-        let holdout = refit(d, &mut state, &inputs, &targets, held.as_ref(), &mut frng);
+        let holdout = refit(d, &mut state, &inputs, &targets, held, &mut frng);
         let error_after_parts = input_error(&state.policy, &inputs, &targets);
         let (error_before, error_after) = (
             error_before_parts.iter().sum::<f64>(),
